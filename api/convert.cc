@@ -1,0 +1,127 @@
+#include "convert.h"
+
+#include <google/protobuf/util/json_util.h>
+
+#include <fstream>
+#include <sstream>
+
+#include "absl/strings/str_cat.h"
+
+namespace transtick {
+
+absl::StatusOr<std::string> ReadTextFile(const std::string& path, size_t max_bytes) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError(absl::StrCat(path, ": cannot open"));
+  std::string text;
+  char buf[65536];
+  while (in.read(buf, sizeof buf) || in.gcount() > 0) {
+    text.append(buf, static_cast<size_t>(in.gcount()));
+    if (text.size() > max_bytes) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(path, ": larger than ", max_bytes, " bytes; not a job or settings file"));
+    }
+  }
+  return text;
+}
+
+absl::Status ParseJson(std::string_view json, const std::string& source,
+                       google::protobuf::Message* message) {
+  google::protobuf::util::JsonParseOptions options;
+  options.ignore_unknown_fields = false;
+  auto status = google::protobuf::util::JsonStringToMessage(
+      google::protobuf::StringPiece(json.data(), json.size()), message, options);
+  if (!status.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat(source, ": not a valid ",
+                                                   message->GetDescriptor()->name(), ": ",
+                                                   std::string(status.message())));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<Classification> ToClassification(const v1::MaterialSet& set) {
+  Classification c;
+  for (int i = 0; i < set.materials_size(); ++i) {
+    const v1::Material& pm = set.materials(i);
+    Material m;
+    m.name = pm.name();
+    m.min = pm.min();
+    m.max = pm.max();
+    if (pm.color_size() != 3) {
+      return absl::InvalidArgumentError(absl::StrCat("material ", i, " '", pm.name(),
+                                                     "': color has ", pm.color_size(),
+                                                     " components, need 3 (RGB)"));
+    }
+    for (int k = 0; k < 3; ++k) m.color[k] = pm.color(k);
+    if (pm.has_opacity()) m.opacity = pm.opacity();
+    if (pm.has_ambient()) m.ambient = pm.ambient();
+    if (pm.has_diffuse()) m.diffuse = pm.diffuse();
+    if (pm.has_specular()) m.specular = pm.specular();
+    if (pm.has_shininess()) m.shininess = pm.shininess();
+    c.materials.push_back(std::move(m));
+  }
+  if (auto s = c.Validate(); !s.ok()) return s;
+  return c;
+}
+
+absl::StatusOr<TransferFunction> ToTransferFunction(const v1::TransferFunction& ptf) {
+  TransferFunction tf;
+  for (int i = 0; i < ptf.points_size(); ++i) {
+    const v1::TransferPoint& pp = ptf.points(i);
+    if (pp.rgba_size() != 4) {
+      return absl::InvalidArgumentError(absl::StrCat("transfer function point ", i, ": rgba has ",
+                                                     pp.rgba_size(), " components, need 4"));
+    }
+    TransferPoint p;
+    p.value = pp.value();
+    for (int k = 0; k < 4; ++k) p.rgba[k] = pp.rgba(k);
+    tf.points.push_back(p);
+  }
+  if (ptf.has_reference_step()) tf.reference_step = ptf.reference_step();
+  if (ptf.has_shading()) tf.shading = ptf.shading();
+  if (ptf.has_ambient()) tf.ambient = ptf.ambient();
+  if (ptf.has_diffuse()) tf.diffuse = ptf.diffuse();
+  if (ptf.has_specular()) tf.specular = ptf.specular();
+  if (ptf.has_shininess()) tf.shininess = ptf.shininess();
+  if (auto s = tf.Validate(); !s.ok()) return s;
+  return tf;
+}
+
+namespace {
+
+template <typename Proto, typename Fn>
+auto LoadJsonFile(const std::string& path, Fn convert) -> decltype(convert(Proto{})) {
+  auto text = ReadTextFile(path);
+  if (!text.ok()) return text.status();
+  Proto proto;
+  if (auto s = ParseJson(*text, path, &proto); !s.ok()) return s;
+  auto result = convert(proto);
+  if (!result.ok()) {
+    return absl::Status(result.status().code(),
+                        absl::StrCat(path, ": ", result.status().message()));
+  }
+  return result;
+}
+
+}  // namespace
+
+absl::StatusOr<Classification> LoadMaterials(const std::string& path) {
+  return LoadJsonFile<v1::MaterialSet>(
+      path, [](const v1::MaterialSet& m) { return ToClassification(m); });
+}
+
+absl::StatusOr<TransferFunction> LoadTransferFunction(const std::string& path) {
+  return LoadJsonFile<v1::TransferFunction>(
+      path, [](const v1::TransferFunction& t) { return ToTransferFunction(t); });
+}
+
+std::string ToJson(const google::protobuf::Message& message) {
+  google::protobuf::util::JsonPrintOptions options;
+  options.add_whitespace = true;
+  options.preserve_proto_field_names = true;
+  options.always_print_primitive_fields = true;
+  std::string out;
+  (void)google::protobuf::util::MessageToJsonString(message, &out, options);
+  return out;
+}
+
+}  // namespace transtick

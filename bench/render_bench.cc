@@ -1,0 +1,299 @@
+// render_bench: times RenderLocal on a real volume.
+//
+//   render_bench [--volume FILE] [--materials FILE] [--size WxH] [--repeat N]
+//                [--azimuth DEG] [--shadows on|off] [--threads N]
+//
+// Loads the volume and builds the surfaces scene once, then for each view
+// (frontal = azimuth 0, and azimuth 45; or only --azimuth) and for 1 thread
+// and one per core (or only --threads N), renders once to warm up and then
+// `repeat` timed frames. Prints a table of median and minimum frame times,
+// rays per second (primary + shadow, from the tracer's counters) and the
+// speed-up of all cores over one thread.
+//
+// Every frame of a view must equal the first bit for bit, whatever the
+// thread count: the framebuffer sums in fixed point, so the thread schedule
+// must not show. Any difference is reported and the exit status is 1.
+//
+// Defaults: cthead.nrrd in $TRANSTICK_DATA_DIR (else the repository's
+// ../shared/data), examples/cthead_materials.json, 400x400, 5 repeats,
+// shadows on.
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "convert.h"
+#include "transtick/camera.h"
+#include "transtick/render.h"
+#include "transtick/scene.h"
+#include "transtick/volume_io.h"
+
+namespace transtick {
+namespace {
+
+constexpr char kUsage[] =
+    "usage: render_bench [--volume FILE] [--materials FILE] [--size WxH] [--repeat N]\n"
+    "                    [--azimuth DEG] [--shadows on|off] [--threads N]\n"
+    "  --azimuth DEG   only this view (default: azimuth 0 and 45)\n"
+    "  --shadows       shadow rays (default on)\n"
+    "  --threads N     only N threads, 0 = one per core (default: 1 and one per core)\n";
+
+struct Options {
+  std::string volume;
+  std::string materials = TRANSTICK_BENCH_MATERIALS;
+  int width = 400;
+  int height = 400;
+  int repeat = 5;
+  std::vector<double> azimuths = {0, 45};
+  bool shadows = true;
+  std::vector<int> threads;  // filled in Parse
+};
+
+std::string DefaultVolume() {
+  const char* dir = std::getenv("TRANSTICK_DATA_DIR");
+  return std::string(dir && *dir ? dir : TRANSTICK_BENCH_DATA_DIR) + "/cthead.nrrd";
+}
+
+bool ParseInt(const std::string& s, int lo, int hi, int* out) {
+  char* end = nullptr;
+  long v = std::strtol(s.c_str(), &end, 10);
+  if (s.empty() || *end != '\0' || v < lo || v > hi) return false;
+  *out = static_cast<int>(v);
+  return true;
+}
+
+// Returns an error message, empty on success.
+std::string Parse(int argc, char** argv, Options* o) {
+  o->volume = DefaultVolume();
+  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  o->threads = cores > 1 ? std::vector<int>{1, cores} : std::vector<int>{1};
+  for (int i = 1; i < argc; ++i) {
+    std::string flag = argv[i];
+    if (flag == "--help" || flag == "-h") return "help";
+    if (i + 1 >= argc) return flag + " needs a value (or is unknown)";
+    std::string value = argv[++i];
+    if (flag == "--volume") {
+      o->volume = value;
+    } else if (flag == "--materials") {
+      o->materials = value;
+    } else if (flag == "--size") {
+      size_t x = value.find('x');
+      if (x == std::string::npos ||
+          !ParseInt(value.substr(0, x), 1, CameraSpec::kMaxImageSize, &o->width) ||
+          !ParseInt(value.substr(x + 1), 1, CameraSpec::kMaxImageSize, &o->height)) {
+        return "--size must be WxH with each in [1, 8192], got '" + value + "'";
+      }
+    } else if (flag == "--repeat") {
+      if (!ParseInt(value, 1, 100000, &o->repeat)) {
+        return "--repeat must be a positive integer, got '" + value + "'";
+      }
+    } else if (flag == "--azimuth") {
+      char* end = nullptr;
+      double a = std::strtod(value.c_str(), &end);
+      if (value.empty() || *end != '\0') return "--azimuth must be a number, got '" + value + "'";
+      o->azimuths = {a};
+    } else if (flag == "--shadows") {
+      if (value != "on" && value != "off") return "--shadows must be on or off";
+      o->shadows = value == "on";
+    } else if (flag == "--threads") {
+      int n = 0;
+      if (!ParseInt(value, 0, 1024, &n)) return "--threads must be in [0, 1024]";
+      o->threads = {n == 0 ? cores : n};
+    } else {
+      return "unknown flag " + flag;
+    }
+  }
+  return "";
+}
+
+double MsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+      .count();
+}
+
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+// Bit-for-bit equality of two float images (memcmp: -0 vs 0 and NaN payloads
+// count as differences, as they would in a file).
+bool SameBits(const Image& a, const Image& b, size_t* first_diff) {
+  if (a.width != b.width || a.height != b.height || a.rgb.size() != b.rgb.size()) {
+    *first_diff = 0;
+    return false;
+  }
+  for (size_t i = 0; i < a.rgb.size(); ++i) {
+    if (std::memcmp(&a.rgb[i], &b.rgb[i], sizeof(float)) != 0) {
+      *first_diff = i;
+      return false;
+    }
+  }
+  return true;
+}
+
+bool SameCounters(const TraceCounters& a, const TraceCounters& b) {
+  return a.primary == b.primary && a.shadow == b.shadow && a.segments == b.segments &&
+         a.surface_hits == b.surface_hits && a.samples == b.samples;
+}
+
+int Run(const Options& o) {
+  auto materials = LoadMaterials(o.materials);
+  if (!materials.ok()) {
+    std::fprintf(stderr, "render_bench: %s\n", std::string(materials.status().message()).c_str());
+    return 1;
+  }
+  auto t_load = std::chrono::steady_clock::now();
+  auto volume = ReadVolume(o.volume);
+  if (!volume.ok()) {
+    std::fprintf(stderr, "render_bench: %s\n", std::string(volume.status().message()).c_str());
+    return 1;
+  }
+  const double load_ms = MsSince(t_load);
+  auto t_build = std::chrono::steady_clock::now();
+  auto scene = Scene::ForSurfaces(*volume, *materials);
+  if (!scene.ok()) {
+    std::fprintf(stderr, "render_bench: %s\n", std::string(scene.status().message()).c_str());
+    return 1;
+  }
+  const double build_ms = MsSince(t_build);
+
+  const Sticks& sticks = scene->sticks();
+  uint64_t encoded = 0;
+  for (int by = 0; by < sticks.BlocksY(); ++by) {
+    for (int bx = 0; bx < sticks.BlocksX(); ++bx) encoded += sticks.EncodeBlock(bx, by).size();
+  }
+  const uint64_t raw = volume->VoxelCount() * ScalarTypeSize(volume->source_type);
+  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+
+  std::printf("volume     %s: %dx%dx%d %s, spacing %g %g %g\n", o.volume.c_str(), volume->dims[0],
+              volume->dims[1], volume->dims[2],
+              std::string(ScalarTypeName(volume->source_type)).c_str(), volume->spacing[0],
+              volume->spacing[1], volume->spacing[2]);
+  std::printf("materials  %s\n", o.materials.c_str());
+  std::printf("load       %.1f ms\n", load_ms);
+  std::printf("scene      built in %.1f ms (surfaces: labels, sticks, occupancy, scalars)\n",
+              build_ms);
+  std::printf(
+      "sticks     %zu sticks; encoded %.3f MB = %.2f%% of raw %.3f MB; "
+      "in memory %.3f MB = %.2f%% of raw\n",
+      sticks.StickCount(), encoded / 1e6, raw ? 100.0 * encoded / raw : 0.0, raw / 1e6,
+      sticks.MemoryBytes() / 1e6, raw ? 100.0 * sticks.MemoryBytes() / raw : 0.0);
+  std::printf("scene mem  %.3f MB (sticks + float scalars + occupancy)\n",
+              scene->MemoryBytes() / 1e6);
+  std::printf("frames     %dx%d, shadows %s, %d timed after 1 warm-up, %d cores\n\n", o.width,
+              o.height, o.shadows ? "on" : "off", o.repeat, cores);
+
+  std::printf("%-9s %7s %10s %10s %14s %8s %8s  %s\n", "view", "threads", "median ms", "min ms",
+              "rays/s", "Mrays/s", "speedup", "rays/frame (primary + shadow)");
+  std::fflush(stdout);
+
+  Vec3 extent{volume->dims[0] * volume->spacing[0], volume->dims[1] * volume->spacing[1],
+              volume->dims[2] * volume->spacing[2]};
+  RenderSettings settings;
+  settings.shadows = o.shadows;
+  bool all_same = true;
+  for (double azimuth : o.azimuths) {
+    CameraSpec spec;
+    spec.azimuth_deg = azimuth;
+    spec.width = o.width;
+    spec.height = o.height;
+    auto camera = Camera::Create(spec, extent);
+    if (!camera.ok()) {
+      std::fprintf(stderr, "render_bench: %s\n", std::string(camera.status().message()).c_str());
+      return 1;
+    }
+    char view[32];
+    std::snprintf(view, sizeof(view), azimuth == 0 ? "frontal" : "az%g", azimuth);
+    Image reference;
+    TraceCounters reference_counters;
+    bool have_reference = false;
+    double one_thread_median = 0;
+    for (int threads : o.threads) {
+      std::vector<double> ms;
+      TraceCounters counters;
+      for (int i = 0; i <= o.repeat; ++i) {  // i = 0 is the warm-up
+        RenderStats stats;
+        auto start = std::chrono::steady_clock::now();
+        auto image = RenderLocal(*scene, *camera, settings, threads, &stats);
+        const double frame_ms = MsSince(start);
+        if (!image.ok()) {
+          std::fprintf(stderr, "render_bench: %s\n", std::string(image.status().message()).c_str());
+          return 1;
+        }
+        if (i > 0) ms.push_back(frame_ms);
+        counters = stats.counters;
+        if (!have_reference) {
+          reference = *std::move(image);
+          reference_counters = stats.counters;
+          have_reference = true;
+          continue;
+        }
+        size_t diff = 0;
+        if (!SameBits(reference, *image, &diff)) {
+          all_same = false;
+          const size_t p = diff / 3;
+          std::fprintf(stderr,
+                       "render_bench: %s, %d threads, frame %d differs from the first frame: "
+                       "pixel (%zu, %zu) channel %zu is %.9g, was %.9g\n",
+                       view, threads, i, p % o.width, p / o.width, diff % 3,
+                       diff < image->rgb.size() ? image->rgb[diff] : 0.0f,
+                       diff < reference.rgb.size() ? reference.rgb[diff] : 0.0f);
+        }
+        if (!SameCounters(reference_counters, stats.counters)) {
+          std::fprintf(stderr,
+                       "render_bench: %s, %d threads, frame %d: counters differ from the first "
+                       "frame (%llu+%llu rays, was %llu+%llu)\n",
+                       view, threads, i, static_cast<unsigned long long>(stats.counters.primary),
+                       static_cast<unsigned long long>(stats.counters.shadow),
+                       static_cast<unsigned long long>(reference_counters.primary),
+                       static_cast<unsigned long long>(reference_counters.shadow));
+        }
+      }
+      const double median = Median(ms);
+      const double min = *std::min_element(ms.begin(), ms.end());
+      const uint64_t rays = counters.primary + counters.shadow;
+      const double rays_per_s = median > 0 ? rays / (median / 1e3) : 0;
+      if (threads == 1) one_thread_median = median;
+      char speedup[16] = "-";
+      if (threads != 1 && one_thread_median > 0) {
+        std::snprintf(speedup, sizeof(speedup), "%.2fx", one_thread_median / median);
+      }
+      std::printf("%-9s %7d %10.1f %10.1f %14.0f %8.2f %8s  %llu + %llu\n", view, threads, median,
+                  min, rays_per_s, rays_per_s / 1e6, speedup,
+                  static_cast<unsigned long long>(counters.primary),
+                  static_cast<unsigned long long>(counters.shadow));
+      std::fflush(stdout);
+    }
+  }
+  if (!all_same) {
+    std::printf("\nFAIL: repeated renders are not bit-identical (see stderr)\n");
+    return 1;
+  }
+  std::printf("\nOK: every frame of a view is bit-identical (all thread counts)\n");
+  return 0;
+}
+
+}  // namespace
+}  // namespace transtick
+
+int main(int argc, char** argv) {
+  transtick::Options options;
+  std::string error = transtick::Parse(argc, argv, &options);
+  if (error == "help") {
+    std::fputs(transtick::kUsage, stdout);
+    return 0;
+  }
+  if (!error.empty()) {
+    std::fprintf(stderr, "render_bench: %s\n%s", error.c_str(), transtick::kUsage);
+    return 2;
+  }
+  return transtick::Run(options);
+}

@@ -1,0 +1,67 @@
+// Cameras: perspective and orthographic, placed by an orbit (azimuth,
+// elevation, zoom) about the volume's centre or by eye/target/up.
+#ifndef TRANSTICK_CAMERA_H_
+#define TRANSTICK_CAMERA_H_
+
+#include <optional>
+
+#include "absl/status/statusor.h"
+#include "transtick/vec.h"
+
+namespace transtick {
+
+enum class Projection { kPerspective, kOrthographic };
+
+struct ExplicitView {
+  Vec3 eye;
+  Vec3 target;
+  Vec3 up = {0, 1, 0};
+};
+
+// World space puts the volume's centre at the origin, axes along the volume's
+// x, y, z, units of the volume's spacing.
+struct CameraSpec {
+  static constexpr int kMaxImageSize = 8192;
+  Projection projection = Projection::kPerspective;
+  // Orbit view: azimuth rotates about +Y; azimuth 0 and elevation 0 look
+  // along -Z (the paper's frontal view). Elevation tilts toward +Y.
+  double azimuth_deg = 0;
+  double elevation_deg = 0;
+  double zoom = 1;  // 1 frames the volume's bounding sphere
+  double fov_deg = 30;
+  std::optional<ExplicitView> view;  // overrides the orbit when set
+  int width = 400;
+  int height = 400;
+};
+
+struct WorldRay {
+  Vec3 origin;
+  Vec3 direction;  // unit length
+};
+
+// Immutable, thread-safe.
+class Camera {
+ public:
+  // Fails on an image size outside [1, kMaxImageSize], zoom or fov out of
+  // range, or a degenerate explicit view.
+  static absl::StatusOr<Camera> Create(const CameraSpec& spec, const Vec3& volume_extent);
+
+  // The ray through the centre of pixel (px, py); py = 0 is the top row.
+  WorldRay Generate(int px, int py) const;
+
+  int width() const { return width_; }
+  int height() const { return height_; }
+  const Vec3& forward() const { return forward_; }
+  const Vec3& right() const { return right_; }
+  const Vec3& up() const { return up_; }
+
+ private:
+  Projection projection_ = Projection::kPerspective;
+  int width_ = 0, height_ = 0;
+  Vec3 eye_, forward_, right_, up_;
+  double half_height_ = 1;  // tan(fov/2) (perspective) or half the view height
+};
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_CAMERA_H_

@@ -1,0 +1,74 @@
+// Classification: scalar values to materials (surfaces mode) and to colour and
+// opacity through a transfer function (dvr mode).
+#ifndef TRANSTICK_CLASSIFICATION_H_
+#define TRANSTICK_CLASSIFICATION_H_
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+
+namespace transtick {
+
+// One threshold surface of the paper: the voxels whose value lies in
+// [min, max) belong to this material. Shading follows Phong: ambient +
+// diffuse * max(N.L, 0) * color + specular * max(N.H, 0)^shininess.
+struct Material {
+  std::string name;
+  float min = 0;
+  float max = 0;
+  std::array<float, 3> color = {1, 1, 1};
+  float opacity = 1;  // fraction of light stopped at the surface, in [0, 1]
+  float ambient = 0.25f;
+  float diffuse = 0.7f;
+  float specular = 0.25f;
+  float shininess = 24.0f;
+};
+
+// Material id 0 is void; material i (1-based) is materials[i - 1]. When
+// intervals overlap, the first listed wins. Immutable after Validate():
+// thread-safe for concurrent reads.
+struct Classification {
+  static constexpr int kMaxMaterials = 255;
+  std::vector<Material> materials;
+
+  // Checks intervals (min < max, finite), colours and coefficients in range,
+  // opacity in [0, 1], at most kMaxMaterials, names non-empty.
+  absl::Status Validate() const;
+
+  uint8_t Classify(float value) const {
+    for (size_t i = 0; i < materials.size(); ++i) {
+      if (value >= materials[i].min && value < materials[i].max) return static_cast<uint8_t>(i + 1);
+    }
+    return 0;
+  }
+};
+
+// A piecewise-linear map from scalar value to RGBA. Opacity is per unit of
+// `TransferFunction::reference_step` (world units): a sample taken with step s
+// gets alpha' = 1 - (1 - alpha)^(s / reference_step). Below the first point
+// and above the last, the end values hold.
+struct TransferPoint {
+  float value = 0;
+  std::array<float, 4> rgba = {0, 0, 0, 0};
+};
+
+struct TransferFunction {
+  std::vector<TransferPoint> points;  // strictly increasing values
+  float reference_step = 1.0f;
+  // Lighting applied to samples when `shading` is set (dvr mode).
+  bool shading = true;
+  float ambient = 0.3f;
+  float diffuse = 0.7f;
+  float specular = 0.2f;
+  float shininess = 20.0f;
+
+  absl::Status Validate() const;
+  std::array<float, 4> Evaluate(float value) const;
+};
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_CLASSIFICATION_H_

@@ -1,0 +1,55 @@
+// Accumulates deposits into pixels in fixed point, so the sum does not depend
+// on the order deposits arrive in: one node or many, any thread schedule,
+// the same bits. Tracks per-pixel completion (see Deposit).
+#ifndef TRANSTICK_FRAMEBUFFER_H_
+#define TRANSTICK_FRAMEBUFFER_H_
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <vector>
+
+#include "transtick/ray.h"
+
+namespace transtick {
+
+// A float RGB image, rows top to bottom.
+struct Image {
+  int width = 0;
+  int height = 0;
+  std::vector<float> rgb;  // width * height * 3
+};
+
+// Threads may add deposits at once only for disjoint pixels; Resolve and
+// the accessors need the writers stopped.
+class Framebuffer {
+ public:
+  // 2^-32 per unit: far below any output precision; a pixel can take 2^31
+  // units before overflow, so sums of many contributions are safe.
+  static constexpr double kScale = 4294967296.0;
+
+  Framebuffer(int width, int height);
+
+  // Adds a deposit. Returns true when this deposit completed its pixel.
+  bool Add(const Deposit& deposit);
+
+  uint64_t complete_pixels() const { return complete_.load(std::memory_order_relaxed); }
+  bool Complete() const { return complete_pixels() == static_cast<uint64_t>(width_) * height_; }
+  int width() const { return width_; }
+  int height() const { return height_; }
+
+  Image Resolve() const;
+
+ private:
+  int width_, height_;
+  std::vector<std::array<int64_t, 3>> sum_;
+  // Per pixel: shadow deposits still owed (primary's count minus shadows
+  // seen); primary_seen_ marks the primary's arrival.
+  std::vector<int32_t> owed_;
+  std::vector<uint8_t> primary_seen_;
+  std::atomic<uint64_t> complete_{0};
+};
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_FRAMEBUFFER_H_

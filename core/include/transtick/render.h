@@ -1,0 +1,38 @@
+// Renders one image in this process with a pool of threads: the reference
+// every distributed render must equal bit for bit.
+#ifndef TRANSTICK_RENDER_H_
+#define TRANSTICK_RENDER_H_
+
+#include <cstdint>
+#include <functional>
+
+#include "absl/status/statusor.h"
+#include "transtick/camera.h"
+#include "transtick/framebuffer.h"
+#include "transtick/scene.h"
+#include "transtick/tracer.h"
+
+namespace transtick {
+
+struct RenderStats {
+  double frame_ms = 0;
+  int threads = 0;
+  TraceCounters counters;
+};
+
+// Called now and then from the calling thread with (pixels done, total).
+using ProgressFn = std::function<void(uint64_t, uint64_t)>;
+
+// threads = 0 uses one per core.
+absl::StatusOr<Image> RenderLocal(const Scene& scene, const Camera& camera,
+                                  const RenderSettings& settings, int threads, RenderStats* stats,
+                                  const ProgressFn& progress = {});
+
+// Traces every ray of the pixels in rows [row_begin, row_end) to completion
+// in a scene that holds the whole volume, depositing into `fb`.
+void TraceRows(const Tracer& tracer, const Camera& camera, int row_begin, int row_end,
+               Framebuffer& fb, TraceCounters& counters);
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_RENDER_H_

@@ -1,0 +1,131 @@
+// The data a tracer reads: the sticks of a slab, the scalars around it (for
+// gradients and dvr samples) and the global brick occupancy used to skip
+// empty space. A whole-volume scene is the slab [0, dims[1]).
+#ifndef TRANSTICK_SCENE_H_
+#define TRANSTICK_SCENE_H_
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "transtick/classification.h"
+#include "transtick/sticks.h"
+#include "transtick/volume.h"
+
+namespace transtick {
+
+enum class RenderMode { kSurfaces, kDvr };
+
+// One bit per 8x8x8 brick of the whole volume: does any voxel in it carry a
+// non-void label? Small (dims / 8 cubed bytes), so every worker holds all of
+// it: skipping an empty brick is then the same decision on every node.
+class Occupancy {
+ public:
+  static constexpr int kShift = 3;
+  static constexpr int kBrick = 1 << kShift;
+
+  Occupancy() = default;
+  static Occupancy Build(std::span<const uint8_t> labels, std::array<int, 3> dims);
+  // Rebuilds from bytes (one per brick, x fastest). Fails on a size mismatch.
+  static absl::StatusOr<Occupancy> FromBytes(std::array<int, 3> dims, std::vector<uint8_t> bytes);
+
+  bool Occupied(int x, int y, int z) const {
+    return bricks_[(static_cast<size_t>(z >> kShift) * bdims_[1] + (y >> kShift)) * bdims_[0] +
+                   (x >> kShift)] != 0;
+  }
+  const std::vector<uint8_t>& bytes() const { return bricks_; }
+  const std::array<int, 3>& brick_dims() const { return bdims_; }
+
+ private:
+  std::array<int, 3> bdims_ = {0, 0, 0};
+  std::vector<uint8_t> bricks_;
+};
+
+// Planes of scalars kept beyond each side of a slab: gradients by central
+// differences at a point interpolated from the 8 nearest voxel centres reach
+// two planes out.
+inline constexpr int kGhostPlanes = 2;
+
+// Immutable after construction; thread-safe for concurrent reads. Movable,
+// not copyable (it can be large).
+class Scene {
+ public:
+  Scene() = default;
+  Scene(Scene&&) = default;
+  Scene& operator=(Scene&&) = default;
+  Scene(const Scene&) = delete;
+  Scene& operator=(const Scene&) = delete;
+
+  // Surfaces mode: labels from the classification.
+  static absl::StatusOr<Scene> ForSurfaces(const Volume& volume,
+                                           const Classification& classification);
+  // Dvr mode: a voxel is labelled 1 when the transfer function is non-zero
+  // somewhere between the min and max of its 3x3x3 neighbourhood, so no
+  // trilinear sample in a void voxel can have opacity.
+  static absl::StatusOr<Scene> ForDvr(const Volume& volume, const TransferFunction& transfer);
+
+  // Assembles a slab scene from parts (as a worker receives them).
+  // REQUIRES: scalars hold planes [ScalarBegin(y_begin), ScalarEnd(y_end)).
+  static absl::StatusOr<Scene> FromParts(RenderMode mode, std::array<int, 3> dims,
+                                         std::array<double, 3> spacing,
+                                         std::array<float, 2> value_range, Sticks sticks,
+                                         std::vector<float> scalars, Occupancy occupancy,
+                                         Classification classification, TransferFunction transfer);
+
+  // A copy of the slab [y_begin, y_end) of this (whole-volume) scene.
+  Scene Slab(int y_begin, int y_end) const;
+
+  int ScalarBegin(int y_begin) const { return std::max(0, y_begin - kGhostPlanes); }
+  int ScalarEnd(int y_end) const { return std::min(dims_[1], y_end + kGhostPlanes); }
+
+  RenderMode mode() const { return mode_; }
+  const std::array<int, 3>& dims() const { return dims_; }
+  const std::array<double, 3>& spacing() const { return spacing_; }
+  // Smallest and largest value of the whole volume (for dvr lookup tables).
+  const std::array<float, 2>& value_range() const { return value_range_; }
+  int y_begin() const { return sticks_.y_begin(); }
+  int y_end() const { return sticks_.y_end(); }
+  const Sticks& sticks() const { return sticks_; }
+  const Occupancy& occupancy() const { return occupancy_; }
+  const Classification& classification() const { return classification_; }
+  const TransferFunction& transfer() const { return transfer_; }
+  const std::vector<float>& scalars() const { return scalars_; }
+  int scalar_y_begin() const { return scalar_y_begin_; }
+
+  // The scalar at a voxel, indices clamped to the volume.
+  // REQUIRES: the clamped y lies in the stored planes.
+  float Scalar(int x, int y, int z) const {
+    x = x < 0 ? 0 : (x >= dims_[0] ? dims_[0] - 1 : x);
+    y = y < 0 ? 0 : (y >= dims_[1] ? dims_[1] - 1 : y);
+    z = z < 0 ? 0 : (z >= dims_[2] ? dims_[2] - 1 : z);
+    return scalars_[(static_cast<size_t>(z) * scalar_planes_ + (y - scalar_y_begin_)) * dims_[0] +
+                    x];
+  }
+
+  // Bytes held: sticks, scalars and occupancy.
+  size_t MemoryBytes() const;
+
+ private:
+  RenderMode mode_ = RenderMode::kSurfaces;
+  std::array<int, 3> dims_ = {0, 0, 0};
+  std::array<double, 3> spacing_ = {1, 1, 1};
+  std::array<float, 2> value_range_ = {0, 0};
+  Sticks sticks_;
+  Occupancy occupancy_;
+  Classification classification_;
+  TransferFunction transfer_;
+  // Planes [scalar_y_begin_, scalar_y_begin_ + scalar_planes_), x fastest, then
+  // y, then z.
+  int scalar_y_begin_ = 0;
+  int scalar_planes_ = 0;
+  std::vector<float> scalars_;
+};
+
+// Labels for the dvr empty-space map (see Scene::ForDvr).
+std::vector<uint8_t> DvrVisibility(const Volume& volume, const TransferFunction& transfer);
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_SCENE_H_

@@ -1,0 +1,102 @@
+// The tracer: advances ray descriptors through a scene (a slab, or the whole
+// volume), shading surfaces (the paper's threshold surfaces, with
+// transparency and shadow rays) or compositing samples (dvr).
+#ifndef TRANSTICK_TRACER_H_
+#define TRANSTICK_TRACER_H_
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "transtick/camera.h"
+#include "transtick/ray.h"
+#include "transtick/scene.h"
+
+namespace transtick {
+
+struct RenderSettings {
+  bool shadows = true;  // surfaces mode only
+  std::array<float, 3> background = {0, 0, 0};
+  double step = 0;  // dvr sample step in world units; 0 = half the smallest spacing
+  // Rays stop once their transmittance falls below this.
+  float min_transmittance = 1.0f / 1024.0f;
+  // Direction toward the (directional) light in world space, camera-relative:
+  // x along the camera's right, y along its up, z toward the viewer.
+  Vec3 light = {-0.35, 0.5, 1.0};
+};
+
+// Counts a tracer adds to; one per thread, summed afterwards.
+struct TraceCounters {
+  uint64_t primary = 0;       // primary rays generated that enter the volume
+  uint64_t shadow = 0;        // shadow rays spawned
+  uint64_t segments = 0;      // traversal steps taken
+  uint64_t surface_hits = 0;  // shaded surface points (surfaces mode)
+  uint64_t samples = 0;       // shaded samples (dvr)
+  void Add(const TraceCounters& o) {
+    primary += o.primary;
+    shadow += o.shadow;
+    segments += o.segments;
+    surface_hits += o.surface_hits;
+    samples += o.samples;
+  }
+};
+
+// Immutable after construction, thread-safe: many threads call Trace at once
+// with their own descriptors, outputs and counters.
+class Tracer {
+ public:
+  // REQUIRES: the scene outlives the tracer.
+  Tracer(const Scene& scene, const RenderSettings& settings, const Camera& camera);
+
+  // The primary ray of `pixel` in index space. Returns false when the ray
+  // misses the volume; its pixel then gets `MissDeposit`.
+  bool MakePrimary(const WorldRay& world, uint32_t pixel, RayDescriptor* ray) const;
+  Deposit MissDeposit(uint32_t pixel) const;
+
+  enum class Outcome { kFinished, kLeftSlab };
+
+  // Advances `ray` while its cell lies in the scene's slab. On kFinished,
+  // `deposit` holds what the ray leaves in its pixel; on kLeftSlab the
+  // descriptor is ready to resume on the node owning ray.cell[1]. Shadow rays
+  // spawned are appended to `spawned` (they start in this slab).
+  Outcome Trace(RayDescriptor& ray, std::vector<RayDescriptor>& spawned, Deposit& deposit,
+                TraceCounters& counters) const;
+
+  double step() const { return step_; }
+
+ private:
+  struct TableEntry {
+    std::array<float, 3> color;
+    float alpha;
+  };
+
+  Outcome TraceSurfaces(RayDescriptor& ray, std::vector<RayDescriptor>& spawned,
+                        TraceCounters& counters) const;
+  Outcome TraceShadow(RayDescriptor& ray, TraceCounters& counters) const;
+  Outcome TraceDvr(RayDescriptor& ray, TraceCounters& counters) const;
+
+  // World-space gradient at an index-space point, trilinearly interpolated
+  // from central differences at the 8 nearest voxel centres.
+  Vec3f Gradient(const Vec3& p) const;
+  float Sample(const Vec3& p) const;  // trilinear, cell-centred
+  const TableEntry& Lookup(float value) const;
+  // Diffuse and specular terms at a point with (unnormalised) gradient g.
+  void Light(const Vec3f& g, const Vec3& view_dir_world, float* diffuse, float* specular,
+             float shininess) const;
+
+  const Scene& scene_;
+  RenderSettings settings_;
+  Vec3 light_world_;        // unit, toward the light
+  Vec3 light_index_;        // light_world_ / spacing
+  double shadow_bias_ = 0;  // t at which shadow rays start: 1.5 voxels out
+  Vec3 inv_spacing_;
+  double step_ = 1;
+  // dvr: colour and step-corrected opacity for values across value_range.
+  static constexpr int kTableSize = 4096;
+  std::vector<TableEntry> table_;
+  float table_lo_ = 0, table_scale_ = 0;
+};
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_TRACER_H_

@@ -1,0 +1,124 @@
+// Traversal: the walk of a ray through the cells of a scene, one segment of
+// constant material at a time. Empty 8^3 bricks are skipped whole, void gaps
+// of a track a stick at a time, and within occupied bricks the walk moves
+// from track to track (an Amanatides-Woo walk over columns).
+//
+// Determinism is the contract here: the next segment is a pure function of
+// (ray origin, direction, cell, t) and the global volume data, every t is a
+// plane-crossing time computed directly from the plane's coordinate (never
+// accumulated), and cell indices off the stepping axis are derived from the
+// point and clamped to what the brick or stick guarantees. So a ray stopped
+// when its cell leaves a slab and resumed on another node takes exactly the
+// steps it would have taken on one node.
+#ifndef TRANSTICK_TRAVERSAL_H_
+#define TRANSTICK_TRAVERSAL_H_
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <optional>
+
+#include "transtick/ray.h"
+#include "transtick/scene.h"
+
+namespace transtick {
+
+struct Segment {
+  double t0;
+  double t1;
+  uint8_t material;  // 0 for void
+};
+
+// Intersects a ray with the box [0, dims] in index space. Returns the
+// parameter interval, or nullopt when the ray misses or only touches it.
+std::optional<std::array<double, 2>> IntersectBox(const Vec3& origin, const Vec3& direction,
+                                                  const std::array<int, 3>& dims);
+
+// The cell containing the point at `t`, clamped to the volume.
+std::array<int32_t, 3> CellAt(const Vec3& origin, const Vec3& direction, double t,
+                              const std::array<int, 3>& dims);
+
+// A value type, cheap to make per ray; no allocation.
+class Traversal {
+ public:
+  Traversal(const Scene& scene, const Vec3& origin, const Vec3& direction)
+      : scene_(scene), origin_(origin) {
+    for (int a = 0; a < 3; ++a) {
+      double d = direction[a];
+      step_[a] = d > 0 ? 1 : (d < 0 ? -1 : 0);
+      inv_[a] = d != 0 ? 1.0 / d : 0.0;
+      dir_[a] = d;
+    }
+  }
+
+  static bool Inside(const std::array<int32_t, 3>& cell, const std::array<int, 3>& dims) {
+    return cell[0] >= 0 && cell[1] >= 0 && cell[2] >= 0 && cell[0] < dims[0] && cell[1] < dims[1] &&
+           cell[2] < dims[2];
+  }
+
+  // Returns the segment that starts at (cell, t) and moves (cell, t) to the
+  // start of the next one; nullopt once the cell has left the volume.
+  // REQUIRES: cell inside the volume implies its track lies in the scene's
+  // slab when its brick is occupied (callers stop at the slab's planes).
+  std::optional<Segment> Next(std::array<int32_t, 3>& cell, double& t) const {
+    const auto& dims = scene_.dims();
+    if (!Inside(cell, dims)) return std::nullopt;
+    if (!scene_.occupancy().Occupied(cell[0], cell[1], cell[2])) {
+      std::array<int, 3> lo, hi;
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = (cell[a] >> Occupancy::kShift) << Occupancy::kShift;
+        hi[a] = std::min(lo[a] + Occupancy::kBrick, dims[a]);
+      }
+      return Leave(cell, t, lo, hi, 0);
+    }
+    StickSpan span = scene_.sticks().Find(cell[0], cell[1], cell[2]);
+    std::array<int, 3> lo = {cell[0], cell[1], span.begin};
+    std::array<int, 3> hi = {cell[0] + 1, cell[1] + 1, span.end};
+    return Leave(cell, t, lo, hi, span.material);
+  }
+
+ private:
+  double PlaneTime(int axis, int lo, int hi) const {
+    if (step_[axis] == 0) return std::numeric_limits<double>::infinity();
+    double plane = step_[axis] > 0 ? hi : lo;
+    return (plane - origin_[axis]) * inv_[axis];
+  }
+
+  // Moves from the box [lo, hi) of constant material to the cell beyond its
+  // exit face.
+  Segment Leave(std::array<int32_t, 3>& cell, double& t, const std::array<int, 3>& lo,
+                const std::array<int, 3>& hi, uint8_t material) const {
+    double tx = PlaneTime(0, lo[0], hi[0]);
+    double ty = PlaneTime(1, lo[1], hi[1]);
+    double tz = PlaneTime(2, lo[2], hi[2]);
+    int axis = 0;
+    double t1 = tx;
+    if (ty < t1) axis = 1, t1 = ty;
+    if (tz < t1) axis = 2, t1 = tz;
+    // Guard against a plane behind the current position (rounding at a start
+    // point lying on the plane): never move backwards.
+    if (t1 < t) t1 = t;
+    Segment seg{t, t1, material};
+    for (int a = 0; a < 3; ++a) {
+      if (a == axis) {
+        cell[a] = step_[a] > 0 ? hi[a] : lo[a] - 1;
+      } else {
+        double p = origin_[a] + dir_[a] * t1;
+        int c = static_cast<int>(std::floor(p));
+        cell[a] = std::clamp(c, lo[a], hi[a] - 1);
+      }
+    }
+    t = t1;
+    return seg;
+  }
+
+  const Scene& scene_;
+  Vec3 origin_;
+  Vec3 dir_;
+  Vec3 inv_;
+  int step_[3];
+};
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_TRAVERSAL_H_

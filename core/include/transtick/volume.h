@@ -1,0 +1,51 @@
+// A scalar voxel volume held in memory.
+#ifndef TRANSTICK_VOLUME_H_
+#define TRANSTICK_VOLUME_H_
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace transtick {
+
+// The sample types the readers accept. Values are converted to float on load.
+enum class ScalarType { kUint8, kInt8, kUint16, kInt16, kUint32, kInt32, kFloat32 };
+
+std::string_view ScalarTypeName(ScalarType type);
+size_t ScalarTypeSize(ScalarType type);
+
+// A regular grid of scalar samples, x fastest, then y, then z. Voxel (x, y, z)
+// covers the box [x, x+1) x [y, y+1) x [z, z+1) in index space; world space is
+// index space scaled by `spacing` (millimetres, or whatever the file says).
+// Samples are stored as float whatever the source type: 4 bytes per voxel.
+//
+// A value type; not thread-safe for concurrent mutation, safe for concurrent
+// reads.
+struct Volume {
+  std::array<int, 3> dims = {0, 0, 0};
+  std::array<double, 3> spacing = {1.0, 1.0, 1.0};
+  ScalarType source_type = ScalarType::kFloat32;
+  std::vector<float> values;  // dims[0] * dims[1] * dims[2] samples
+
+  size_t VoxelCount() const {
+    return static_cast<size_t>(dims[0]) * static_cast<size_t>(dims[1]) *
+           static_cast<size_t>(dims[2]);
+  }
+  size_t Index(int x, int y, int z) const {
+    return (static_cast<size_t>(z) * static_cast<size_t>(dims[1]) + static_cast<size_t>(y)) *
+               static_cast<size_t>(dims[0]) +
+           static_cast<size_t>(x);
+  }
+  // REQUIRES: 0 <= x < dims[0], 0 <= y < dims[1], 0 <= z < dims[2].
+  float At(int x, int y, int z) const { return values[Index(x, y, z)]; }
+
+  // Smallest and largest sample; {0, 0} for an empty volume.
+  std::array<float, 2> Range() const;
+};
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_VOLUME_H_

@@ -1,0 +1,89 @@
+#include "transtick/camera.h"
+
+#include <cmath>
+#include <numbers>
+
+#include "absl/strings/str_cat.h"
+
+namespace transtick {
+namespace {
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+}  // namespace
+
+absl::StatusOr<Camera> Camera::Create(const CameraSpec& spec, const Vec3& volume_extent) {
+  if (spec.width < 1 || spec.height < 1 || spec.width > CameraSpec::kMaxImageSize ||
+      spec.height > CameraSpec::kMaxImageSize) {
+    return absl::InvalidArgumentError(absl::StrCat("image size ", spec.width, "x", spec.height,
+                                                   " is outside 1x1 .. ", CameraSpec::kMaxImageSize,
+                                                   "x", CameraSpec::kMaxImageSize));
+  }
+  if (!std::isfinite(spec.zoom) || spec.zoom < 1e-3 || spec.zoom > 1e3) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("zoom ", spec.zoom, " is outside [0.001, 1000]"));
+  }
+  if (!std::isfinite(spec.fov_deg) || spec.fov_deg <= 0.5 || spec.fov_deg >= 170) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("field of view ", spec.fov_deg, " degrees is outside (0.5, 170)"));
+  }
+  if (!std::isfinite(spec.azimuth_deg) || !std::isfinite(spec.elevation_deg)) {
+    return absl::InvalidArgumentError("azimuth and elevation must be finite");
+  }
+  Camera c;
+  c.projection_ = spec.projection;
+  c.width_ = spec.width;
+  c.height_ = spec.height;
+  const double radius = 0.5 * Length(volume_extent);
+  const double half_fov = 0.5 * spec.fov_deg * kDeg;
+  Vec3 target{0, 0, 0};
+  Vec3 up_hint{0, 1, 0};
+  if (spec.view) {
+    c.eye_ = spec.view->eye;
+    target = spec.view->target;
+    up_hint = spec.view->up;
+    for (int a = 0; a < 3; ++a) {
+      if (!std::isfinite(c.eye_[a]) || !std::isfinite(target[a]) || !std::isfinite(up_hint[a])) {
+        return absl::InvalidArgumentError("explicit view: eye, target and up must be finite");
+      }
+    }
+  } else {
+    const double az = spec.azimuth_deg * kDeg, el = spec.elevation_deg * kDeg;
+    // Azimuth 0, elevation 0: the eye on +Z looking along -Z.
+    Vec3 toward_eye{std::sin(az) * std::cos(el), std::sin(el), std::cos(az) * std::cos(el)};
+    double distance = radius / std::sin(half_fov) * 1.05;
+    c.eye_ = target + toward_eye * distance;
+    // Near the poles the world's Y is no use as an up hint.
+    if (std::fabs(std::cos(el)) < 1e-6) up_hint = {-std::sin(az), 0, -std::cos(az)};
+  }
+  Vec3 forward = target - c.eye_;
+  if (Length(forward) < 1e-12) {
+    return absl::InvalidArgumentError("explicit view: eye and target coincide");
+  }
+  c.forward_ = Normalize(forward);
+  Vec3 right = Cross(c.forward_, up_hint);
+  if (Length(right) < 1e-9) {
+    return absl::InvalidArgumentError("explicit view: up is parallel to the view direction");
+  }
+  c.right_ = Normalize(right);
+  c.up_ = Cross(c.right_, c.forward_);
+  if (spec.projection == Projection::kPerspective) {
+    c.half_height_ = std::tan(half_fov) / spec.zoom;
+  } else {
+    c.half_height_ = radius * 1.05 / spec.zoom;
+  }
+  return c;
+}
+
+WorldRay Camera::Generate(int px, int py) const {
+  const double aspect = static_cast<double>(width_) / height_;
+  const double sx = (2.0 * (px + 0.5) / width_ - 1.0) * aspect * half_height_;
+  const double sy = (1.0 - 2.0 * (py + 0.5) / height_) * half_height_;
+  if (projection_ == Projection::kPerspective) {
+    return {eye_, Normalize(forward_ + right_ * sx + up_ * sy)};
+  }
+  // Orthographic: parallel rays from a plane through the eye.
+  return {eye_ + right_ * sx + up_ * sy, forward_};
+}
+
+}  // namespace transtick

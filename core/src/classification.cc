@@ -1,0 +1,94 @@
+#include "transtick/classification.h"
+
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+
+namespace transtick {
+namespace {
+
+bool InUnit(float v) { return std::isfinite(v) && v >= 0.0f && v <= 1.0f; }
+
+absl::Status CheckColor(const std::string& where, const float* c, int n) {
+  for (int i = 0; i < n; ++i) {
+    if (!InUnit(c[i])) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, ": colour component ", i, " is ", c[i], ", must be in [0, 1]"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::Status Classification::Validate() const {
+  if (materials.empty()) return absl::InvalidArgumentError("materials: none given");
+  if (materials.size() > kMaxMaterials) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("materials: ", materials.size(), " given, at most ", kMaxMaterials));
+  }
+  for (size_t i = 0; i < materials.size(); ++i) {
+    const Material& m = materials[i];
+    std::string where =
+        absl::StrCat("material ", i, m.name.empty() ? "" : " '", m.name, m.name.empty() ? "" : "'");
+    if (m.name.empty()) return absl::InvalidArgumentError(where + ": name is empty");
+    if (!std::isfinite(m.min) || !std::isfinite(m.max) || !(m.min < m.max)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, ": interval [", m.min, ", ", m.max, ") is empty or not finite"));
+    }
+    if (auto s = CheckColor(where, m.color.data(), 3); !s.ok()) return s;
+    if (!InUnit(m.opacity)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, ": opacity ", m.opacity, " is not in [0, 1]"));
+    }
+    for (float k : {m.ambient, m.diffuse, m.specular}) {
+      if (!std::isfinite(k) || k < 0 || k > 4) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(where, ": shading coefficient ", k, " is not in [0, 4]"));
+      }
+    }
+    if (!std::isfinite(m.shininess) || m.shininess < 1 || m.shininess > 1000) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, ": shininess ", m.shininess, " is not in [1, 1000]"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status TransferFunction::Validate() const {
+  if (points.size() < 2) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("transfer function: ", points.size(), " points given, need at least 2"));
+  }
+  for (size_t i = 0; i < points.size(); ++i) {
+    std::string where = absl::StrCat("transfer function point ", i);
+    if (!std::isfinite(points[i].value)) {
+      return absl::InvalidArgumentError(where + ": value is not finite");
+    }
+    if (i > 0 && !(points[i].value > points[i - 1].value)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          where, ": value ", points[i].value, " does not increase on ", points[i - 1].value));
+    }
+    if (auto s = CheckColor(where, points[i].rgba.data(), 4); !s.ok()) return s;
+  }
+  if (!std::isfinite(reference_step) || reference_step <= 0) {
+    return absl::InvalidArgumentError("transfer function: reference_step must be positive");
+  }
+  return absl::OkStatus();
+}
+
+std::array<float, 4> TransferFunction::Evaluate(float value) const {
+  if (points.empty()) return {0, 0, 0, 0};
+  if (value <= points.front().value) return points.front().rgba;
+  if (value >= points.back().value) return points.back().rgba;
+  size_t i = 1;
+  while (points[i].value < value) ++i;
+  const TransferPoint& a = points[i - 1];
+  const TransferPoint& b = points[i];
+  float f = (value - a.value) / (b.value - a.value);
+  std::array<float, 4> out;
+  for (int c = 0; c < 4; ++c) out[c] = a.rgba[c] + f * (b.rgba[c] - a.rgba[c]);
+  return out;
+}
+
+}  // namespace transtick

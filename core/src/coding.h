@@ -1,0 +1,76 @@
+// Little-endian fixed-width and varint encoding with bounds-checked decoding
+// (in the manner of LevelDB's util/coding.h).
+#ifndef TRANSTICK_CODING_H_
+#define TRANSTICK_CODING_H_
+
+#include <cstdint>
+#include <cstring>
+#include <string>
+#include <string_view>
+
+namespace transtick {
+
+inline void PutFixed16(std::string* out, uint16_t v) {
+  out->push_back(static_cast<char>(v & 0xff));
+  out->push_back(static_cast<char>(v >> 8));
+}
+inline void PutFixed32(std::string* out, uint32_t v) {
+  for (int i = 0; i < 4; ++i) out->push_back(static_cast<char>((v >> (8 * i)) & 0xff));
+}
+inline void PutVarint32(std::string* out, uint32_t v) {
+  while (v >= 0x80) {
+    out->push_back(static_cast<char>((v & 0x7f) | 0x80));
+    v >>= 7;
+  }
+  out->push_back(static_cast<char>(v));
+}
+
+// Reads from a borrowed byte range; every Get returns false instead of
+// reading past the end. The viewed bytes must outlive the decoder.
+class Decoder {
+ public:
+  explicit Decoder(std::string_view bytes) : p_(bytes.data()), end_(bytes.data() + bytes.size()) {}
+
+  size_t remaining() const { return static_cast<size_t>(end_ - p_); }
+
+  bool GetBytes(void* dst, size_t n) {
+    if (remaining() < n) return false;
+    std::memcpy(dst, p_, n);
+    p_ += n;
+    return true;
+  }
+  bool GetByte(uint8_t* v) { return GetBytes(v, 1); }
+  bool GetFixed16(uint16_t* v) {
+    uint8_t b[2];
+    if (!GetBytes(b, 2)) return false;
+    *v = static_cast<uint16_t>(b[0] | (b[1] << 8));
+    return true;
+  }
+  bool GetFixed32(uint32_t* v) {
+    uint8_t b[4];
+    if (!GetBytes(b, 4)) return false;
+    *v = uint32_t{b[0]} | (uint32_t{b[1]} << 8) | (uint32_t{b[2]} << 16) | (uint32_t{b[3]} << 24);
+    return true;
+  }
+  bool GetVarint32(uint32_t* v) {
+    uint32_t result = 0;
+    for (int shift = 0; shift <= 28 && p_ < end_; shift += 7) {
+      uint32_t byte = static_cast<uint8_t>(*p_++);
+      if (shift == 28 && byte > 0x0f) return false;  // more than 32 bits
+      result |= (byte & 0x7f) << shift;
+      if ((byte & 0x80) == 0) {
+        *v = result;
+        return true;
+      }
+    }
+    return false;
+  }
+
+ private:
+  const char* p_;
+  const char* end_;
+};
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_CODING_H_

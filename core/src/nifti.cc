@@ -1,0 +1,279 @@
+// NIfTI-1 single-file reader (.nii, and .nii.gz: the same bytes gzipped).
+//
+// The 348-byte header, fields used here (offsets in bytes; byte order is the
+// file's, told by sizeof_hdr which must read 348):
+//   offset  width        field
+//        0  int32        sizeof_hdr   348
+//       40  int16[8]     dim          dim[0] = number of axes, dim[1..] sizes
+//       70  int16        datatype     2 uint8, 4 int16, 8 int32, 16 float32,
+//                                     256 int8, 512 uint16, 768 uint32
+//       76  float32[8]   pixdim       pixdim[1..3] = voxel size
+//      108  float32      vox_offset   where the samples start
+//      112  float32      scl_slope    value = stored * slope + inter,
+//      116  float32      scl_inter      unless slope is 0 (no scaling)
+//      344  char[4]      magic        "n+1\0" (single file)
+// Samples follow at vox_offset, x fastest. Between byte 348 and vox_offset
+// may sit extensions, which are skipped; bytes after the samples are ignored
+// (in a .nii.gz, up to kMaxTrailingBytes of them).
+//
+// Accepted: dim[0] = 3, or up to 7 with every axis beyond the third of size
+// 1 (a single time point). A nonpositive or non-finite pixdim is taken as 1,
+// as many writers leave it unset; its sign is dropped.
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "transtick/volume_io.h"
+#include "volume_io_internal.h"
+
+namespace transtick {
+namespace {
+
+namespace vi = volume_io_internal;
+
+constexpr size_t kHeaderBytes = 348;
+// Single-file NIfTI-1 puts a 4-byte extension flag after the header, so data
+// start at 352 at the earliest; some writers leave vox_offset 0 to mean that.
+constexpr uint64_t kDefaultVoxOffset = 352;
+// vox_offset is a float: beyond 2^24 it cannot even name every byte.
+constexpr double kMaxVoxOffset = double{1 << 24};
+// Bytes after the samples are ignored, but a .nii.gz is read to its end so
+// that the gzip CRC is checked; this bounds the work spent on a trailer.
+constexpr uint64_t kMaxTrailingBytes = uint64_t{64} << 20;
+
+class HeaderView {
+ public:
+  HeaderView(const unsigned char* bytes, bool big) : bytes_(bytes), big_(big) {}
+  uint32_t U32(size_t offset) const {
+    uint32_t v = 0;
+    for (int i = 0; i < 4; ++i) {
+      v = v << 8 | bytes_[offset + (big_ ? i : 3 - i)];
+    }
+    return v;
+  }
+  int16_t I16(size_t offset) const {
+    return static_cast<int16_t>(big_ ? (bytes_[offset] << 8 | bytes_[offset + 1])
+                                     : (bytes_[offset + 1] << 8 | bytes_[offset]));
+  }
+  float F32(size_t offset) const {
+    uint32_t bits = U32(offset);
+    float f;
+    std::memcpy(&f, &bits, sizeof(f));
+    return f;
+  }
+
+ private:
+  const unsigned char* bytes_;
+  bool big_;
+};
+
+const char* UnsupportedDatatypeName(int datatype) {
+  switch (datatype) {
+    case 1:
+      return "binary";
+    case 32:
+      return "complex64";
+    case 64:
+      return "float64";
+    case 128:
+      return "rgb24";
+    case 1024:
+      return "int64";
+    case 1280:
+      return "uint64";
+    case 1536:
+      return "float128";
+    case 1792:
+      return "complex128";
+    case 2048:
+      return "complex256";
+    case 2304:
+      return "rgba32";
+    default:
+      return "unknown";
+  }
+}
+
+absl::Status Error(const std::string& path, const std::string& message) {
+  return absl::InvalidArgumentError(absl::StrCat(path, ": ", message));
+}
+
+struct Header {
+  std::array<int64_t, 3> dims;
+  ScalarType type;
+  ByteOrder order;
+  std::array<double, 3> spacing;
+  uint64_t vox_offset;
+  float slope;
+  float inter;
+};
+
+absl::StatusOr<Header> ParseHeader(const std::string& path, const unsigned char* bytes) {
+  Header header;
+  bool big;
+  if (HeaderView(bytes, false).U32(0) == kHeaderBytes) {
+    big = false;
+  } else if (HeaderView(bytes, true).U32(0) == kHeaderBytes) {
+    big = true;
+  } else if (HeaderView(bytes, false).U32(0) == 540 || HeaderView(bytes, true).U32(0) == 540) {
+    return Error(path, "NIfTI-2 files are not supported, only NIfTI-1");
+  } else {
+    return Error(path, "not a NIfTI-1 file (sizeof_hdr is not 348 in either byte order)");
+  }
+  header.order = big ? ByteOrder::kBig : ByteOrder::kLittle;
+  HeaderView h(bytes, big);
+
+  if (std::memcmp(bytes + 344, "ni1\0", 4) == 0) {
+    return Error(path, "is the header of a .hdr/.img pair; only single-file .nii is supported");
+  }
+  if (std::memcmp(bytes + 344, "n+1\0", 4) != 0) {
+    return Error(path, "bad NIfTI-1 magic (expected \"n+1\")");
+  }
+
+  const int rank = h.I16(40);
+  if (rank < 3 || rank > 7) {
+    return Error(path, absl::StrCat("dim[0] is ", rank, ": only 3-D volumes are supported"));
+  }
+  for (int i = 4; i <= rank; ++i) {
+    if (h.I16(40 + 2 * i) != 1) {
+      return Error(path, absl::StrCat("dim[", i, "] is ", h.I16(40 + 2 * i),
+                                      ": only 3-D volumes (a single time point) are supported"));
+    }
+  }
+  for (int i = 0; i < 3; ++i) header.dims[i] = h.I16(40 + 2 * (i + 1));
+
+  const int datatype = h.I16(70);
+  switch (datatype) {
+    case 2:
+      header.type = ScalarType::kUint8;
+      break;
+    case 4:
+      header.type = ScalarType::kInt16;
+      break;
+    case 8:
+      header.type = ScalarType::kInt32;
+      break;
+    case 16:
+      header.type = ScalarType::kFloat32;
+      break;
+    case 256:
+      header.type = ScalarType::kInt8;
+      break;
+    case 512:
+      header.type = ScalarType::kUint16;
+      break;
+    case 768:
+      header.type = ScalarType::kUint32;
+      break;
+    default:
+      return Error(path, absl::StrCat("unsupported datatype ", datatype, " (",
+                                      UnsupportedDatatypeName(datatype),
+                                      "); supported: uint8, int8, uint16, int16, uint32, "
+                                      "int32, float32"));
+  }
+
+  for (int i = 0; i < 3; ++i) {
+    double s = std::fabs(h.F32(76 + 4 * (i + 1)));
+    header.spacing[i] = (s > 0.0 && std::isfinite(s)) ? s : 1.0;
+  }
+
+  const float vox_offset = h.F32(108);
+  if (vox_offset == 0.0f) {
+    header.vox_offset = kDefaultVoxOffset;
+  } else if (!(vox_offset >= kHeaderBytes) || !(vox_offset <= kMaxVoxOffset) ||
+             vox_offset != std::floor(vox_offset)) {
+    return Error(path, absl::StrCat("vox_offset ", vox_offset,
+                                    " is not a whole number of bytes at or after the header"));
+  } else {
+    header.vox_offset = static_cast<uint64_t>(vox_offset);
+  }
+
+  header.slope = h.F32(112);
+  header.inter = h.F32(116);
+  return header;
+}
+
+void ApplyScaling(float slope, float inter, std::vector<float>* values) {
+  // Slope 0 (or not a number) means "no scaling" in NIfTI-1; skip the
+  // identity too, so unscaled files cost nothing.
+  if (!std::isfinite(slope) || slope == 0.0f) return;
+  if (!std::isfinite(inter)) inter = 0.0f;
+  if (slope == 1.0f && inter == 0.0f) return;
+  for (float& v : *values) v = v * slope + inter;
+}
+
+}  // namespace
+
+absl::StatusOr<Volume> ReadNifti(const std::string& path, const ReadOptions& options) {
+  absl::StatusOr<bool> gzipped = vi::IsGzipFile(path);
+  if (!gzipped.ok()) return gzipped.status();
+
+  unsigned char bytes[kHeaderBytes];
+  std::unique_ptr<vi::GzipFileReader> gz;
+  if (*gzipped) {
+    absl::StatusOr<std::unique_ptr<vi::GzipFileReader>> reader = vi::GzipFileReader::Open(path, 0);
+    if (!reader.ok()) return reader.status();
+    gz = *std::move(reader);
+    absl::Status status = gz->Read(bytes, kHeaderBytes);
+    if (!status.ok()) {
+      return absl::Status(status.code(), absl::StrCat(status.message(), "; expected a ",
+                                                      kHeaderBytes, "-byte NIfTI-1 header"));
+    }
+  } else {
+    absl::StatusOr<std::string> prefix = vi::ReadPrefix(path, kHeaderBytes);
+    if (!prefix.ok()) return prefix.status();
+    if (prefix->size() < kHeaderBytes) {
+      return Error(path, absl::StrCat("file holds ", prefix->size(), " bytes, less than the ",
+                                      kHeaderBytes, "-byte NIfTI-1 header (truncated header)"));
+    }
+    std::memcpy(bytes, prefix->data(), kHeaderBytes);
+  }
+
+  absl::StatusOr<Header> header = ParseHeader(path, bytes);
+  if (!header.ok()) return header.status();
+  absl::StatusOr<uint64_t> data_bytes =
+      vi::CheckedDataBytes(path, header->dims, header->type, options);
+  if (!data_bytes.ok()) return data_bytes.status();
+  const std::string layout = vi::DescribeLayout(header->dims, header->type);
+
+  Volume volume;
+  volume.dims = {static_cast<int>(header->dims[0]), static_cast<int>(header->dims[1]),
+                 static_cast<int>(header->dims[2])};
+  volume.spacing = header->spacing;
+  volume.source_type = header->type;
+  const uint64_t count = volume.VoxelCount();
+
+  if (gz != nullptr) {
+    absl::Status status = gz->Skip(header->vox_offset - kHeaderBytes);
+    if (status.ok()) {
+      status = vi::ReadSamples([&](unsigned char* dst, size_t n) { return gz->Read(dst, n); },
+                               count, header->type, header->order, &volume.values);
+    }
+    if (status.ok()) status = gz->SkipToEnd(kMaxTrailingBytes).status();
+    if (!status.ok()) {
+      return absl::Status(status.code(), absl::StrCat(status.message(), "; header says ", layout,
+                                                      " at offset ", header->vox_offset));
+    }
+  } else {
+    absl::StatusOr<uint64_t> file_size = vi::FileSize(path);
+    if (!file_size.ok()) return file_size.status();
+    const uint64_t available =
+        *file_size > header->vox_offset ? *file_size - header->vox_offset : 0;
+    if (available < *data_bytes) {
+      return Error(path, absl::StrCat("header says ", layout, " at offset ", header->vox_offset,
+                                      ", file holds ", available));
+    }
+    absl::Status status = vi::ReadRawSamples(path, header->vox_offset, count, header->type,
+                                             header->order, &volume.values);
+    if (!status.ok()) return status;
+  }
+  ApplyScaling(header->slope, header->inter, &volume.values);
+  return volume;
+}
+
+}  // namespace transtick

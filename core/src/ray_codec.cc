@@ -1,0 +1,123 @@
+#include "transtick/ray_codec.h"
+
+#include <bit>
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+#include "coding.h"
+
+namespace transtick {
+namespace {
+
+void PutF64(std::string* out, double v) {
+  uint64_t bits = std::bit_cast<uint64_t>(v);
+  PutFixed32(out, static_cast<uint32_t>(bits));
+  PutFixed32(out, static_cast<uint32_t>(bits >> 32));
+}
+void PutF32(std::string* out, float v) { PutFixed32(out, std::bit_cast<uint32_t>(v)); }
+
+bool GetF64(Decoder& in, double* v) {
+  uint32_t lo, hi;
+  if (!in.GetFixed32(&lo) || !in.GetFixed32(&hi)) return false;
+  *v = std::bit_cast<double>(uint64_t{lo} | (uint64_t{hi} << 32));
+  return true;
+}
+bool GetF32(Decoder& in, float* v) {
+  uint32_t bits;
+  if (!in.GetFixed32(&bits)) return false;
+  *v = std::bit_cast<float>(bits);
+  return true;
+}
+
+absl::Status CheckSize(std::string_view bytes, size_t record, const char* what) {
+  if (bytes.size() % record != 0) {
+    return absl::InvalidArgumentError(absl::StrCat(what, " batch of ", bytes.size(),
+                                                   " bytes is not a whole number of ", record,
+                                                   "-byte records"));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+void AppendRay(const RayDescriptor& r, std::string* out) {
+  for (int a = 0; a < 3; ++a) PutF64(out, r.origin[a]);
+  for (int a = 0; a < 3; ++a) PutF64(out, r.direction[a]);
+  PutF64(out, r.t);
+  PutF64(out, r.t_start);
+  for (int a = 0; a < 3; ++a) PutFixed32(out, static_cast<uint32_t>(r.cell[a]));
+  PutFixed32(out, r.pixel);
+  PutFixed32(out, r.sample);
+  out->push_back(static_cast<char>(r.kind));
+  out->push_back(static_cast<char>(r.material));
+  PutFixed16(out, r.spawned);
+  for (int c = 0; c < 3; ++c) PutF32(out, r.color[c]);
+  PutF32(out, r.transmittance);
+}
+
+void AppendDeposit(const Deposit& d, std::string* out) {
+  PutFixed32(out, d.pixel);
+  out->push_back(static_cast<char>(d.kind));
+  out->push_back(0);
+  PutFixed16(out, d.spawned);
+  for (int c = 0; c < 3; ++c) PutF32(out, d.color[c]);
+}
+
+absl::StatusOr<std::vector<RayDescriptor>> DecodeRays(std::string_view bytes,
+                                                      uint32_t pixel_limit) {
+  if (auto s = CheckSize(bytes, kRayRecordBytes, "ray"); !s.ok()) return s;
+  std::vector<RayDescriptor> rays(bytes.size() / kRayRecordBytes);
+  Decoder in(bytes);
+  for (size_t i = 0; i < rays.size(); ++i) {
+    RayDescriptor& r = rays[i];
+    uint32_t cell[3];
+    uint8_t kind;
+    bool ok = true;
+    for (int a = 0; a < 3; ++a) ok = ok && GetF64(in, &r.origin[a]);
+    for (int a = 0; a < 3; ++a) ok = ok && GetF64(in, &r.direction[a]);
+    ok = ok && GetF64(in, &r.t) && GetF64(in, &r.t_start);
+    for (int a = 0; a < 3; ++a) ok = ok && in.GetFixed32(&cell[a]);
+    ok = ok && in.GetFixed32(&r.pixel) && in.GetFixed32(&r.sample) && in.GetByte(&kind) &&
+         in.GetByte(&r.material) && in.GetFixed16(&r.spawned);
+    for (int c = 0; c < 3; ++c) ok = ok && GetF32(in, &r.color[c]);
+    ok = ok && GetF32(in, &r.transmittance);
+    if (!ok) return absl::InternalError("ray batch: decoder ran short");  // sizes were checked
+    for (int a = 0; a < 3; ++a) r.cell[a] = static_cast<int32_t>(cell[a]);
+    bool finite = std::isfinite(r.t) && std::isfinite(r.t_start);
+    for (int a = 0; a < 3; ++a)
+      finite = finite && std::isfinite(r.origin[a]) && std::isfinite(r.direction[a]);
+    if (kind > 1 || !finite || r.pixel >= pixel_limit ||
+        (r.direction.x == 0 && r.direction.y == 0 && r.direction.z == 0)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("ray batch: record ", i, " is invalid (kind ", int{kind}, ", pixel ",
+                       r.pixel, " of ", pixel_limit, finite ? "" : ", non-finite geometry", ")"));
+    }
+    r.kind = static_cast<RayKind>(kind);
+  }
+  return rays;
+}
+
+absl::StatusOr<std::vector<Deposit>> DecodeDeposits(std::string_view bytes, uint32_t pixel_limit) {
+  if (auto s = CheckSize(bytes, kDepositRecordBytes, "deposit"); !s.ok()) return s;
+  std::vector<Deposit> deposits(bytes.size() / kDepositRecordBytes);
+  Decoder in(bytes);
+  for (size_t i = 0; i < deposits.size(); ++i) {
+    Deposit& d = deposits[i];
+    uint8_t kind, pad;
+    bool ok = in.GetFixed32(&d.pixel) && in.GetByte(&kind) && in.GetByte(&pad) &&
+              in.GetFixed16(&d.spawned);
+    for (int c = 0; c < 3; ++c) ok = ok && GetF32(in, &d.color[c]);
+    if (!ok) return absl::InternalError("deposit batch: decoder ran short");
+    bool finite =
+        std::isfinite(d.color[0]) && std::isfinite(d.color[1]) && std::isfinite(d.color[2]);
+    if (kind > 1 || d.pixel >= pixel_limit || !finite || (kind == 1 && d.spawned != 0)) {
+      return absl::InvalidArgumentError(absl::StrCat("deposit batch: record ", i,
+                                                     " is invalid (kind ", int{kind}, ", pixel ",
+                                                     d.pixel, " of ", pixel_limit, ")"));
+    }
+    d.kind = static_cast<RayKind>(kind);
+  }
+  return deposits;
+}
+
+}  // namespace transtick

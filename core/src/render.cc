@@ -1,0 +1,95 @@
+#include "transtick/render.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
+
+namespace transtick {
+
+void TraceRows(const Tracer& tracer, const Camera& camera, int row_begin, int row_end,
+               Framebuffer& fb, TraceCounters& counters) {
+  std::vector<RayDescriptor> pending;
+  Deposit deposit;
+  const int width = camera.width();
+  for (int py = row_begin; py < row_end; ++py) {
+    for (int px = 0; px < width; ++px) {
+      const uint32_t pixel = static_cast<uint32_t>(py) * width + px;
+      RayDescriptor ray;
+      if (!tracer.MakePrimary(camera.Generate(px, py), pixel, &ray)) {
+        fb.Add(tracer.MissDeposit(pixel));
+        continue;
+      }
+      ++counters.primary;
+      pending.push_back(ray);
+      while (!pending.empty()) {
+        RayDescriptor r = pending.back();
+        pending.pop_back();
+        // A whole-volume scene has no slab planes: every ray finishes here.
+        tracer.Trace(r, pending, deposit, counters);
+        fb.Add(deposit);
+      }
+    }
+  }
+}
+
+absl::StatusOr<Image> RenderLocal(const Scene& scene, const Camera& camera,
+                                  const RenderSettings& settings, int threads, RenderStats* stats,
+                                  const ProgressFn& progress) {
+  if (scene.y_begin() != 0 || scene.y_end() != scene.dims()[1]) {
+    return absl::InvalidArgumentError("RenderLocal needs a scene holding the whole volume");
+  }
+  if (threads <= 0) threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const auto start = std::chrono::steady_clock::now();
+  const Tracer tracer(scene, settings, camera);
+  Framebuffer fb(camera.width(), camera.height());
+  constexpr int kRowsPerTask = 2;
+  std::atomic<int> next_row{0};
+  std::atomic<int> rows_done{0};
+  std::vector<TraceCounters> counters(threads);
+  auto work = [&](int id) {
+    while (true) {
+      int r0 = next_row.fetch_add(kRowsPerTask);
+      if (r0 >= camera.height()) break;
+      int r1 = std::min(r0 + kRowsPerTask, camera.height());
+      TraceRows(tracer, camera, r0, r1, fb, counters[id]);
+      rows_done.fetch_add(r1 - r0);
+    }
+  };
+  std::mutex mu;
+  std::condition_variable done_cv;
+  int finished_threads = 0;  // guarded by mu
+  std::vector<std::thread> pool;
+  for (int i = 0; i < threads; ++i) {
+    pool.emplace_back([&, i] {
+      work(i);
+      std::lock_guard<std::mutex> lock(mu);
+      ++finished_threads;
+      done_cv.notify_all();
+    });
+  }
+  if (progress) {
+    // The calling thread only reports progress while the pool works.
+    const uint64_t total = static_cast<uint64_t>(camera.height()) * camera.width();
+    std::unique_lock<std::mutex> lock(mu);
+    while (!done_cv.wait_for(lock, std::chrono::milliseconds(200),
+                             [&] { return finished_threads == threads; })) {
+      progress(static_cast<uint64_t>(rows_done.load()) * camera.width(), total);
+    }
+    progress(total, total);
+  }
+  for (auto& t : pool) t.join();
+  Image image = fb.Resolve();
+  if (stats) {
+    stats->frame_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    stats->threads = threads;
+    stats->counters = TraceCounters{};
+    for (const auto& c : counters) stats->counters.Add(c);
+  }
+  return image;
+}
+
+}  // namespace transtick

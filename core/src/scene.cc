@@ -1,0 +1,220 @@
+#include "transtick/scene.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+
+namespace transtick {
+namespace {
+
+absl::Status CheckDims(const Volume& volume) {
+  for (int a = 0; a < 3; ++a) {
+    if (volume.dims[a] < 1 || volume.dims[a] > Sticks::kMaxExtent) {
+      return absl::InvalidArgumentError(absl::StrCat("volume dimension ", a, " is ", volume.dims[a],
+                                                     ", must be in [1, ", Sticks::kMaxExtent, "]"));
+    }
+    if (!(volume.spacing[a] > 0) || !std::isfinite(volume.spacing[a])) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("volume spacing ", a, " is ", volume.spacing[a], ", must be positive"));
+    }
+  }
+  if (volume.values.size() != volume.VoxelCount()) {
+    return absl::InvalidArgumentError(absl::StrCat("volume holds ", volume.values.size(),
+                                                   " values for ", volume.VoxelCount(), " voxels"));
+  }
+  return absl::OkStatus();
+}
+
+// Min (or max) over the 3x3x3 neighbourhood, separably, clamped at borders.
+std::vector<float> Filter3(const Volume& v, bool take_max) {
+  const int nx = v.dims[0], ny = v.dims[1], nz = v.dims[2];
+  auto pick = [take_max](float a, float b) { return take_max ? std::max(a, b) : std::min(a, b); };
+  std::vector<float> a = v.values, b(a.size());
+  const size_t sx = 1, sy = nx, sz = static_cast<size_t>(nx) * ny;
+  const size_t strides[3] = {sx, sy, sz};
+  const int extent[3] = {nx, ny, nz};
+  for (int axis = 0; axis < 3; ++axis) {
+    for (int z = 0; z < nz; ++z) {
+      for (int y = 0; y < ny; ++y) {
+        for (int x = 0; x < nx; ++x) {
+          size_t i = z * sz + y * sy + x;
+          int c = axis == 0 ? x : (axis == 1 ? y : z);
+          float r = a[i];
+          if (c > 0) r = pick(r, a[i - strides[axis]]);
+          if (c + 1 < extent[axis]) r = pick(r, a[i + strides[axis]]);
+          b[i] = r;
+        }
+      }
+    }
+    std::swap(a, b);
+  }
+  return a;
+}
+
+}  // namespace
+
+Occupancy Occupancy::Build(std::span<const uint8_t> labels, std::array<int, 3> dims) {
+  Occupancy o;
+  for (int a = 0; a < 3; ++a) o.bdims_[a] = (dims[a] + kBrick - 1) >> kShift;
+  o.bricks_.assign(static_cast<size_t>(o.bdims_[0]) * o.bdims_[1] * o.bdims_[2], 0);
+  size_t i = 0;
+  for (int z = 0; z < dims[2]; ++z) {
+    for (int y = 0; y < dims[1]; ++y) {
+      size_t row = (static_cast<size_t>(z >> kShift) * o.bdims_[1] + (y >> kShift)) * o.bdims_[0];
+      for (int x = 0; x < dims[0]; ++x, ++i) {
+        if (labels[i] != 0) o.bricks_[row + (x >> kShift)] = 1;
+      }
+    }
+  }
+  return o;
+}
+
+absl::StatusOr<Occupancy> Occupancy::FromBytes(std::array<int, 3> dims,
+                                               std::vector<uint8_t> bytes) {
+  Occupancy o;
+  for (int a = 0; a < 3; ++a) o.bdims_[a] = (dims[a] + kBrick - 1) >> kShift;
+  size_t want = static_cast<size_t>(o.bdims_[0]) * o.bdims_[1] * o.bdims_[2];
+  if (bytes.size() != want) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("occupancy: ", bytes.size(), " bytes, expected ", want));
+  }
+  o.bricks_ = std::move(bytes);
+  return o;
+}
+
+std::vector<uint8_t> DvrVisibility(const Volume& volume, const TransferFunction& transfer) {
+  // A fine table of "is alpha > 0 anywhere in this value bin", with a prefix
+  // count so a [lo, hi] query is two lookups. Bins are conservative: a bin is
+  // visible if the transfer function is non-zero at either end or at any
+  // control point inside it.
+  constexpr int kBins = 8192;
+  auto range = volume.Range();
+  const float lo = range[0], hi = range[1];
+  const float width = hi > lo ? (hi - lo) / kBins : 1.0f;
+  std::vector<uint32_t> prefix(kBins + 1, 0);
+  for (int b = 0; b < kBins; ++b) {
+    float v0 = lo + b * width, v1 = lo + (b + 1) * width;
+    bool visible = transfer.Evaluate(v0)[3] > 0 || transfer.Evaluate(v1)[3] > 0;
+    for (const TransferPoint& p : transfer.points) {
+      if (p.value >= v0 && p.value <= v1 && p.rgba[3] > 0) visible = true;
+    }
+    prefix[b + 1] = prefix[b] + (visible ? 1 : 0);
+  }
+  auto bin = [&](float v) {
+    int b = static_cast<int>((v - lo) / width);
+    return std::clamp(b, 0, kBins - 1);
+  };
+  std::vector<float> mn = Filter3(volume, false), mx = Filter3(volume, true);
+  std::vector<uint8_t> labels(volume.values.size());
+  for (size_t i = 0; i < labels.size(); ++i) {
+    labels[i] = prefix[bin(mx[i]) + 1] - prefix[bin(mn[i])] > 0 ? 1 : 0;
+  }
+  return labels;
+}
+
+absl::StatusOr<Scene> Scene::ForSurfaces(const Volume& volume,
+                                         const Classification& classification) {
+  if (auto s = CheckDims(volume); !s.ok()) return s;
+  if (auto s = classification.Validate(); !s.ok()) return s;
+  std::vector<uint8_t> labels(volume.values.size());
+  for (size_t i = 0; i < labels.size(); ++i) labels[i] = classification.Classify(volume.values[i]);
+  Scene scene;
+  scene.mode_ = RenderMode::kSurfaces;
+  scene.dims_ = volume.dims;
+  scene.spacing_ = volume.spacing;
+  scene.value_range_ = volume.Range();
+  scene.sticks_ = Sticks::Encode(labels, volume.dims, 0, volume.dims[1]);
+  scene.occupancy_ = Occupancy::Build(labels, volume.dims);
+  scene.classification_ = classification;
+  scene.scalar_y_begin_ = 0;
+  scene.scalar_planes_ = volume.dims[1];
+  scene.scalars_ = volume.values;
+  return scene;
+}
+
+absl::StatusOr<Scene> Scene::ForDvr(const Volume& volume, const TransferFunction& transfer) {
+  if (auto s = CheckDims(volume); !s.ok()) return s;
+  if (auto s = transfer.Validate(); !s.ok()) return s;
+  std::vector<uint8_t> labels = DvrVisibility(volume, transfer);
+  Scene scene;
+  scene.mode_ = RenderMode::kDvr;
+  scene.dims_ = volume.dims;
+  scene.spacing_ = volume.spacing;
+  scene.value_range_ = volume.Range();
+  scene.sticks_ = Sticks::Encode(labels, volume.dims, 0, volume.dims[1]);
+  scene.occupancy_ = Occupancy::Build(labels, volume.dims);
+  scene.transfer_ = transfer;
+  scene.scalar_y_begin_ = 0;
+  scene.scalar_planes_ = volume.dims[1];
+  scene.scalars_ = volume.values;
+  return scene;
+}
+
+absl::StatusOr<Scene> Scene::FromParts(RenderMode mode, std::array<int, 3> dims,
+                                       std::array<double, 3> spacing,
+                                       std::array<float, 2> value_range, Sticks sticks,
+                                       std::vector<float> scalars, Occupancy occupancy,
+                                       Classification classification, TransferFunction transfer) {
+  Scene scene;
+  scene.mode_ = mode;
+  scene.dims_ = dims;
+  scene.spacing_ = spacing;
+  scene.value_range_ = value_range;
+  scene.scalar_y_begin_ = scene.ScalarBegin(sticks.y_begin());
+  scene.scalar_planes_ = scene.ScalarEnd(sticks.y_end()) - scene.scalar_y_begin_;
+  size_t want = static_cast<size_t>(dims[0]) * scene.scalar_planes_ * dims[2];
+  if (scalars.size() != want) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("slab scalars: ", scalars.size(), " values, expected ", want));
+  }
+  if (sticks.dims() != dims || occupancy.brick_dims()[0] != (dims[0] + 7) / 8) {
+    return absl::InvalidArgumentError("slab parts disagree on the volume's dimensions");
+  }
+  if (mode == RenderMode::kSurfaces) {
+    if (auto s = classification.Validate(); !s.ok()) return s;
+  } else {
+    if (auto s = transfer.Validate(); !s.ok()) return s;
+  }
+  scene.sticks_ = std::move(sticks);
+  scene.scalars_ = std::move(scalars);
+  scene.occupancy_ = std::move(occupancy);
+  scene.classification_ = std::move(classification);
+  scene.transfer_ = std::move(transfer);
+  return scene;
+}
+
+Scene Scene::Slab(int y_begin, int y_end) const {
+  Scene s;
+  s.mode_ = mode_;
+  s.dims_ = dims_;
+  s.spacing_ = spacing_;
+  s.value_range_ = value_range_;
+  s.occupancy_ = occupancy_;
+  s.classification_ = classification_;
+  s.transfer_ = transfer_;
+  std::vector<std::string> blocks;
+  for (int by = y_begin / Sticks::kBlockSize; by * Sticks::kBlockSize < y_end; ++by) {
+    for (int bx = 0; bx < sticks_.BlocksX(); ++bx) blocks.push_back(sticks_.EncodeBlock(bx, by));
+  }
+  int max_material =
+      mode_ == RenderMode::kSurfaces ? static_cast<int>(classification_.materials.size()) : 1;
+  s.sticks_ = *Sticks::FromBlocks(dims_, y_begin, y_end, max_material, blocks);
+  s.scalar_y_begin_ = ScalarBegin(y_begin);
+  s.scalar_planes_ = ScalarEnd(y_end) - s.scalar_y_begin_;
+  s.scalars_.reserve(static_cast<size_t>(dims_[0]) * s.scalar_planes_ * dims_[2]);
+  for (int z = 0; z < dims_[2]; ++z) {
+    auto first = scalars_.begin() +
+                 (static_cast<size_t>(z) * scalar_planes_ + (s.scalar_y_begin_ - scalar_y_begin_)) *
+                     dims_[0];
+    s.scalars_.insert(s.scalars_.end(), first,
+                      first + static_cast<size_t>(s.scalar_planes_) * dims_[0]);
+  }
+  return s;
+}
+
+size_t Scene::MemoryBytes() const {
+  return sticks_.MemoryBytes() + scalars_.size() * sizeof(float) + occupancy_.bytes().size();
+}
+
+}  // namespace transtick

@@ -1,0 +1,56 @@
+#include "transtick/volume.h"
+
+#include <limits>
+
+namespace transtick {
+
+std::string_view ScalarTypeName(ScalarType type) {
+  switch (type) {
+    case ScalarType::kUint8:
+      return "uint8";
+    case ScalarType::kInt8:
+      return "int8";
+    case ScalarType::kUint16:
+      return "uint16";
+    case ScalarType::kInt16:
+      return "int16";
+    case ScalarType::kUint32:
+      return "uint32";
+    case ScalarType::kInt32:
+      return "int32";
+    case ScalarType::kFloat32:
+      return "float";
+  }
+  return "unknown";
+}
+
+size_t ScalarTypeSize(ScalarType type) {
+  switch (type) {
+    case ScalarType::kUint8:
+    case ScalarType::kInt8:
+      return 1;
+    case ScalarType::kUint16:
+    case ScalarType::kInt16:
+      return 2;
+    case ScalarType::kUint32:
+    case ScalarType::kInt32:
+    case ScalarType::kFloat32:
+      return 4;
+  }
+  return 0;
+}
+
+std::array<float, 2> Volume::Range() const {
+  // NaN compares false both ways, so NaN samples never become the min or max;
+  // a volume of nothing but NaN reports {0, 0} like an empty one.
+  float lo = std::numeric_limits<float>::infinity();
+  float hi = -std::numeric_limits<float>::infinity();
+  for (float v : values) {
+    if (v < lo) lo = v;
+    if (v > hi) hi = v;
+  }
+  if (lo > hi) return {0.0f, 0.0f};
+  return {lo, hi};
+}
+
+}  // namespace transtick

@@ -1,0 +1,128 @@
+// Helpers shared by the volume readers (volume_io.cc, nrrd.cc, den.cc,
+// nifti.cc). Private to the core library.
+//
+// Every function that can fail returns a status whose message starts with the
+// path as the caller gave it, so a user sees which file is wrong.
+#ifndef TRANSTICK_CORE_SRC_VOLUME_IO_INTERNAL_H_
+#define TRANSTICK_CORE_SRC_VOLUME_IO_INTERNAL_H_
+
+#include <array>
+#include <cstdint>
+#include <cstdio>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "transtick/volume.h"
+#include "transtick/volume_io.h"
+#include "zlib.h"
+
+namespace transtick::volume_io_internal {
+
+struct FileCloser {
+  void operator()(std::FILE* file) const { std::fclose(file); }
+};
+using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
+
+// Opens a regular file for binary reading: NotFound if it does not exist,
+// InvalidArgument if it is a directory or unreadable.
+absl::StatusOr<FilePtr> OpenFile(const std::string& path);
+
+// Size in bytes of the regular file at `path`.
+absl::StatusOr<uint64_t> FileSize(const std::string& path);
+
+// Reads up to `max_len` bytes from the start of the file (fewer if the file is
+// shorter). Used for headers, whose length is not known in advance.
+absl::StatusOr<std::string> ReadPrefix(const std::string& path, uint64_t max_len);
+
+// Returns the offset just past the `lines`-th '\n' at or after `offset`.
+absl::StatusOr<uint64_t> SkipLines(const std::string& path, uint64_t offset, uint64_t lines);
+
+// a * b, a + b; false on unsigned 64-bit overflow.
+bool CheckedMul(uint64_t a, uint64_t b, uint64_t* out);
+bool CheckedAdd(uint64_t a, uint64_t b, uint64_t* out);
+
+// "256x256x113 int16 = 14811136 bytes": how messages describe a layout.
+std::string DescribeLayout(const std::array<int64_t, 3>& dims, ScalarType type);
+
+// Validates dims as a header states them (each in [1, INT_MAX]), checks that
+// the float volume fits in `options.max_bytes` (ResourceExhausted if not) and
+// returns the number of bytes the samples occupy on disk. Nothing is
+// allocated: this is the check that must come before any allocation.
+absl::StatusOr<uint64_t> CheckedDataBytes(const std::string& path,
+                                          const std::array<int64_t, 3>& dims, ScalarType type,
+                                          const ReadOptions& options);
+
+// Converts `count` samples of `type` stored in `order` at `src` to float.
+// REQUIRES: src holds count * ScalarTypeSize(type) bytes; dst holds count floats.
+void ConvertSamples(const unsigned char* src, size_t count, ScalarType type, ByteOrder order,
+                    float* dst);
+
+// A source of bytes: reads exactly `n` bytes into `dst` or fails.
+using ReadFn = std::function<absl::Status(unsigned char* dst, size_t n)>;
+
+// Reads `count` samples through `read` in bounded chunks and appends them, as
+// float, to `*out`. `*out` grows as data actually arrives, so a header that
+// claims more voxels than a (compressed) stream holds costs at most one chunk
+// of extra memory, not the claimed size.
+absl::Status ReadSamples(const ReadFn& read, uint64_t count, ScalarType type, ByteOrder order,
+                         std::vector<float>* out);
+
+// Reads `count` samples of `type` from [offset, offset + count * size) of a
+// plain file. REQUIRES: the caller checked that the file holds those bytes.
+absl::Status ReadRawSamples(const std::string& path, uint64_t offset, uint64_t count,
+                            ScalarType type, ByteOrder order, std::vector<float>* out);
+
+// Streams the decompressed content of a gzip or zlib stream (detected from
+// its first bytes) that starts at `offset` in a file. Reading past the end of
+// the stream, or a corrupt stream, is an InvalidArgument error naming the
+// file; memory use is bounded by one input buffer whatever the stream holds.
+//
+// Not thread-safe; owns its file handle.
+class GzipFileReader {
+ public:
+  static absl::StatusOr<std::unique_ptr<GzipFileReader>> Open(const std::string& path,
+                                                              uint64_t offset);
+  ~GzipFileReader();
+  GzipFileReader(const GzipFileReader&) = delete;
+  GzipFileReader& operator=(const GzipFileReader&) = delete;
+
+  // Reads exactly `n` decompressed bytes.
+  absl::Status Read(unsigned char* dst, size_t n);
+  // Discards `n` decompressed bytes.
+  absl::Status Skip(uint64_t n);
+  // True when the stream has ended, false if it still has data; an error if
+  // that cannot be told because the stream is corrupt or cut short.
+  absl::StatusOr<bool> AtEnd();
+  // Reads on to the end of the stream, which checks the gzip trailer (CRC and
+  // length), and returns how many bytes were left; an error if more than
+  // `limit` remain, or if the stream is corrupt or cut short.
+  absl::StatusOr<uint64_t> SkipToEnd(uint64_t limit);
+  // Decompressed bytes delivered so far (read or skipped).
+  uint64_t position() const { return position_; }
+
+ private:
+  GzipFileReader(std::string path, FilePtr file);
+  // Inflates into [dst, dst + n); sets *produced. Stops early only at the end
+  // of the stream.
+  absl::Status Inflate(unsigned char* dst, size_t n, size_t* produced);
+
+  std::string path_;
+  FilePtr file_;
+  z_stream stream_{};
+  bool initialized_ = false;
+  bool stream_end_ = false;
+  bool file_eof_ = false;
+  uint64_t position_ = 0;
+  std::vector<unsigned char> in_;
+};
+
+// True if the file starts with the gzip magic bytes 1f 8b.
+absl::StatusOr<bool> IsGzipFile(const std::string& path);
+
+}  // namespace transtick::volume_io_internal
+
+#endif  // TRANSTICK_CORE_SRC_VOLUME_IO_INTERNAL_H_

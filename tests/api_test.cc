@@ -1,0 +1,71 @@
+#include <fstream>
+
+#include "convert.h"
+#include "gtest/gtest.h"
+#include "testing.h"
+
+namespace transtick {
+namespace {
+
+std::string Write(const std::string& dir, const std::string& name, const std::string& text) {
+  std::string path = dir + "/" + name;
+  std::ofstream(path) << text;
+  return path;
+}
+
+TEST(ApiTest, LoadsMaterialsWithDefaults) {
+  std::string dir = testing::TempDir();
+  auto c = LoadMaterials(Write(dir, "m.json", R"({"materials":[
+      {"name":"skin","min":1300,"max":1900,"color":[0.9,0.7,0.6],"opacity":0.3},
+      {"name":"bone","min":1900,"max":4000,"color":[1,1,1],"specular":0.5}]})"));
+  ASSERT_TRUE(c.ok()) << c.status();
+  ASSERT_EQ(c->materials.size(), 2u);
+  EXPECT_FLOAT_EQ(c->materials[0].opacity, 0.3f);
+  EXPECT_FLOAT_EQ(c->materials[1].opacity, 1.0f);  // absent means opaque
+  EXPECT_FLOAT_EQ(c->materials[1].specular, 0.5f);
+  EXPECT_EQ(c->Classify(1500), 1);
+  EXPECT_EQ(c->Classify(1900), 2);
+  EXPECT_EQ(c->Classify(100), 0);
+}
+
+TEST(ApiTest, BadMaterialsNameTheProblem) {
+  std::string dir = testing::TempDir();
+  struct Case {
+    const char* json;
+    const char* expect;
+  } cases[] = {
+      {R"({"materials":[{"name":"a","min":1,"max":2,"color":[1,1]}]})", "color has 2"},
+      {R"({"materials":[{"name":"a","min":3,"max":2,"color":[1,1,1]}]})", "interval"},
+      {R"({"materials":[{"name":"a","min":1,"max":2,"color":[1,1,1],"opacity":2}]})", "opacity"},
+      {R"({"materials":[{"name":"a","min":1,"max":2,"colour":[1,1,1]}]})", "colour"},
+      {R"({"materials":[)", "m.json"},
+      {R"({"materials":[]})", "none given"},
+      {R"({"materials":[{"min":1,"max":2,"color":[1,1,1]}]})", "name is empty"},
+  };
+  for (const Case& c : cases) {
+    auto r = LoadMaterials(Write(dir, "m.json", c.json));
+    ASSERT_FALSE(r.ok()) << c.json;
+    EXPECT_NE(r.status().message().find(c.expect), std::string::npos)
+        << c.json << " -> " << r.status().message();
+    EXPECT_NE(r.status().message().find("m.json"), std::string::npos) << r.status().message();
+  }
+  EXPECT_EQ(LoadMaterials(dir + "/missing.json").status().code(), absl::StatusCode::kNotFound);
+}
+
+TEST(ApiTest, TransferFunctions) {
+  std::string dir = testing::TempDir();
+  auto tf = LoadTransferFunction(Write(dir, "t.json", R"({"points":[
+      {"value":0,"rgba":[0,0,0,0]},{"value":100,"rgba":[1,0.5,0,0.5]}],"shading":false})"));
+  ASSERT_TRUE(tf.ok()) << tf.status();
+  EXPECT_FALSE(tf->shading);
+  auto mid = tf->Evaluate(50);
+  EXPECT_FLOAT_EQ(mid[0], 0.5f);
+  EXPECT_FLOAT_EQ(mid[3], 0.25f);
+  EXPECT_FLOAT_EQ(tf->Evaluate(1000)[3], 0.5f);
+  auto bad = LoadTransferFunction(Write(dir, "t.json", R"({"points":[
+      {"value":10,"rgba":[0,0,0,0]},{"value":5,"rgba":[1,1,1,1]}]})"));
+  EXPECT_NE(bad.status().message().find("does not increase"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace transtick

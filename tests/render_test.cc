@@ -1,0 +1,258 @@
+// Known answers of the renderer: a sphere's silhouette and shading, the
+// transmittance of semi-transparent slabs, the shadow a sphere casts.
+#include "transtick/render.h"
+
+#include <cmath>
+#include <numbers>
+
+#include "gtest/gtest.h"
+#include "testing.h"
+#include "transtick/synthetic.h"
+
+namespace transtick {
+namespace {
+
+using testing::MakeCamera;
+using testing::RenderWhole;
+
+float Pixel(const Image& img, int x, int y, int c = 0) {
+  return img.rgb[(static_cast<size_t>(y) * img.width + x) * 3 + c];
+}
+
+Material Opaque(const std::string& name, float lo, float hi, float grey = 0.5f) {
+  return Material{.name = name, .min = lo, .max = hi, .color = {grey, grey, grey}, .opacity = 1};
+}
+
+TEST(RenderTest, OpaqueSphereSilhouette) {
+  std::array<int, 3> dims = {64, 64, 64};
+  const double r = 20;
+  Volume v = MakeSphere(dims, {32, 32, 32}, r);
+  Classification c;
+  c.materials = {Opaque("ball", 50, 150)};
+  Scene scene = *Scene::ForSurfaces(v, c);
+  for (double az : {0.0, 30.0, 90.0}) {
+    Camera cam = MakeCamera(dims, 200, az, 10, Projection::kOrthographic);
+    Image img = RenderWhole(scene, cam, RenderSettings{});
+    // Pixel size: the orthographic view spans the bounding sphere + 5%.
+    const double half = 0.5 * std::sqrt(3.0) * 64 * 1.05;
+    const double pixel = 2 * half / 200;
+    int covered = 0;
+    for (int y = 0; y < 200; ++y)
+      for (int x = 0; x < 200; ++x) covered += Pixel(img, x, y) > 0;
+    const double expected = std::numbers::pi * r * r / (pixel * pixel);
+    // Surfaces are voxel-exact: seen obliquely, voxel corners stand out of
+    // the sphere by up to half a voxel, about 5% of the area at r = 20.
+    EXPECT_NEAR(covered / expected, 1.0, az == 0 ? 0.03 : 0.06) << "azimuth " << az;
+    // The silhouette is centred.
+    EXPECT_GT(Pixel(img, 100, 100), 0);
+    EXPECT_EQ(Pixel(img, 100, 100 - static_cast<int>(r / pixel) - 3), 0);
+  }
+}
+
+TEST(RenderTest, SphereShadingFollowsLambert) {
+  std::array<int, 3> dims = {64, 64, 64};
+  Volume v = MakeSphere(dims, {32, 32, 32}, 24);
+  Classification c;
+  c.materials = {Opaque("ball", 50, 150)};
+  Scene scene = *Scene::ForSurfaces(v, c);
+  Camera cam = MakeCamera(dims, 201, 0, 0, Projection::kOrthographic);
+  RenderSettings settings;
+  settings.light = {0, 0, 1};  // from the viewer
+  Image img = RenderWhole(scene, cam, settings);
+  const Material& m = c.materials[0];
+  // Facing the viewer: ambient + diffuse + full specular highlight.
+  const float centre = m.ambient * 0.5f + m.diffuse * 0.5f + m.specular;
+  EXPECT_NEAR(Pixel(img, 100, 100), centre, 0.03);
+  // Along a radius the brightness follows cos(theta) (within voxel noise).
+  const double half = 0.5 * std::sqrt(3.0) * 64 * 1.05, pixel = 2 * half / 201;
+  for (double s : {0.5, 0.7, 0.85}) {
+    int x = 100 + static_cast<int>(std::lround(s * 24 / pixel));
+    const double cos_theta = std::sqrt(1 - s * s);
+    const double expected = m.ambient * 0.5 + m.diffuse * 0.5 * cos_theta;  // specular ~0 here
+    EXPECT_NEAR(Pixel(img, x, 100), expected, 0.06) << "at " << s << " of the radius";
+  }
+  // Shadow rays from a convex body lit from the viewer find nothing.
+  settings.shadows = false;
+  Image no_shadows = RenderWhole(scene, cam, settings);
+  for (size_t i = 0; i < img.rgb.size(); ++i) ASSERT_NEAR(img.rgb[i], no_shadows.rgb[i], 1e-6);
+}
+
+// Black, unlit material: a surface only takes away light from behind.
+Material Filter(const std::string& name, float lo, float hi, float opacity) {
+  return Material{.name = name,
+                  .min = lo,
+                  .max = hi,
+                  .color = {0, 0, 0},
+                  .opacity = opacity,
+                  .ambient = 0,
+                  .diffuse = 0,
+                  .specular = 0};
+}
+
+TEST(RenderTest, SemiTransparentSlabsTransmit) {
+  std::array<int, 3> dims = {32, 32, 40};
+  Volume one = MakeSlab(dims, 2, 10, 20);
+  Volume two = MakeSlab(dims, 2, 5, 10);
+  Volume second = MakeSlab(dims, 2, 25, 30);
+  for (size_t i = 0; i < two.values.size(); ++i) two.values[i] += second.values[i];
+  Classification c;
+  c.materials = {Filter("glass", 50, 150, 0.4f)};
+  RenderSettings settings;
+  settings.background = {1, 1, 1};
+  Camera cam = MakeCamera(dims, 64, 0, 0, Projection::kOrthographic);
+  Image a = RenderWhole(*Scene::ForSurfaces(one, c), cam, settings);
+  Image b = RenderWhole(*Scene::ForSurfaces(two, c), cam, settings);
+  EXPECT_NEAR(Pixel(a, 32, 32), 0.6f, 1e-6);
+  EXPECT_NEAR(Pixel(b, 32, 32), 0.36f, 1e-6);
+  // Rays that miss the volume see the background.
+  EXPECT_EQ(Pixel(a, 0, 0), 1.0f);
+  // Seen at 60 degrees the slab is still crossed once: one surface, one
+  // attenuation (the paper's threshold surfaces, not a path length).
+  Image tilted = RenderWhole(*Scene::ForSurfaces(one, c), MakeCamera(dims, 64, 60, 0), settings);
+  EXPECT_NEAR(Pixel(tilted, 32, 32), 0.6f, 1e-6);
+}
+
+TEST(RenderTest, DvrSlabTransmittanceFollowsDepth) {
+  std::array<int, 3> dims = {32, 32, 48};
+  Volume v = MakeSlab(dims, 2, 14, 34);  // 20 voxels deep
+  TransferFunction tf;
+  tf.points = {
+      {0, {0, 0, 0, 0}}, {60, {0, 0, 0, 0}}, {90, {0, 0, 0, 0.1f}}, {100, {0, 0, 0, 0.1f}}};
+  tf.shading = false;
+  RenderSettings settings;
+  settings.background = {1, 1, 1};
+  Scene scene = *Scene::ForDvr(v, tf);
+  Image img = RenderWhole(scene, MakeCamera(dims, 64, 0, 0, Projection::kOrthographic), settings);
+  const float t = Pixel(img, 32, 32);
+  // 20 voxels of alpha 0.1 per voxel, give or take the soft faces.
+  EXPECT_GT(t, std::pow(0.9f, 21.0f));
+  EXPECT_LT(t, std::pow(0.9f, 19.0f));
+  // Halving the step changes little: opacity is corrected for it.
+  settings.step = 0.25;
+  Image fine = RenderWhole(scene, MakeCamera(dims, 64, 0, 0, Projection::kOrthographic), settings);
+  EXPECT_NEAR(Pixel(fine, 32, 32), t, 0.01);
+}
+
+TEST(RenderTest, SphereCastsShadowOnFloor) {
+  std::array<int, 3> dims = {96, 64, 96};
+  // A floor plate y in [0, 6) and a ball above it.
+  Volume v = MakeSlab(dims, 1, 0, 6, 100);
+  const Vec3 centre{48, 30, 48};
+  const double r = 12;
+  Volume ball = MakeSphere(dims, {centre.x, centre.y, centre.z}, r, 200);
+  for (size_t i = 0; i < v.values.size(); ++i) v.values[i] += ball.values[i];
+  Classification c;
+  c.materials = {Opaque("floor", 50, 150, 0.8f), Opaque("ball", 150, 350, 0.8f)};
+  Scene scene = *Scene::ForSurfaces(v, c);
+  Camera cam = MakeCamera(dims, 160, 0, 90, Projection::kOrthographic);  // from above
+  RenderSettings settings;
+  settings.light = {1, 0, 1};  // 45 degrees from straight up, toward the camera's right
+  Image img = RenderWhole(scene, cam, settings);
+  const Vec3 light = Normalize(cam.right() * 1.0 - cam.forward() * 1.0);
+  const Vec3 half{dims[0] / 2.0, dims[1] / 2.0, dims[2] / 2.0};
+  int agree = 0, judged = 0, shadowed = 0;
+  for (int y = 0; y < 160; ++y) {
+    for (int x = 0; x < 160; ++x) {
+      WorldRay w = cam.Generate(x, y);
+      Vec3 o = w.origin + half;
+      // Where the pixel's ray meets the floor's top (y = 6), if it misses the ball.
+      double t = (6 - o.y) / w.direction.y;
+      Vec3 p = o + w.direction * t;
+      if (p.x < 2 || p.z < 2 || p.x > dims[0] - 2 || p.z > dims[2] - 2) continue;
+      Vec3 oc = o - centre;
+      double bq = Dot(oc, w.direction), cq = Dot(oc, oc) - (r + 2) * (r + 2);
+      if (bq * bq - cq > 0) continue;  // the ball (or its rim) is in front
+      // Distance from the ball's centre to the shadow ray from p.
+      Vec3 pc = centre - p;
+      double along = Dot(pc, light);
+      double miss = Length(pc - light * along);
+      if (std::fabs(miss - r) < 2.0) continue;  // the penumbra of voxels
+      bool in_shadow = along > 0 && miss < r;
+      bool dark = Pixel(img, x, y) < 0.8f * (0.25f + 0.35f);  // ambient + half of lit diffuse
+      ++judged;
+      agree += in_shadow == dark;
+      shadowed += in_shadow;
+    }
+  }
+  EXPECT_GT(shadowed, 200);
+  EXPECT_GT(judged, 5000);
+  EXPECT_GE(agree, judged * 0.99);
+  // Without shadow rays no floor pixel is dark.
+  settings.shadows = false;
+  Image lit = RenderWhole(scene, cam, settings);
+  // (The floor spans image columns 32..128; the shadow falls left of the ball.)
+  float darkest = 1;
+  for (int y = 40; y < 120; ++y) darkest = std::min(darkest, Pixel(lit, 120, y));
+  EXPECT_GT(darkest, 0.3f);
+}
+
+TEST(RenderTest, ThreadCountDoesNotChangeTheImage) {
+  std::array<int, 3> dims = {48, 40, 36};
+  Volume v = MakeNoisyPhantom(dims, 9);
+  auto range = v.Range();
+  Classification c;
+  c.materials = {Material{.name = "soft",
+                          .min = range[1] * 0.3f,
+                          .max = range[1] * 0.6f,
+                          .color = {0.9f, 0.6f, 0.5f},
+                          .opacity = 0.3f},
+                 Opaque("hard", range[1] * 0.6f, range[1] + 1)};
+  Scene scene = *Scene::ForSurfaces(v, c);
+  Camera cam = MakeCamera(dims, 96, 37, 20);
+  Image one = RenderWhole(scene, cam, RenderSettings{}, 1);
+  Image three = RenderWhole(scene, cam, RenderSettings{}, 3);
+  EXPECT_EQ(one.rgb, three.rgb);
+}
+
+TEST(CameraTest, FrontalViewLooksAlongMinusZ) {
+  auto cam = Camera::Create(CameraSpec{}, Vec3{100, 100, 100});
+  ASSERT_TRUE(cam.ok());
+  EXPECT_NEAR(cam->forward().z, -1, 1e-12);
+  WorldRay centre = cam->Generate(200, 200);
+  EXPECT_GT(centre.origin.z, 50);
+  // 45 degrees of azimuth turns the view direction about +Y.
+  CameraSpec spec;
+  spec.azimuth_deg = 45;
+  auto side = Camera::Create(spec, Vec3{100, 100, 100});
+  EXPECT_NEAR(side->forward().x, -std::sqrt(0.5), 1e-12);
+  EXPECT_NEAR(side->forward().z, -std::sqrt(0.5), 1e-12);
+}
+
+TEST(CameraTest, RejectsAbsurdSizesAndViews) {
+  CameraSpec spec;
+  spec.width = 8193;
+  EXPECT_NE(Camera::Create(spec, Vec3{1, 1, 1}).status().message().find("8193x400"),
+            std::string::npos);
+  spec.width = 0;
+  EXPECT_FALSE(Camera::Create(spec, Vec3{1, 1, 1}).ok());
+  spec.width = 8192;
+  spec.height = 8192;
+  EXPECT_TRUE(Camera::Create(spec, Vec3{1, 1, 1}).ok());
+  spec.zoom = 0;
+  EXPECT_FALSE(Camera::Create(spec, Vec3{1, 1, 1}).ok());
+  spec.zoom = 1;
+  spec.view = ExplicitView{{0, 0, 5}, {0, 0, 5}, {0, 1, 0}};
+  EXPECT_FALSE(Camera::Create(spec, Vec3{1, 1, 1}).ok());
+  spec.view = ExplicitView{{0, 0, 5}, {0, 0, 0}, {0, 0, 1}};
+  EXPECT_FALSE(Camera::Create(spec, Vec3{1, 1, 1}).ok());
+}
+
+TEST(FramebufferTest, CompletesPixelsInAnyOrder) {
+  Framebuffer fb(2, 1);
+  // Pixel 0: a primary that spawned two shadow rays; they arrive first.
+  EXPECT_FALSE(fb.Add(Deposit{0, RayKind::kShadow, 0, {0.25f, 0, 0}}));
+  EXPECT_FALSE(fb.Add(Deposit{0, RayKind::kShadow, 0, {0.25f, 0, 0}}));
+  EXPECT_FALSE(fb.Complete());
+  EXPECT_TRUE(fb.Add(Deposit{0, RayKind::kPrimary, 2, {0.5f, 0, 0}}));
+  EXPECT_EQ(fb.complete_pixels(), 1u);
+  // Pixel 1: primary first, then its one shadow ray.
+  EXPECT_FALSE(fb.Add(Deposit{1, RayKind::kPrimary, 1, {0, 0.5f, 0}}));
+  EXPECT_TRUE(fb.Add(Deposit{1, RayKind::kShadow, 0, {0, 0.125f, 0}}));
+  EXPECT_TRUE(fb.Complete());
+  Image img = fb.Resolve();
+  EXPECT_EQ(img.rgb[0], 1.0f);
+  EXPECT_EQ(img.rgb[4], 0.625f);
+}
+
+}  // namespace
+}  // namespace transtick

@@ -1,0 +1,125 @@
+#include "testing.h"
+
+#include <unistd.h>
+
+#include <cstdlib>
+#include <deque>
+#include <filesystem>
+
+#include "gtest/gtest.h"
+#include "transtick/ray_codec.h"
+#include "transtick/render.h"
+
+namespace transtick::testing {
+
+std::string DataDir() {
+  if (const char* d = std::getenv("TRANSTICK_DATA_DIR")) return d;
+  return std::string(TRANSTICK_SOURCE_DIR) + "/../shared/data";
+}
+
+std::string DataFile(const std::string& name) {
+  std::string path = DataDir() + "/" + name;
+  return std::filesystem::exists(path) ? path : "";
+}
+
+std::string TempDir() {
+  std::string base = ::testing::TempDir() + "transtick-XXXXXX";
+  std::vector<char> buf(base.begin(), base.end());
+  buf.push_back('\0');
+  const char* dir = mkdtemp(buf.data());
+  EXPECT_NE(dir, nullptr);
+  return dir ? dir : "/tmp";
+}
+
+Image RenderSlabs(const Scene& whole, const std::vector<int>& cuts, const Camera& camera,
+                  const RenderSettings& settings, uint64_t* handoffs) {
+  std::vector<int> bounds = {0};
+  bounds.insert(bounds.end(), cuts.begin(), cuts.end());
+  bounds.push_back(whole.dims()[1]);
+  std::vector<Scene> slabs;
+  std::vector<Tracer> tracers;
+  slabs.reserve(bounds.size() - 1);
+  for (size_t i = 0; i + 1 < bounds.size(); ++i)
+    slabs.push_back(whole.Slab(bounds[i], bounds[i + 1]));
+  for (const Scene& s : slabs) tracers.emplace_back(s, settings, camera);
+  auto owner = [&](int y) {
+    for (size_t i = 0; i + 1 < bounds.size(); ++i)
+      if (y >= bounds[i] && y < bounds[i + 1]) return static_cast<int>(i);
+    return -1;
+  };
+  Framebuffer fb(camera.width(), camera.height());
+  std::vector<std::deque<RayDescriptor>> queues(slabs.size());
+  TraceCounters counters;
+  // Primary rays start on the slab where they enter the volume (the paper's
+  // distributed policy).
+  for (int py = 0; py < camera.height(); ++py) {
+    for (int px = 0; px < camera.width(); ++px) {
+      uint32_t pixel = static_cast<uint32_t>(py) * camera.width() + px;
+      RayDescriptor ray;
+      if (!tracers[0].MakePrimary(camera.Generate(px, py), pixel, &ray)) {
+        fb.Add(tracers[0].MissDeposit(pixel));
+        continue;
+      }
+      queues[owner(ray.cell[1])].push_back(ray);
+    }
+  }
+  uint64_t moved = 0;
+  std::vector<RayDescriptor> spawned;
+  Deposit deposit;
+  bool busy = true;
+  while (busy) {
+    busy = false;
+    // Round-robin over slabs, a few rays each, so rays interleave as they
+    // would on a ring.
+    for (size_t i = 0; i < slabs.size(); ++i) {
+      for (int n = 0; n < 7 && !queues[i].empty(); ++n) {
+        busy = true;
+        RayDescriptor ray = queues[i].front();
+        queues[i].pop_front();
+        spawned.clear();
+        auto outcome = tracers[i].Trace(ray, spawned, deposit, counters);
+        for (const auto& s : spawned) queues[i].push_back(s);
+        if (outcome == Tracer::Outcome::kFinished) {
+          fb.Add(deposit);
+        } else {
+          int o = owner(ray.cell[1]);
+          EXPECT_GE(o, 0);
+          EXPECT_NE(o, static_cast<int>(i));
+          ++moved;
+          // Through the wire form, as between workers.
+          std::string wire;
+          AppendRay(ray, &wire);
+          auto decoded = DecodeRays(wire, camera.width() * camera.height());
+          EXPECT_TRUE(decoded.ok() && decoded->size() == 1);
+          queues[o].push_back(decoded->at(0));
+        }
+      }
+    }
+  }
+  EXPECT_TRUE(fb.Complete());
+  if (handoffs) *handoffs = moved;
+  return fb.Resolve();
+}
+
+Image RenderWhole(const Scene& scene, const Camera& camera, const RenderSettings& settings,
+                  int threads) {
+  RenderStats stats;
+  auto image = RenderLocal(scene, camera, settings, threads, &stats);
+  EXPECT_TRUE(image.ok()) << image.status();
+  return image.ok() ? *image : Image{};
+}
+
+Camera MakeCamera(std::array<int, 3> dims, int size, double azimuth, double elevation,
+                  Projection projection, double zoom) {
+  CameraSpec spec;
+  spec.width = spec.height = size;
+  spec.azimuth_deg = azimuth;
+  spec.elevation_deg = elevation;
+  spec.projection = projection;
+  spec.zoom = zoom;
+  auto camera = Camera::Create(spec, Vec3{double(dims[0]), double(dims[1]), double(dims[2])});
+  EXPECT_TRUE(camera.ok());
+  return *camera;
+}
+
+}  // namespace transtick::testing
