@@ -50,13 +50,17 @@ absl::StatusOr<Image> RenderLocal(const Scene& scene, const Camera& camera,
   std::atomic<int> rows_done{0};
   std::vector<TraceCounters> counters(threads);
   auto work = [&](int id) {
+    // Counted on the thread's stack: neighbouring counters in one vector
+    // would share a cache line written at every traversal step.
+    TraceCounters local;
     while (true) {
       int r0 = next_row.fetch_add(kRowsPerTask);
       if (r0 >= camera.height()) break;
       int r1 = std::min(r0 + kRowsPerTask, camera.height());
-      TraceRows(tracer, camera, r0, r1, fb, counters[id]);
+      TraceRows(tracer, camera, r0, r1, fb, local);
       rows_done.fetch_add(r1 - r0);
     }
+    counters[id] = local;
   };
   std::mutex mu;
   std::condition_variable done_cv;

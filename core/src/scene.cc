@@ -54,33 +54,46 @@ std::vector<float> Filter3(const Volume& v, bool take_max) {
 
 }  // namespace
 
-Occupancy Occupancy::Build(std::span<const uint8_t> labels, std::array<int, 3> dims) {
-  Occupancy o;
-  for (int a = 0; a < 3; ++a) o.bdims_[a] = (dims[a] + kBrick - 1) >> kShift;
-  o.bricks_.assign(static_cast<size_t>(o.bdims_[0]) * o.bdims_[1] * o.bdims_[2], 0);
+BrickMap BrickMap::Build(std::span<const uint8_t> labels, std::array<int, 3> dims,
+                         bool uniform_materials) {
+  BrickMap b;
+  for (int a = 0; a < 3; ++a) b.bdims_[a] = (dims[a] + kBrick - 1) >> kShift;
+  const size_t n = static_cast<size_t>(b.bdims_[0]) * b.bdims_[1] * b.bdims_[2];
+  // First voxel seen fixes the brick's material; any other makes it mixed.
+  std::vector<uint8_t> seen(n, 0);
+  b.bricks_.assign(n, 0);
   size_t i = 0;
   for (int z = 0; z < dims[2]; ++z) {
     for (int y = 0; y < dims[1]; ++y) {
-      size_t row = (static_cast<size_t>(z >> kShift) * o.bdims_[1] + (y >> kShift)) * o.bdims_[0];
+      size_t row = (static_cast<size_t>(z >> kShift) * b.bdims_[1] + (y >> kShift)) * b.bdims_[0];
       for (int x = 0; x < dims[0]; ++x, ++i) {
-        if (labels[i] != 0) o.bricks_[row + (x >> kShift)] = 1;
+        size_t k = row + (x >> kShift);
+        uint8_t m = labels[i];
+        if (!seen[k]) {
+          seen[k] = 1;
+          b.bricks_[k] = m;
+        } else if (b.bricks_[k] != m) {
+          b.bricks_[k] = kMixed;
+        }
       }
     }
   }
-  return o;
+  if (!uniform_materials) {
+    for (uint8_t& m : b.bricks_) m = m == 0 ? 0 : kMixed;
+  }
+  return b;
 }
 
-absl::StatusOr<Occupancy> Occupancy::FromBytes(std::array<int, 3> dims,
-                                               std::vector<uint8_t> bytes) {
-  Occupancy o;
-  for (int a = 0; a < 3; ++a) o.bdims_[a] = (dims[a] + kBrick - 1) >> kShift;
-  size_t want = static_cast<size_t>(o.bdims_[0]) * o.bdims_[1] * o.bdims_[2];
+absl::StatusOr<BrickMap> BrickMap::FromBytes(std::array<int, 3> dims, std::vector<uint8_t> bytes) {
+  BrickMap b;
+  for (int a = 0; a < 3; ++a) b.bdims_[a] = (dims[a] + kBrick - 1) >> kShift;
+  size_t want = static_cast<size_t>(b.bdims_[0]) * b.bdims_[1] * b.bdims_[2];
   if (bytes.size() != want) {
     return absl::InvalidArgumentError(
-        absl::StrCat("occupancy: ", bytes.size(), " bytes, expected ", want));
+        absl::StrCat("brick map: ", bytes.size(), " bytes, expected ", want));
   }
-  o.bricks_ = std::move(bytes);
-  return o;
+  b.bricks_ = std::move(bytes);
+  return b;
 }
 
 std::vector<uint8_t> DvrVisibility(const Volume& volume, const TransferFunction& transfer) {
@@ -125,7 +138,7 @@ absl::StatusOr<Scene> Scene::ForSurfaces(const Volume& volume,
   scene.spacing_ = volume.spacing;
   scene.value_range_ = volume.Range();
   scene.sticks_ = Sticks::Encode(labels, volume.dims, 0, volume.dims[1]);
-  scene.occupancy_ = Occupancy::Build(labels, volume.dims);
+  scene.bricks_ = BrickMap::Build(labels, volume.dims, /*uniform_materials=*/true);
   scene.classification_ = classification;
   scene.scalar_y_begin_ = 0;
   scene.scalar_planes_ = volume.dims[1];
@@ -143,7 +156,7 @@ absl::StatusOr<Scene> Scene::ForDvr(const Volume& volume, const TransferFunction
   scene.spacing_ = volume.spacing;
   scene.value_range_ = volume.Range();
   scene.sticks_ = Sticks::Encode(labels, volume.dims, 0, volume.dims[1]);
-  scene.occupancy_ = Occupancy::Build(labels, volume.dims);
+  scene.bricks_ = BrickMap::Build(labels, volume.dims, /*uniform_materials=*/false);
   scene.transfer_ = transfer;
   scene.scalar_y_begin_ = 0;
   scene.scalar_planes_ = volume.dims[1];
@@ -154,7 +167,7 @@ absl::StatusOr<Scene> Scene::ForDvr(const Volume& volume, const TransferFunction
 absl::StatusOr<Scene> Scene::FromParts(RenderMode mode, std::array<int, 3> dims,
                                        std::array<double, 3> spacing,
                                        std::array<float, 2> value_range, Sticks sticks,
-                                       std::vector<float> scalars, Occupancy occupancy,
+                                       std::vector<float> scalars, BrickMap bricks,
                                        Classification classification, TransferFunction transfer) {
   Scene scene;
   scene.mode_ = mode;
@@ -168,7 +181,7 @@ absl::StatusOr<Scene> Scene::FromParts(RenderMode mode, std::array<int, 3> dims,
     return absl::InvalidArgumentError(
         absl::StrCat("slab scalars: ", scalars.size(), " values, expected ", want));
   }
-  if (sticks.dims() != dims || occupancy.brick_dims()[0] != (dims[0] + 7) / 8) {
+  if (sticks.dims() != dims || bricks.brick_dims()[0] != (dims[0] + 7) / 8) {
     return absl::InvalidArgumentError("slab parts disagree on the volume's dimensions");
   }
   if (mode == RenderMode::kSurfaces) {
@@ -178,7 +191,7 @@ absl::StatusOr<Scene> Scene::FromParts(RenderMode mode, std::array<int, 3> dims,
   }
   scene.sticks_ = std::move(sticks);
   scene.scalars_ = std::move(scalars);
-  scene.occupancy_ = std::move(occupancy);
+  scene.bricks_ = std::move(bricks);
   scene.classification_ = std::move(classification);
   scene.transfer_ = std::move(transfer);
   return scene;
@@ -190,7 +203,7 @@ Scene Scene::Slab(int y_begin, int y_end) const {
   s.dims_ = dims_;
   s.spacing_ = spacing_;
   s.value_range_ = value_range_;
-  s.occupancy_ = occupancy_;
+  s.bricks_ = bricks_;
   s.classification_ = classification_;
   s.transfer_ = transfer_;
   std::vector<std::string> blocks;
@@ -214,7 +227,7 @@ Scene Scene::Slab(int y_begin, int y_end) const {
 }
 
 size_t Scene::MemoryBytes() const {
-  return sticks_.MemoryBytes() + scalars_.size() * sizeof(float) + occupancy_.bytes().size();
+  return sticks_.MemoryBytes() + scalars_.size() * sizeof(float) + bricks_.bytes().size();
 }
 
 }  // namespace transtick

@@ -31,7 +31,7 @@ struct Material {
 // intervals overlap, the first listed wins. Immutable after Validate():
 // thread-safe for concurrent reads.
 struct Classification {
-  static constexpr int kMaxMaterials = 255;
+  static constexpr int kMaxMaterials = 254;  // 255 marks mixed bricks
   std::vector<Material> materials;
 
   // Checks intervals (min < max, finite), colours and coefficients in range,

@@ -1,6 +1,6 @@
 // The data a tracer reads: the sticks of a slab, the scalars around it (for
-// gradients and dvr samples) and the global brick occupancy used to skip
-// empty space. A whole-volume scene is the slab [0, dims[1]).
+// gradients and dvr samples) and the global brick map used to skip
+// uniform space. A whole-volume scene is the slab [0, dims[1]).
 #ifndef TRANSTICK_SCENE_H_
 #define TRANSTICK_SCENE_H_
 
@@ -18,22 +18,28 @@ namespace transtick {
 
 enum class RenderMode { kSurfaces, kDvr };
 
-// One bit per 8x8x8 brick of the whole volume: does any voxel in it carry a
-// non-void label? Small (dims / 8 cubed bytes), so every worker holds all of
-// it: skipping an empty brick is then the same decision on every node.
-class Occupancy {
+// The material of each 8x8x8 brick of the whole volume when all its voxels
+// share one (void included), else kMixed. Small (a byte per brick), so every
+// worker holds all of it: skipping a uniform brick in one step is then the
+// same decision on every node.
+class BrickMap {
  public:
   static constexpr int kShift = 3;
   static constexpr int kBrick = 1 << kShift;
+  static constexpr uint8_t kMixed = 255;
 
-  Occupancy() = default;
-  static Occupancy Build(std::span<const uint8_t> labels, std::array<int, 3> dims);
+  BrickMap() = default;
+  // With `uniform_materials` false only void bricks are uniform: dvr samples
+  // must stay within the column they are taken in.
+  static BrickMap Build(std::span<const uint8_t> labels, std::array<int, 3> dims,
+                        bool uniform_materials);
   // Rebuilds from bytes (one per brick, x fastest). Fails on a size mismatch.
-  static absl::StatusOr<Occupancy> FromBytes(std::array<int, 3> dims, std::vector<uint8_t> bytes);
+  static absl::StatusOr<BrickMap> FromBytes(std::array<int, 3> dims, std::vector<uint8_t> bytes);
 
-  bool Occupied(int x, int y, int z) const {
+  // The brick's material, or kMixed. REQUIRES: (x, y, z) inside the volume.
+  uint8_t At(int x, int y, int z) const {
     return bricks_[(static_cast<size_t>(z >> kShift) * bdims_[1] + (y >> kShift)) * bdims_[0] +
-                   (x >> kShift)] != 0;
+                   (x >> kShift)];
   }
   const std::vector<uint8_t>& bytes() const { return bricks_; }
   const std::array<int, 3>& brick_dims() const { return bdims_; }
@@ -71,7 +77,7 @@ class Scene {
   static absl::StatusOr<Scene> FromParts(RenderMode mode, std::array<int, 3> dims,
                                          std::array<double, 3> spacing,
                                          std::array<float, 2> value_range, Sticks sticks,
-                                         std::vector<float> scalars, Occupancy occupancy,
+                                         std::vector<float> scalars, BrickMap bricks,
                                          Classification classification, TransferFunction transfer);
 
   // A copy of the slab [y_begin, y_end) of this (whole-volume) scene.
@@ -88,7 +94,7 @@ class Scene {
   int y_begin() const { return sticks_.y_begin(); }
   int y_end() const { return sticks_.y_end(); }
   const Sticks& sticks() const { return sticks_; }
-  const Occupancy& occupancy() const { return occupancy_; }
+  const BrickMap& bricks() const { return bricks_; }
   const Classification& classification() const { return classification_; }
   const TransferFunction& transfer() const { return transfer_; }
   const std::vector<float>& scalars() const { return scalars_; }
@@ -104,7 +110,7 @@ class Scene {
                     x];
   }
 
-  // Bytes held: sticks, scalars and occupancy.
+  // Bytes held: sticks, scalars and the brick map.
   size_t MemoryBytes() const;
 
  private:
@@ -113,7 +119,7 @@ class Scene {
   std::array<double, 3> spacing_ = {1, 1, 1};
   std::array<float, 2> value_range_ = {0, 0};
   Sticks sticks_;
-  Occupancy occupancy_;
+  BrickMap bricks_;
   Classification classification_;
   TransferFunction transfer_;
   // Planes [scalar_y_begin_, scalar_y_begin_ + scalar_planes_), x fastest, then

@@ -63,13 +63,14 @@ class Traversal {
   std::optional<Segment> Next(std::array<int32_t, 3>& cell, double& t) const {
     const auto& dims = scene_.dims();
     if (!Inside(cell, dims)) return std::nullopt;
-    if (!scene_.occupancy().Occupied(cell[0], cell[1], cell[2])) {
+    const uint8_t brick = scene_.bricks().At(cell[0], cell[1], cell[2]);
+    if (brick != BrickMap::kMixed) {
       std::array<int, 3> lo, hi;
       for (int a = 0; a < 3; ++a) {
-        lo[a] = (cell[a] >> Occupancy::kShift) << Occupancy::kShift;
-        hi[a] = std::min(lo[a] + Occupancy::kBrick, dims[a]);
+        lo[a] = (cell[a] >> BrickMap::kShift) << BrickMap::kShift;
+        hi[a] = std::min(lo[a] + BrickMap::kBrick, dims[a]);
       }
-      return Leave(cell, t, lo, hi, 0);
+      return Leave(cell, t, lo, hi, brick);
     }
     StickSpan span = scene_.sticks().Find(cell[0], cell[1], cell[2]);
     std::array<int, 3> lo = {cell[0], cell[1], span.begin};
