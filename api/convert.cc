@@ -2,6 +2,7 @@
 
 #include <google/protobuf/util/json_util.h>
 
+#include <cmath>
 #include <fstream>
 #include <sstream>
 
@@ -112,6 +113,58 @@ absl::StatusOr<Classification> LoadMaterials(const std::string& path) {
 absl::StatusOr<TransferFunction> LoadTransferFunction(const std::string& path) {
   return LoadJsonFile<v1::TransferFunction>(
       path, [](const v1::TransferFunction& t) { return ToTransferFunction(t); });
+}
+
+absl::StatusOr<CameraSpec> ToCameraSpec(const v1::View& v) {
+  CameraSpec c;
+  if (v.projection().empty() || v.projection() == "perspective") {
+    c.projection = Projection::kPerspective;
+  } else if (v.projection() == "orthographic") {
+    c.projection = Projection::kOrthographic;
+  } else {
+    return absl::InvalidArgumentError(
+        absl::StrCat("projection '", v.projection(), "' is not perspective or orthographic"));
+  }
+  c.azimuth_deg = v.azimuth();
+  c.elevation_deg = v.elevation();
+  if (v.has_zoom()) c.zoom = v.zoom();
+  if (v.has_fov()) c.fov_deg = v.fov();
+  c.width = v.width();
+  c.height = v.height();
+  if (v.has_explicit_view()) {
+    const v1::ExplicitView& e = v.explicit_view();
+    if (e.eye_size() != 3 || e.target_size() != 3 || (e.up_size() != 0 && e.up_size() != 3)) {
+      return absl::InvalidArgumentError(
+          "explicit_view: eye and target need 3 numbers, up 3 or none");
+    }
+    ExplicitView ev;
+    ev.eye = {e.eye(0), e.eye(1), e.eye(2)};
+    ev.target = {e.target(0), e.target(1), e.target(2)};
+    if (e.up_size() == 3) ev.up = {e.up(0), e.up(1), e.up(2)};
+    c.view = ev;
+  }
+  if (v.background_size() != 0 && v.background_size() != 3) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("background has ", v.background_size(), " components, need 3"));
+  }
+  for (float b : v.background()) {
+    if (!(b >= 0 && b <= 1))
+      return absl::InvalidArgumentError("background components must be in [0, 1]");
+  }
+  if (!(v.step() >= 0) || !std::isfinite(v.step())) {
+    return absl::InvalidArgumentError("step must be a non-negative number");
+  }
+  // Camera::Create checks sizes, zoom, fov and the explicit view.
+  if (auto cam = Camera::Create(c, Vec3{1, 1, 1}); !cam.ok()) return cam.status();
+  return c;
+}
+
+RenderSettings ToRenderSettings(const v1::View& v) {
+  RenderSettings s;
+  s.shadows = !v.has_shadows() || v.shadows();
+  for (int c = 0; c < v.background_size() && c < 3; ++c) s.background[c] = v.background(c);
+  s.step = v.step();
+  return s;
 }
 
 std::string ToJson(const google::protobuf::Message& message) {

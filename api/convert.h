@@ -7,8 +7,11 @@
 #include <string_view>
 
 #include "absl/status/statusor.h"
+#include "cluster.pb.h"
 #include "transtick.pb.h"
+#include "transtick/camera.h"
 #include "transtick/classification.h"
+#include "transtick/tracer.h"
 
 namespace transtick {
 
@@ -26,6 +29,11 @@ absl::StatusOr<TransferFunction> ToTransferFunction(const v1::TransferFunction& 
 // Reads and validates a materials (or transfer function) JSON file.
 absl::StatusOr<Classification> LoadMaterials(const std::string& path);
 absl::StatusOr<TransferFunction> LoadTransferFunction(const std::string& path);
+
+// A view's camera and render settings. ToCameraSpec checks what Camera
+// does not: the projection name, vector lengths, finite numbers.
+absl::StatusOr<CameraSpec> ToCameraSpec(const v1::View& view);
+RenderSettings ToRenderSettings(const v1::View& view);
 
 // Protobuf JSON with the field names as written in the .proto.
 std::string ToJson(const google::protobuf::Message& message);

@@ -5,16 +5,23 @@
 //
 // Run `transtick help` for every flag.
 
+#include <grpcpp/generic/generic_stub.h>
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <string>
+#include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "client.h"
+#include "cluster.grpc.pb.h"
 #include "convert.h"
+#include "daemon.h"
 #include "flags.h"
 #include "transtick/camera.h"
 #include "transtick/image_io.h"
@@ -28,7 +35,11 @@ namespace {
 constexpr char kUsage[] = R"(transtick: a volume ray tracer (sticks, ray dataflow)
 
 usage:
-  transtick render --volume FILE [options]     render one image in this process
+  transtick render --volume FILE [options]     render one image (embedded cluster by default)
+  transtick submit JOB.json --root HOST:PORT [--out-dir DIR] [--stats FILE.json]
+  transtick status --root HOST:PORT            jobs and workers of a running cluster
+  transtick cancel JOB_ID --root HOST:PORT
+  transtick health --addr HOST:PORT            exit 0 when a daemon reports SERVING
   transtick info --volume FILE [raw options]   describe a volume
 
 render options:
@@ -45,7 +56,12 @@ render options:
   --shadows on|off       shadow rays in surfaces mode (default on)
   --background R,G,B     background colour in [0, 1] (default 0,0,0)
   --step S               dvr sample step in world units (default half the smallest spacing)
-  --threads N            tracing threads (default: one per core)
+  --local N              render on an embedded cluster of N workers (default: one per
+                         core); 0 renders in this process without gRPC (the reference)
+  --rings R              rings of the embedded cluster (default 1)
+  --root HOST:PORT       render on a running cluster; --volume is then relative to
+                         the root's data directory
+  --threads N            tracing threads of --local 0 (default: one per core)
   --out FILE             .png (8-bit), .tif/.exr (float) (default transtick.png)
   --stats FILE.json      write frame statistics as JSON
   --max-volume-mb N      refuse volumes larger than N MiB in memory (default 8192)
@@ -126,125 +142,93 @@ int Info(int argc, char** argv) {
   return 0;
 }
 
-int Render(int argc, char** argv) {
-  std::set<std::string> known = kRawFlags;
-  for (const char* f :
-       {"materials", "transfer", "mode", "azimuth", "elevation", "zoom", "projection", "fov", "eye",
-        "target", "up", "size", "shadows", "background", "step", "threads", "out", "stats"}) {
-    known.insert(f);
+// The view a render's flags describe, as the job API has it, so the
+// in-process and cluster renders take their camera from one place.
+absl::StatusOr<v1::View> ViewFromFlags(const Flags& flags) {
+  v1::View v;
+  v.set_width(400);
+  v.set_height(400);
+  if (flags.Has("size")) {
+    auto size = flags.GetDims("size", 2);
+    if (!size.ok()) return size.status();
+    v.set_width((*size)[0]);
+    v.set_height((*size)[1]);
   }
-  auto fail = [](const absl::Status& s) {
-    std::cerr << "transtick render: " << s.message() << "\n";
-    return s.code() == absl::StatusCode::kInvalidArgument ? 2 : 1;
-  };
-  auto flags = Flags::Parse(argc, argv, 2, known);
-  if (!flags.ok()) return fail(flags.status());
+  auto az = flags.GetDouble("azimuth", 0);
+  auto el = flags.GetDouble("elevation", 0);
+  auto zoom = flags.GetDouble("zoom", 1);
+  auto fov = flags.GetDouble("fov", 30);
+  auto step = flags.GetDouble("step", 0);
+  for (const auto* d : {&az, &el, &zoom, &fov, &step}) {
+    if (!d->ok()) return d->status();
+  }
+  v.set_azimuth(*az);
+  v.set_elevation(*el);
+  v.set_zoom(*zoom);
+  v.set_fov(*fov);
+  if (*step < 0) return absl::InvalidArgumentError("--step must be positive");
+  v.set_step(*step);
+  v.set_projection(flags.Get("projection", "perspective"));
+  if (flags.Has("eye") || flags.Has("target")) {
+    if (!flags.Has("eye") || !flags.Has("target")) {
+      return absl::InvalidArgumentError("--eye and --target go together");
+    }
+    for (const char* name : {"eye", "target", "up"}) {
+      if (!flags.Has(name)) continue;
+      auto t = flags.GetTriple(name);
+      if (!t.ok()) return t.status();
+      auto* field = std::string(name) == "eye"      ? v.mutable_explicit_view()->mutable_eye()
+                    : std::string(name) == "target" ? v.mutable_explicit_view()->mutable_target()
+                                                    : v.mutable_explicit_view()->mutable_up();
+      for (double x : *t) field->Add(x);
+    }
+  }
+  auto shadows = flags.GetOnOff("shadows", true);
+  if (!shadows.ok()) return shadows.status();
+  v.set_shadows(*shadows);
+  if (flags.Has("background")) {
+    auto bg = flags.GetTriple("background");
+    if (!bg.ok()) return bg.status();
+    for (double c : *bg) v.add_background(static_cast<float>(c));
+  }
+  v.set_output(flags.Get("out", "transtick.png"));
+  // Checks ranges (image size, zoom, projection, background) up front.
+  if (auto c = ToCameraSpec(v); !c.ok()) return c.status();
+  return v;
+}
 
-  // Everything about the request is checked before the volume is read.
-  std::string mode_name = flags->Get("mode", flags->Has("transfer") ? "dvr" : "surfaces");
-  if (mode_name != "surfaces" && mode_name != "dvr") {
-    return fail(absl::InvalidArgumentError("--mode must be surfaces or dvr"));
-  }
-  const bool dvr = mode_name == "dvr";
-  if (!dvr && !flags->Has("materials")) {
-    return fail(absl::InvalidArgumentError("surfaces mode needs --materials FILE"));
-  }
-  if (dvr && !flags->Has("transfer")) {
-    return fail(absl::InvalidArgumentError("dvr mode needs --transfer FILE"));
-  }
-  CameraSpec cam;
-  auto size = flags->GetDims("size", 2);
-  if (flags->Has("size")) {
-    if (!size.ok()) return fail(size.status());
-    cam.width = (*size)[0];
-    cam.height = (*size)[1];
-  }
-  auto az = flags->GetDouble("azimuth", 0);
-  auto el = flags->GetDouble("elevation", 0);
-  auto zoom = flags->GetDouble("zoom", 1);
-  auto fov = flags->GetDouble("fov", 30);
-  for (const auto* v : {&az, &el, &zoom, &fov}) {
-    if (!v->ok()) return fail(v->status());
-  }
-  cam.azimuth_deg = *az;
-  cam.elevation_deg = *el;
-  cam.zoom = *zoom;
-  cam.fov_deg = *fov;
-  std::string projection = flags->Get("projection", "perspective");
-  if (projection != "perspective" && projection != "orthographic") {
-    return fail(absl::InvalidArgumentError("--projection must be perspective or orthographic"));
-  }
-  cam.projection =
-      projection == "perspective" ? Projection::kPerspective : Projection::kOrthographic;
-  if (flags->Has("eye") || flags->Has("target")) {
-    if (!flags->Has("eye") || !flags->Has("target")) {
-      return fail(absl::InvalidArgumentError("--eye and --target go together"));
-    }
-    ExplicitView view;
-    auto eye = flags->GetTriple("eye");
-    auto target = flags->GetTriple("target");
-    if (!eye.ok()) return fail(eye.status());
-    if (!target.ok()) return fail(target.status());
-    view.eye = {(*eye)[0], (*eye)[1], (*eye)[2]};
-    view.target = {(*target)[0], (*target)[1], (*target)[2]};
-    if (flags->Has("up")) {
-      auto up = flags->GetTriple("up");
-      if (!up.ok()) return fail(up.status());
-      view.up = {(*up)[0], (*up)[1], (*up)[2]};
-    }
-    cam.view = view;
-  }
-  RenderSettings settings;
-  auto shadows = flags->GetOnOff("shadows", true);
-  if (!shadows.ok()) return fail(shadows.status());
-  settings.shadows = *shadows;
-  if (flags->Has("background")) {
-    auto bg = flags->GetTriple("background");
-    if (!bg.ok()) return fail(bg.status());
-    for (int c = 0; c < 3; ++c) {
-      if ((*bg)[c] < 0 || (*bg)[c] > 1) {
-        return fail(absl::InvalidArgumentError("--background components must be in [0, 1]"));
-      }
-      settings.background[c] = static_cast<float>((*bg)[c]);
-    }
-  }
-  auto step = flags->GetDouble("step", 0);
-  if (!step.ok()) return fail(step.status());
-  if (*step < 0) return fail(absl::InvalidArgumentError("--step must be positive"));
-  settings.step = *step;
-  auto threads = flags->GetInt("threads", 0);
+int Fail(const char* command, const absl::Status& s) {
+  std::cerr << "transtick " << command << ": " << s.message() << "\n";
+  return s.code() == absl::StatusCode::kInvalidArgument ? 2 : 1;
+}
+
+void WriteStats(const std::string& path, const google::protobuf::Message& m) {
+  std::ofstream f(path);
+  f << ToJson(m);
+  if (!f) std::cerr << "transtick: cannot write " << path << "\n";
+}
+
+// --local 0: the reference renderer, in this process without gRPC.
+int RenderInProcess(const Flags& flags, const v1::View& view, bool dvr,
+                    const Classification& classification, const TransferFunction& transfer) {
+  auto fail = [](const absl::Status& s) { return Fail("render", s); };
+  auto threads = flags.GetInt("threads", 0);
   if (!threads.ok()) return fail(threads.status());
   if (*threads < 0 || *threads > 1024) {
     return fail(absl::InvalidArgumentError("--threads must be in [0, 1024]"));
   }
-  Classification classification;
-  TransferFunction transfer;
-  if (dvr) {
-    auto tf = LoadTransferFunction(flags->Get("transfer"));
-    if (!tf.ok()) return fail(tf.status());
-    transfer = *std::move(tf);
-  } else {
-    auto m = LoadMaterials(flags->Get("materials"));
-    if (!m.ok()) return fail(m.status());
-    classification = *std::move(m);
-  }
-  const std::string out = flags->Get("out", "transtick.png");
-
   auto t_load = std::chrono::steady_clock::now();
-  auto volume = LoadVolume(*flags);
+  auto volume = LoadVolume(flags);
   if (!volume.ok()) return fail(volume.status());
   const double load_ms = MsSince(t_load);
-
   auto t_prepare = std::chrono::steady_clock::now();
   auto scene = dvr ? Scene::ForDvr(*volume, transfer) : Scene::ForSurfaces(*volume, classification);
   if (!scene.ok()) return fail(scene.status());
   const double prepare_ms = MsSince(t_prepare);
-
   Vec3 extent{volume->dims[0] * volume->spacing[0], volume->dims[1] * volume->spacing[1],
               volume->dims[2] * volume->spacing[2]};
-  auto camera = Camera::Create(cam, extent);
+  auto camera = Camera::Create(*ToCameraSpec(view), extent);
   if (!camera.ok()) return fail(camera.status());
-
   const bool tty = isatty(STDERR_FILENO);
   ProgressFn progress;
   if (tty) {
@@ -254,9 +238,10 @@ int Render(int argc, char** argv) {
     };
   }
   RenderStats stats;
-  auto image = RenderLocal(*scene, *camera, settings, *threads, &stats, progress);
+  auto image = RenderLocal(*scene, *camera, ToRenderSettings(view), *threads, &stats, progress);
   if (tty) std::fprintf(stderr, "\r\033[K");
   if (!image.ok()) return fail(image.status());
+  const std::string out = view.output();
   if (auto s = WriteImage(out, *image); !s.ok()) return fail(s);
 
   v1::FrameStats fs;
@@ -264,9 +249,9 @@ int Render(int argc, char** argv) {
   fs.set_prepare_ms(prepare_ms);
   fs.set_load_ms(load_ms);
   fs.set_threads(stats.threads);
-  fs.set_mode(mode_name);
-  fs.set_width(cam.width);
-  fs.set_height(cam.height);
+  fs.set_mode(dvr ? "dvr" : "surfaces");
+  fs.set_width(view.width());
+  fs.set_height(view.height());
   const TraceCounters& c = stats.counters;
   fs.mutable_rays()->set_primary(c.primary);
   fs.mutable_rays()->set_shadow(c.shadow);
@@ -288,28 +273,284 @@ int Render(int argc, char** argv) {
   ss->set_scalar_bytes(scene->scalars().size() * sizeof(float));
   for (int a = 0; a < 3; ++a) fs.add_volume_dims(volume->dims[a]);
   fs.set_rays_per_second(stats.frame_ms > 0 ? (c.primary + c.shadow) / (stats.frame_ms / 1e3) : 0);
-
   std::fprintf(stderr,
                "%s: %dx%d %s in %.1f ms on %d threads (%llu primary + %llu shadow rays); "
                "sticks %.2f MB = %.1f%% of the raw volume\n",
-               out.c_str(), cam.width, cam.height, mode_name.c_str(), stats.frame_ms, stats.threads,
-               static_cast<unsigned long long>(c.primary),
+               out.c_str(), view.width(), view.height(), fs.mode().c_str(), stats.frame_ms,
+               stats.threads, static_cast<unsigned long long>(c.primary),
                static_cast<unsigned long long>(c.shadow), encoded / 1e6, 100.0 * ss->ratio());
-  if (flags->Has("stats")) {
-    std::ofstream f(flags->Get("stats"));
-    f << ToJson(fs);
-    if (!f) return fail(absl::UnavailableError(flags->Get("stats") + ": cannot write"));
+  if (flags.Has("stats")) WriteStats(flags.Get("stats"), fs);
+  return 0;
+}
+
+void PrintClusterFrame(const v1::ClusterFrameStats& fs) {
+  std::fprintf(stderr, "frame %dx%d in %.1f ms on %d workers (%d ring%s)\n", fs.width(),
+               fs.height(), fs.frame_ms(), fs.workers_size(), fs.rings(),
+               fs.rings() == 1 ? "" : "s");
+  for (const auto& w : fs.workers()) {
+    std::fprintf(stderr,
+                 "  ring %d slab [%3d, %3d): elapsed %7.1f ms, active %7.1f ms, traced %8llu, "
+                 "sent %7llu, received %7llu\n",
+                 w.ring(), w.slab_size() > 0 ? w.slab(0) : -1, w.slab_size() > 1 ? w.slab(1) : -1,
+                 w.elapsed_ms(), w.active_ms(), static_cast<unsigned long long>(w.rays_traced()),
+                 static_cast<unsigned long long>(w.rays_sent()),
+                 static_cast<unsigned long long>(w.rays_received()));
+  }
+}
+
+int Render(int argc, char** argv) {
+  std::set<std::string> known = kRawFlags;
+  for (const char* f :
+       {"materials", "transfer", "mode",   "azimuth", "elevation", "zoom",    "projection",
+        "fov",       "eye",      "target", "up",      "size",      "shadows", "background",
+        "step",      "threads",  "out",    "stats",   "local",     "root",    "rings"}) {
+    known.insert(f);
+  }
+  auto fail = [](const absl::Status& s) { return Fail("render", s); };
+  auto flags = Flags::Parse(argc, argv, 2, known);
+  if (!flags.ok()) return fail(flags.status());
+
+  // Everything about the request is checked before the volume is read.
+  std::string mode_name = flags->Get("mode", flags->Has("transfer") ? "dvr" : "surfaces");
+  if (mode_name != "surfaces" && mode_name != "dvr") {
+    return fail(absl::InvalidArgumentError("--mode must be surfaces or dvr"));
+  }
+  const bool dvr = mode_name == "dvr";
+  if (!dvr && !flags->Has("materials")) {
+    return fail(absl::InvalidArgumentError("surfaces mode needs --materials FILE"));
+  }
+  if (dvr && !flags->Has("transfer")) {
+    return fail(absl::InvalidArgumentError("dvr mode needs --transfer FILE"));
+  }
+  auto view = ViewFromFlags(*flags);
+  if (!view.ok()) return fail(view.status());
+  if (!flags->Has("volume")) return fail(absl::InvalidArgumentError("--volume FILE is required"));
+  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  auto local = flags->GetInt("local", cores);
+  auto rings = flags->GetInt("rings", 1);
+  if (!local.ok()) return fail(local.status());
+  if (!rings.ok()) return fail(rings.status());
+  if (*local < 0 || *local > 64)
+    return fail(absl::InvalidArgumentError("--local must be in [0, 64]"));
+  if (*rings < 1 || *rings > 64)
+    return fail(absl::InvalidArgumentError("--rings must be in [1, 64]"));
+
+  v1::Dataset dataset;
+  Classification classification;
+  TransferFunction transfer;
+  const std::string settings_file = flags->Get(dvr ? "transfer" : "materials");
+  auto text = ReadTextFile(settings_file);
+  if (!text.ok()) return fail(text.status());
+  if (dvr) {
+    if (auto s = ParseJson(*text, settings_file, dataset.mutable_transfer()); !s.ok())
+      return fail(s);
+    auto tf = ToTransferFunction(dataset.transfer());
+    if (!tf.ok())
+      return fail(
+          absl::InvalidArgumentError(absl::StrCat(settings_file, ": ", tf.status().message())));
+    transfer = *std::move(tf);
+  } else {
+    if (auto s = ParseJson(*text, settings_file, dataset.mutable_materials()); !s.ok())
+      return fail(s);
+    auto c = ToClassification(dataset.materials());
+    if (!c.ok())
+      return fail(
+          absl::InvalidArgumentError(absl::StrCat(settings_file, ": ", c.status().message())));
+    classification = *std::move(c);
+  }
+  if (*local == 0 && !flags->Has("root")) {
+    return RenderInProcess(*flags, *view, dvr, classification, transfer);
+  }
+
+  // On a cluster: an embedded one (--local N), or a running one (--root).
+  const std::string volume = flags->Get("volume");
+  std::unique_ptr<LocalCluster> cluster;
+  std::string root = flags->Get("root");
+  if (root.empty()) {
+    std::error_code ec;
+    const std::filesystem::path abs = std::filesystem::absolute(volume, ec);
+    if (!std::filesystem::is_regular_file(abs, ec)) {
+      return fail(absl::NotFoundError(absl::StrCat(volume, ": cannot open")));
+    }
+    LocalCluster::Options co;
+    co.workers = *local;
+    co.rings = *rings;
+    co.threads_per_worker = std::max(1, cores / *local);
+    co.data_dir = abs.parent_path().string();
+    dataset.set_volume(abs.filename().string());
+    auto c = LocalCluster::Start(co);
+    if (!c.ok()) return fail(c.status());
+    cluster = *std::move(c);
+    root = cluster->root_address();
+  } else {
+    dataset.set_volume(volume);  // relative to the root's data directory
+  }
+  if (flags->Has("raw-dims")) {
+    auto dims = flags->GetDims("raw-dims", 3);
+    if (!dims.ok()) return fail(dims.status());
+    v1::RawVolume* raw = dataset.mutable_raw();
+    for (int d : *dims) raw->add_dims(d);
+    raw->set_type(flags->Get("raw-type", "uint8"));
+    raw->set_big_endian(flags->Get("raw-endian", "little") == "big");
+    if (flags->Has("raw-spacing")) {
+      auto sp = flags->GetTriple("raw-spacing");
+      if (!sp.ok()) return fail(sp.status());
+      for (double x : *sp) raw->add_spacing(x);
+    }
+    auto skip = flags->GetInt("raw-skip", 0);
+    if (!skip.ok()) return fail(skip.status());
+    raw->set_header_bytes(static_cast<uint64_t>(std::max(0, *skip)));
+  }
+  std::string out = view->output();
+  if (std::filesystem::path(out).is_relative()) {
+    view->set_output((std::filesystem::current_path() / out).string());
+  }
+  *dataset.add_views() = *view;
+  v1::Job job;
+  job.set_name("render");
+  *job.add_datasets() = dataset;
+  WatchOptions wo;
+  wo.progress = isatty(STDERR_FILENO);
+  auto stats = SubmitAndWatch(root, job, wo);
+  if (!stats.ok()) return fail(stats.status());
+  if (!stats->empty()) {
+    PrintClusterFrame(stats->front());
+    std::fprintf(stderr, "%s: %dx%d %s on %d workers\n", out.c_str(), view->width(), view->height(),
+                 mode_name.c_str(), stats->front().workers_size());
+    if (flags->Has("stats")) WriteStats(flags->Get("stats"), stats->front());
   }
   return 0;
+}
+
+int Submit(int argc, char** argv) {
+  auto flags = Flags::Parse(argc, argv, 2, {"root", "out-dir", "stats"});
+  if (!flags.ok()) return Fail("submit", flags.status());
+  if (flags->positional().size() != 1) {
+    return Fail("submit",
+                absl::InvalidArgumentError("usage: transtick submit JOB.json --root HOST:PORT "
+                                           "[--out-dir DIR] [--stats FILE.json]"));
+  }
+  if (!flags->Has("root"))
+    return Fail("submit", absl::InvalidArgumentError("--root HOST:PORT is required"));
+  auto job = LoadJobFile(flags->positional()[0]);
+  if (!job.ok()) return Fail("submit", job.status());
+  WatchOptions wo;
+  wo.out_dir = flags->Get("out-dir", ".");
+  wo.progress = isatty(STDERR_FILENO);
+  auto stats = SubmitAndWatch(flags->Get("root"), *job, wo);
+  if (!stats.ok()) return Fail("submit", stats.status());
+  for (const auto& s : *stats) PrintClusterFrame(s);
+  if (flags->Has("stats")) {
+    v1::JobEvent all;  // a list of frames: written as one JSON array
+    std::ofstream f(flags->Get("stats"));
+    f << "[\n";
+    for (size_t i = 0; i < stats->size(); ++i)
+      f << ToJson((*stats)[i]) << (i + 1 < stats->size() ? ",\n" : "\n");
+    f << "]\n";
+  }
+  return 0;
+}
+
+int StatusCommand(int argc, char** argv) {
+  auto flags = Flags::Parse(argc, argv, 2, {"root"});
+  if (!flags.ok()) return Fail("status", flags.status());
+  if (!flags->Has("root"))
+    return Fail("status", absl::InvalidArgumentError("--root HOST:PORT is required"));
+  auto stub = v1::Root::NewStub(MakeChannel(flags->Get("root")));
+  grpc::ClientContext ctx;
+  ctx.set_deadline(Deadline(10));
+  v1::StatusReply reply;
+  grpc::Status s = stub->Status(&ctx, v1::StatusRequest(), &reply);
+  if (!s.ok()) return Fail("status", FromGrpc(s));
+  std::printf("%d workers, %d ring(s)\n", reply.workers_size(), reply.rings());
+  for (const auto& w : reply.workers()) {
+    std::printf("  worker %s at %s, %d threads\n", w.id().c_str(), w.address().c_str(),
+                w.threads());
+  }
+  for (const auto& j : reply.jobs()) {
+    std::printf("%-10s %-10s %3d/%-3d %s%s%s\n", j.job_id().c_str(),
+                v1::JobState_Name(j.state()).c_str(), j.frames_done(), j.frames_total(),
+                j.name().c_str(), j.error().empty() ? "" : "  error: ", j.error().c_str());
+  }
+  return 0;
+}
+
+int CancelCommand(int argc, char** argv) {
+  auto flags = Flags::Parse(argc, argv, 2, {"root"});
+  if (!flags.ok()) return Fail("cancel", flags.status());
+  if (!flags->Has("root") || flags->positional().size() != 1) {
+    return Fail("cancel",
+                absl::InvalidArgumentError("usage: transtick cancel JOB_ID --root HOST:PORT"));
+  }
+  auto stub = v1::Root::NewStub(MakeChannel(flags->Get("root")));
+  grpc::ClientContext ctx;
+  ctx.set_deadline(Deadline(10));
+  v1::JobRef ref;
+  ref.set_job_id(flags->positional()[0]);
+  v1::CancelReply reply;
+  grpc::Status s = stub->Cancel(&ctx, ref, &reply);
+  if (!s.ok()) return Fail("cancel", FromGrpc(s));
+  std::printf("%s: %s\n", ref.job_id().c_str(),
+              reply.cancelled() ? "cancelled" : "already finished");
+  return 0;
+}
+
+// Exit 0 when the server at --addr reports SERVING (container probes).
+int Health(int argc, char** argv) {
+  auto flags = Flags::Parse(argc, argv, 2, {"addr", "timeout"});
+  if (!flags.ok()) return Fail("health", flags.status());
+  auto timeout = flags->GetDouble("timeout", 3);
+  if (!timeout.ok()) return Fail("health", timeout.status());
+  auto channel = MakeChannel(flags->Get("addr", "127.0.0.1:7000"));
+  grpc::ClientContext ctx;
+  ctx.set_deadline(Deadline(*timeout));
+  // An empty HealthCheckRequest serialises to zero bytes, but the buffer
+  // must still hold a (zero-length) slice to be a message.
+  grpc::Slice empty("", 0);
+  grpc::ByteBuffer request(&empty, 1), response;
+  // grpc.health.v1.HealthCheckRequest{service: ""} is the empty message.
+  grpc::GenericStub generic(channel);
+  grpc::CompletionQueue cq;
+  auto call = generic.PrepareUnaryCall(&ctx, "/grpc.health.v1.Health/Check", request, &cq);
+  call->StartCall();
+  grpc::Status status;
+  call->Finish(&response, &status, reinterpret_cast<void*>(1));
+  void* tag;
+  bool ok;
+  cq.Next(&tag, &ok);
+  cq.Shutdown();
+  while (cq.Next(&tag, &ok)) {
+  }
+  if (!status.ok()) return Fail("health", FromGrpc(status));
+  std::vector<grpc::Slice> slices;
+  response.Dump(&slices);
+  std::string bytes;
+  for (auto& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
+  // HealthCheckResponse{status = 1 (SERVING)}: field 1, varint 1.
+  if (bytes == std::string("\x08\x01", 2)) {
+    std::printf("SERVING\n");
+    return 0;
+  }
+  std::printf("NOT_SERVING\n");
+  return 1;
 }
 
 }  // namespace
 }  // namespace transtick
 
 int main(int argc, char** argv) {
+  // The embedded cluster logs only warnings unless asked for more.
+  spdlog::set_level(spdlog::level::warn);
+  if (const char* level = std::getenv("TRANSTICK_LOG_LEVEL")) {
+    spdlog::set_level(spdlog::level::from_str(level));
+  }
   std::string cmd = argc > 1 ? argv[1] : "help";
   if (cmd == "render") return transtick::Render(argc, argv);
   if (cmd == "info") return transtick::Info(argc, argv);
+  if (cmd == "submit") return transtick::Submit(argc, argv);
+  if (cmd == "status") return transtick::StatusCommand(argc, argv);
+  if (cmd == "cancel") return transtick::CancelCommand(argc, argv);
+  if (cmd == "health") return transtick::Health(argc, argv);
   if (cmd == "help" || cmd == "--help" || cmd == "-h") {
     std::cout << transtick::kUsage;
     return 0;

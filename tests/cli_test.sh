@@ -44,8 +44,14 @@ JSON
 expect 0 "64x64 surfaces" -- render --volume "$dir/cube.nrrd" --materials "$dir/m.json" \
   --size 64x64 --azimuth 30 --out "$dir/a.png" --stats "$dir/s.json"
 [[ -s $dir/a.png ]] || { echo "FAIL: no image written"; fails=$((fails + 1)); }
-grep -q '"frame_ms"' "$dir/s.json" && grep -q '"primary"' "$dir/s.json" &&
-  grep -q '"encoded_bytes"' "$dir/s.json" || { echo "FAIL: stats lack fields"; fails=$((fails + 1)); }
+grep -q '"frame_ms"' "$dir/s.json" && grep -q '"workers"' "$dir/s.json" &&
+  grep -q '"active_ms"' "$dir/s.json" || { echo "FAIL: cluster stats lack fields"; fails=$((fails + 1)); }
+# --local 0: the in-process reference renderer, and the same image.
+expect 0 "64x64 surfaces" -- render --local 0 --volume "$dir/cube.nrrd" --materials "$dir/m.json" \
+  --size 64x64 --azimuth 30 --out "$dir/a0.png" --stats "$dir/s0.json"
+grep -q '"primary"' "$dir/s0.json" && grep -q '"encoded_bytes"' "$dir/s0.json" ||
+  { echo "FAIL: stats lack fields"; fails=$((fails + 1)); }
+cmp "$dir/a.png" "$dir/a0.png" || { echo "FAIL: cluster and in-process images differ"; fails=$((fails + 1)); }
 expect 0 "dvr" -- render --volume "$dir/cube.nrrd" --transfer "$dir/t.json" --size 32x32 \
   --out "$dir/b.exr"
 [[ -s $dir/b.exr ]] || { echo "FAIL: no EXR written"; fails=$((fails + 1)); }
@@ -58,7 +64,8 @@ expect 2 "unknown flag --colour" -- render --volume "$dir/cube.nrrd" --colour re
 expect 2 "shadows" -- render --volume "$dir/cube.nrrd" --materials "$dir/m.json" --shadows maybe
 expect 1 "nope.nrrd" -- render --volume "$dir/nope.nrrd" --materials "$dir/m.json"
 head -c 5000 "$dir/cube.nrrd" >"$dir/short.nrrd"
-expect 2 "short.nrrd" -- render --volume "$dir/short.nrrd" --materials "$dir/m.json"
+expect 2 "short.nrrd" -- render --local 0 --volume "$dir/short.nrrd" --materials "$dir/m.json"
+expect 1 "short.nrrd" -- render --volume "$dir/short.nrrd" --materials "$dir/m.json"
 printf '{"materials":[{"name":"x","min":5,"max":1,"color":[1,1,1]}]}' >"$dir/bad.json"
 expect 2 "bad.json" -- render --volume "$dir/cube.nrrd" --materials "$dir/bad.json"
 expect 2 "unknown command" -- frobnicate

@@ -1,0 +1,185 @@
+#include "client.h"
+
+#include <unistd.h>
+
+#include <bit>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <thread>
+
+#include "absl/strings/str_cat.h"
+#include "cluster.grpc.pb.h"
+#include "convert.h"
+#include "daemon.h"
+#include "display_service.h"
+#include "root_node.h"
+#include "transtick/image_io.h"
+#include "worker_node.h"
+
+namespace transtick {
+namespace fs = std::filesystem;
+
+absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::string& root,
+                                                                  const v1::Job& job,
+                                                                  const WatchOptions& options) {
+  auto stub = v1::Root::NewStub(MakeChannel(root));
+  v1::SubmitReply submitted;
+  {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(30));
+    grpc::Status s = stub->Submit(&ctx, job, &submitted);
+    if (!s.ok()) {
+      if (s.error_code() == grpc::StatusCode::UNAVAILABLE) {
+        return absl::UnavailableError(
+            absl::StrCat("cannot reach the root at ", root, ": ", s.error_message()));
+      }
+      return FromGrpc(s);
+    }
+  }
+  if (options.progress) {
+    std::fprintf(stderr, "%s: %d frames, %d jobs ahead\n", submitted.job_id().c_str(),
+                 submitted.frames(), submitted.queue_position());
+  }
+  grpc::ClientContext ctx;
+  v1::JobRef ref;
+  ref.set_job_id(submitted.job_id());
+  auto reader = stub->Watch(&ctx, ref);
+  v1::JobEvent e;
+  std::vector<v1::ClusterFrameStats> stats;
+  std::map<std::pair<int, int>, Image> images;
+  std::map<std::pair<int, int>, int> rows_in;
+  v1::JobState state = v1::QUEUED;
+  std::string error;
+  absl::Status save_error;
+  while (reader->Read(&e)) {
+    state = e.state();
+    error = e.error();
+    if (e.has_image()) {
+      const v1::ImageChunk& c = e.image();
+      auto key = std::make_pair(e.dataset(), e.view());
+      Image& img = images[key];
+      if (img.rgb.empty()) {
+        img.width = c.width();
+        img.height = c.height();
+        img.rgb.resize(static_cast<size_t>(c.width()) * c.height() * 3);
+      }
+      const size_t floats = static_cast<size_t>(c.row_end() - c.row_begin()) * c.width() * 3;
+      if (c.width() != img.width || c.row_begin() < 0 || c.row_end() > img.height ||
+          c.rgb().size() != floats * 4) {
+        return absl::DataLossError("the root sent a malformed image chunk");
+      }
+      float* dst = img.rgb.data() + static_cast<size_t>(c.row_begin()) * img.width * 3;
+      const auto* b = reinterpret_cast<const uint8_t*>(c.rgb().data());
+      for (size_t i = 0; i < floats; ++i, b += 4) {
+        dst[i] = std::bit_cast<float>(uint32_t{b[0]} | uint32_t{b[1]} << 8 | uint32_t{b[2]} << 16 |
+                                      uint32_t{b[3]} << 24);
+      }
+      rows_in[key] += c.row_end() - c.row_begin();
+      if (e.has_stats()) stats.push_back(e.stats());
+      if (rows_in[key] == img.height) {
+        std::string out = c.output();
+        if (out.empty())
+          out = absl::StrCat(submitted.job_id(), "-d", e.dataset(), "-v", e.view(), ".png");
+        fs::path path(out);
+        if (path.is_relative() && !options.out_dir.empty()) path = fs::path(options.out_dir) / path;
+        if (path.has_parent_path()) {
+          std::error_code ec;
+          fs::create_directories(path.parent_path(), ec);
+        }
+        absl::Status s = WriteImage(path.string(), img);
+        if (!s.ok() && save_error.ok()) save_error = s;
+        if (options.progress) {
+          std::fprintf(stderr, "\r\033[K%s: frame %d/%d saved to %s (%.1f ms)\n",
+                       submitted.job_id().c_str(), e.frames_done() + 1, e.frames_total(),
+                       path.c_str(), e.has_stats() ? e.stats().frame_ms() : 0.0);
+        }
+        images.erase(key);
+      }
+    } else if (options.progress && e.pixels_total() > 0) {
+      std::fprintf(stderr, "\r\033[K%s: frame %d/%d, %5.1f%% of %llu pixels",
+                   submitted.job_id().c_str(), e.frames_done() + 1, e.frames_total(),
+                   100.0 * e.pixels_done() / e.pixels_total(),
+                   static_cast<unsigned long long>(e.pixels_total()));
+    }
+  }
+  grpc::Status s = reader->Finish();
+  if (!s.ok()) return FromGrpc(s);
+  if (state == v1::FAILED)
+    return absl::AbortedError(absl::StrCat(submitted.job_id(), " failed: ", error));
+  if (state == v1::CANCELLED)
+    return absl::CancelledError(absl::StrCat(submitted.job_id(), " was cancelled"));
+  if (!save_error.ok()) return save_error;
+  return stats;
+}
+
+absl::StatusOr<v1::Job> LoadJobFile(const std::string& path) {
+  auto text = ReadTextFile(path);
+  if (!text.ok()) return text.status();
+  v1::Job job;
+  if (auto s = ParseJson(*text, path, &job); !s.ok()) return s;
+  const fs::path dir = fs::path(path).parent_path();
+  for (int d = 0; d < job.datasets_size(); ++d) {
+    v1::Dataset* ds = job.mutable_datasets(d);
+    auto resolve = [&](const std::string& f) {
+      return fs::path(f).is_absolute() ? f : (dir / f).string();
+    };
+    if (!ds->materials_file().empty()) {
+      std::string f = resolve(ds->materials_file());
+      auto t = ReadTextFile(f);
+      if (!t.ok()) return t.status();
+      if (auto s = ParseJson(*t, f, ds->mutable_materials()); !s.ok()) return s;
+      ds->clear_materials_file();
+    }
+    if (!ds->transfer_file().empty()) {
+      std::string f = resolve(ds->transfer_file());
+      auto t = ReadTextFile(f);
+      if (!t.ok()) return t.status();
+      if (auto s = ParseJson(*t, f, ds->mutable_transfer()); !s.ok()) return s;
+      ds->clear_transfer_file();
+    }
+  }
+  return job;
+}
+
+absl::StatusOr<std::unique_ptr<LocalCluster>> LocalCluster::Start(const Options& options) {
+  auto c = std::unique_ptr<LocalCluster>(new LocalCluster());
+  c->display_service_ = std::make_unique<DisplayService>();
+  auto display = Server::Start("127.0.0.1:0", {c->display_service_.get()});
+  if (!display.ok()) return display.status();
+  c->display_server_ = *std::move(display);
+  RootOptions ro;
+  ro.data_dir = options.data_dir;
+  ro.display = absl::StrCat("127.0.0.1:", c->display_server_->port());
+  ro.rings = options.rings;
+  ro.worker_wait_s = 30;
+  auto root = RootNode::Start("127.0.0.1:0", ro);
+  if (!root.ok()) return root.status();
+  c->root_ = *std::move(root);
+  for (int i = 0; i < options.workers; ++i) {
+    WorkerNodeOptions wo;
+    wo.listen = "127.0.0.1:0";
+    wo.root = c->root_address();
+    wo.threads = options.threads_per_worker;
+    // The advertised address is fixed once the port is known.
+    auto w = WorkerNode::Start(wo);
+    if (!w.ok()) return w.status();
+    c->workers_.push_back(*std::move(w));
+  }
+  // Ready once every worker has registered.
+  for (int tries = 0; c->root_->service().WorkerCount() < options.workers; ++tries) {
+    if (tries > 1000) return absl::DeadlineExceededError("workers did not register");
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return c;
+}
+
+LocalCluster::~LocalCluster() {
+  for (auto& w : workers_) w->Stop(std::chrono::milliseconds(1000));
+  if (root_) root_->Stop(std::chrono::milliseconds(1000));
+  if (display_server_) display_server_->Shutdown(std::chrono::milliseconds(1000));
+}
+
+std::string LocalCluster::root_address() const { return absl::StrCat("127.0.0.1:", root_->port()); }
+
+}  // namespace transtick

@@ -1,0 +1,145 @@
+#include "display_service.h"
+
+#include <spdlog/spdlog.h>
+
+#include <bit>
+
+#include "absl/strings/str_cat.h"
+#include "transtick/ray_codec.h"
+
+namespace transtick {
+namespace {
+
+// Image rows per chunk: keeps messages near 1 MB whatever the width.
+int RowsPerChunk(int width) { return std::max(1, (1 << 20) / (width * 12)); }
+
+}  // namespace
+
+DisplayService::DisplayService(uint64_t max_frame_pixels) : max_frame_pixels_(max_frame_pixels) {}
+
+std::shared_ptr<DisplayService::FrameState> DisplayService::Find(uint64_t id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  auto it = frames_.find(id);
+  return it == frames_.end() ? nullptr : it->second;
+}
+
+grpc::Status DisplayService::BeginFrame(grpc::ServerContext*, const v1::DisplayFrame* req,
+                                        v1::FrameAck*) {
+  if (req->width() < 1 || req->height() < 1 ||
+      static_cast<uint64_t>(req->width()) * req->height() > max_frame_pixels_) {
+    return grpc::Status(
+        grpc::StatusCode::INVALID_ARGUMENT,
+        absl::StrCat("display: frame size ", req->width(), "x", req->height(), " is out of range"));
+  }
+  std::lock_guard<std::mutex> lock(mu_);
+  if (frames_.count(req->frame_id())) {
+    return grpc::Status(grpc::StatusCode::ALREADY_EXISTS,
+                        absl::StrCat("display: frame ", req->frame_id(), " already begun"));
+  }
+  frames_[req->frame_id()] = std::make_shared<FrameState>(req->width(), req->height());
+  return grpc::Status::OK;
+}
+
+grpc::Status DisplayService::Deposits(grpc::ServerContext*,
+                                      grpc::ServerReader<v1::DepositBatch>* reader, v1::FrameAck*) {
+  v1::DepositBatch batch;
+  std::shared_ptr<FrameState> frame;
+  uint64_t frame_id = 0;
+  while (reader->Read(&batch)) {
+    if (!frame || batch.frame_id() != frame_id) {
+      frame_id = batch.frame_id();
+      frame = Find(frame_id);
+      if (!frame) {
+        return grpc::Status(grpc::StatusCode::NOT_FOUND,
+                            absl::StrCat("display: frame ", frame_id, " was not begun"));
+      }
+    }
+    std::lock_guard<std::mutex> lock(frame->mu);
+    const uint32_t limit =
+        static_cast<uint32_t>(frame->fb.width()) * static_cast<uint32_t>(frame->fb.height());
+    auto deposits = DecodeDeposits(batch.deposits(), limit);
+    if (!deposits.ok()) {
+      return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                          absl::StrCat("display: ", deposits.status().message()));
+    }
+    bool completed = false;
+    for (const Deposit& d : *deposits) completed |= frame->fb.Add(d);
+    frame->deposits += deposits->size();
+    if (completed && frame->fb.Complete()) frame->cv.notify_all();
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::FrameRef* req,
+                                        grpc::ServerWriter<v1::FrameProgress>* writer) {
+  std::shared_ptr<FrameState> frame = Find(req->frame_id());
+  if (!frame) {
+    return grpc::Status(grpc::StatusCode::NOT_FOUND,
+                        absl::StrCat("display: frame ", req->frame_id(), " was not begun"));
+  }
+  const uint64_t total = static_cast<uint64_t>(frame->fb.width()) * frame->fb.height();
+  Image image;
+  {
+    std::unique_lock<std::mutex> lock(frame->mu);
+    while (!frame->fb.Complete() && !frame->aborted) {
+      frame->cv.wait_for(lock, std::chrono::milliseconds(250));
+      if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "cancelled");
+      if (frame->fb.Complete() || frame->aborted) break;
+      v1::FrameProgress p;
+      p.set_pixels_done(frame->fb.complete_pixels());
+      p.set_pixels_total(total);
+      lock.unlock();
+      writer->Write(p);
+      lock.lock();
+    }
+    if (frame->aborted) {
+      return grpc::Status(grpc::StatusCode::ABORTED,
+                          absl::StrCat("display: frame ", req->frame_id(), " was aborted"));
+    }
+    image = frame->fb.Resolve();
+  }
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    frames_.erase(req->frame_id());
+  }
+  const int rows = RowsPerChunk(image.width);
+  for (int r0 = 0; r0 < image.height; r0 += rows) {
+    const int r1 = std::min(image.height, r0 + rows);
+    v1::FrameProgress p;
+    p.set_pixels_done(total);
+    p.set_pixels_total(total);
+    p.set_complete(true);
+    v1::ImageChunk* c = p.mutable_image();
+    c->set_width(image.width);
+    c->set_height(image.height);
+    c->set_row_begin(r0);
+    c->set_row_end(r1);
+    std::string* bytes = c->mutable_rgb();
+    bytes->reserve(static_cast<size_t>(r1 - r0) * image.width * 12);
+    for (size_t i = static_cast<size_t>(r0) * image.width * 3;
+         i < static_cast<size_t>(r1) * image.width * 3; ++i) {
+      uint32_t bits = std::bit_cast<uint32_t>(image.rgb[i]);
+      for (int k = 0; k < 4; ++k) bytes->push_back(static_cast<char>((bits >> (8 * k)) & 0xff));
+    }
+    if (!writer->Write(p)) return grpc::Status(grpc::StatusCode::CANCELLED, "root went away");
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status DisplayService::AbortFrame(grpc::ServerContext*, const v1::FrameRef* req,
+                                        v1::FrameAck*) {
+  std::shared_ptr<FrameState> frame;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = frames_.find(req->frame_id());
+    if (it == frames_.end()) return grpc::Status::OK;
+    frame = it->second;
+    frames_.erase(it);
+  }
+  std::lock_guard<std::mutex> lock(frame->mu);
+  frame->aborted = true;
+  frame->cv.notify_all();
+  return grpc::Status::OK;
+}
+
+}  // namespace transtick

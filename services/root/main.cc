@@ -1,0 +1,53 @@
+// transtick-root: the client-facing API and the coordinator of the cluster.
+#include <spdlog/spdlog.h>
+
+#include <iostream>
+
+#include "daemon.h"
+#include "root_node.h"
+
+int main(int argc, char** argv) {
+  using namespace transtick;
+  BlockTerminationSignals();
+  InitLogging("root");
+  auto flags = Flags::Parse(
+      argc, argv, 1, {"listen", "data-dir", "display", "rings", "max-volume-mb", "frame-timeout"},
+      {"help"});
+  if (!flags.ok() || flags->Has("help")) {
+    if (!flags.ok()) std::cerr << "transtick-root: " << flags.status().message() << "\n";
+    std::cerr << "usage: transtick-root [--listen ADDR] [--data-dir DIR] [--display ADDR] "
+                 "[--rings R] [--max-volume-mb N] [--frame-timeout S]\n(environment: "
+                 "TRANSTICK_LISTEN, TRANSTICK_DATA_DIR, TRANSTICK_DISPLAY, TRANSTICK_RINGS, "
+                 "TRANSTICK_MAX_VOLUME_MB, TRANSTICK_FRAME_TIMEOUT)\n";
+    return flags.ok() ? 0 : 2;
+  }
+  RootOptions o;
+  const std::string listen = Setting(*flags, "listen", "TRANSTICK_LISTEN", "0.0.0.0:7000");
+  o.data_dir = Setting(*flags, "data-dir", "TRANSTICK_DATA_DIR", "/data");
+  o.display = Setting(*flags, "display", "TRANSTICK_DISPLAY", "127.0.0.1:7002");
+  try {
+    o.rings = std::stoi(Setting(*flags, "rings", "TRANSTICK_RINGS", "1"));
+    o.max_volume_bytes =
+        std::stoull(Setting(*flags, "max-volume-mb", "TRANSTICK_MAX_VOLUME_MB", "8192")) << 20;
+    o.frame_timeout_s =
+        std::stod(Setting(*flags, "frame-timeout", "TRANSTICK_FRAME_TIMEOUT", "600"));
+  } catch (...) {
+    std::cerr << "transtick-root: --rings, --max-volume-mb and --frame-timeout take numbers\n";
+    return 2;
+  }
+  if (o.rings < 1 || o.rings > 64) {
+    std::cerr << "transtick-root: --rings must be in [1, 64]\n";
+    return 2;
+  }
+  auto node = RootNode::Start(listen, o);
+  if (!node.ok()) {
+    spdlog::error("{}", std::string(node.status().message()));
+    return 1;
+  }
+  spdlog::info("root serving on port {}; data {}, display {}, {} ring(s)", (*node)->port(),
+               o.data_dir, o.display, o.rings);
+  int sig = WaitForSignal();
+  spdlog::info("signal {}: stopping", sig);
+  (*node)->Stop(std::chrono::milliseconds(5000));
+  return 0;
+}

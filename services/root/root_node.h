@@ -1,0 +1,44 @@
+// A running root: its server and service. Used by the transtick-root daemon
+// and by embedded clusters. Thread-safe.
+#ifndef TRANSTICK_SERVICES_ROOT_ROOT_NODE_H_
+#define TRANSTICK_SERVICES_ROOT_ROOT_NODE_H_
+
+#include <memory>
+
+#include "absl/status/statusor.h"
+#include "daemon.h"
+#include "root_service.h"
+
+namespace transtick {
+
+class RootNode {
+ public:
+  static absl::StatusOr<std::unique_ptr<RootNode>> Start(const std::string& listen,
+                                                         const RootOptions& options);
+  ~RootNode() { Stop(std::chrono::milliseconds(0)); }
+
+  int port() const { return server_->port(); }
+  RootService& service() { return *service_; }
+  void Stop(std::chrono::milliseconds grace) {
+    service_->Stop();
+    server_->Shutdown(grace);
+  }
+
+ private:
+  std::unique_ptr<RootService> service_;
+  std::unique_ptr<Server> server_;
+};
+
+inline absl::StatusOr<std::unique_ptr<RootNode>> RootNode::Start(const std::string& listen,
+                                                                 const RootOptions& options) {
+  auto node = std::unique_ptr<RootNode>(new RootNode());
+  node->service_ = std::make_unique<RootService>(options);
+  auto server = Server::Start(listen, {node->service_.get()});
+  if (!server.ok()) return server.status();
+  node->server_ = *std::move(server);
+  return node;
+}
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_SERVICES_ROOT_ROOT_NODE_H_

@@ -1,0 +1,861 @@
+#include "root_service.h"
+
+#include <spdlog/spdlog.h>
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <filesystem>
+#include <functional>
+#include <numeric>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "convert.h"
+#include "daemon.h"
+#include "transtick/framebuffer.h"
+#include "transtick/volume_io.h"
+
+namespace transtick {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+double MsSince(Clock::time_point t) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+grpc::Status Invalid(const std::string& m) {
+  return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, m);
+}
+
+// Runs fn(i) for i in [0, n) on n threads and returns the first error.
+absl::Status ForEachParallel(size_t n, const std::function<absl::Status(size_t)>& fn) {
+  std::vector<absl::Status> results(n);
+  std::vector<std::thread> threads;
+  for (size_t i = 0; i < n; ++i) threads.emplace_back([&, i] { results[i] = fn(i); });
+  for (auto& t : threads) t.join();
+  for (auto& s : results) {
+    if (!s.ok()) return s;
+  }
+  return absl::OkStatus();
+}
+
+bool IsWorkerFailure(const grpc::Status& s) {
+  return s.error_code() == grpc::StatusCode::UNAVAILABLE ||
+         s.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED ||
+         s.error_code() == grpc::StatusCode::CANCELLED;
+}
+
+bool SupportedOutput(const std::string& path) {
+  auto dot = path.rfind('.');
+  if (dot == std::string::npos) return false;
+  std::string ext = path.substr(dot + 1);
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
+  return ext == "png" || ext == "tif" || ext == "tiff" || ext == "exr" || ext == "jpg" ||
+         ext == "jpeg";
+}
+
+void AppendFloats(const float* v, size_t n, std::string* out) {
+  out->reserve(out->size() + n * 4);
+  for (size_t i = 0; i < n; ++i) {
+    uint32_t bits = std::bit_cast<uint32_t>(v[i]);
+    for (int k = 0; k < 4; ++k) out->push_back(static_cast<char>((bits >> (8 * k)) & 0xff));
+  }
+}
+
+}  // namespace
+
+struct RootService::WorkerEntry {
+  std::string id, address;
+  int threads = 1;
+  uint64_t order = 0;
+  std::unique_ptr<v1::Worker::Stub> stub;
+};
+
+struct RootService::JobRecord {
+  std::string id;
+  v1::Job job;
+  double submitted_unix = 0;
+  int frames_total = 0;
+  std::atomic<bool> cancel{false};
+  std::mutex mu;
+  std::condition_variable cv;
+  std::vector<v1::JobEvent> events;  // guarded by mu
+  v1::JobState state = v1::QUEUED;   // guarded by mu
+  int frames_done = 0;               // guarded by mu
+  std::string error;                 // guarded by mu
+  bool finished = false;             // guarded by mu
+};
+
+struct RootService::LoadedDataset {
+  std::string key;  // content: file identity + classification
+  std::string mode;
+  v1::Dataset spec;
+  Scene scene;
+  double load_ms = 0;
+};
+
+struct RootService::Layout {
+  struct Ring {
+    std::vector<std::shared_ptr<WorkerEntry>> workers;
+    std::vector<int> cuts;  // workers.size() + 1 bounds along Y
+  };
+  std::vector<Ring> rings;
+  double load_ms = 0;  // slab transfers done for this layout
+  std::string SlabKey(const std::string& data_key, const Ring& ring, size_t i) const {
+    return absl::StrCat(data_key, "@", ring.cuts[i], "-", ring.cuts[i + 1]);
+  }
+};
+
+RootService::RootService(RootOptions options) : options_(std::move(options)) {
+  // Frame ids unique across root restarts, so a worker never mistakes a
+  // stale frame for a new one.
+  next_frame_id_ =
+      static_cast<uint64_t>(std::chrono::system_clock::now().time_since_epoch().count() / 1000)
+      << 8;
+  runner_ = std::thread([this] { RunnerLoop(); });
+}
+
+RootService::~RootService() { Stop(); }
+
+void RootService::Stop() {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (stopping_) return;
+    stopping_ = true;
+    for (auto& j : queue_) j->cancel = true;
+    for (auto& j : jobs_) j->cancel = true;
+    cv_.notify_all();
+  }
+  if (runner_.joinable()) runner_.join();
+}
+
+int RootService::WorkerCount() {
+  std::lock_guard<std::mutex> lock(mu_);
+  return static_cast<int>(workers_.size());
+}
+
+absl::Status RootService::ValidateJob(const v1::Job& job) const {
+  if (job.datasets_size() == 0) return absl::InvalidArgumentError("job: no datasets");
+  if (job.balance_grid() < 0 || job.balance_grid() > 256) {
+    return absl::InvalidArgumentError("job: balance_grid must be in [0, 256]");
+  }
+  int views = 0;
+  std::error_code ec;
+  const fs::path root = fs::weakly_canonical(options_.data_dir, ec);
+  for (int d = 0; d < job.datasets_size(); ++d) {
+    const v1::Dataset& ds = job.datasets(d);
+    const std::string where = absl::StrCat("datasets[", d, "]");
+    if (ds.volume().empty()) return absl::InvalidArgumentError(where + ": no volume given");
+    fs::path rel(ds.volume());
+    if (rel.is_absolute()) {
+      return absl::InvalidArgumentError(absl::StrCat(where, ": volume '", ds.volume(),
+                                                     "' must be relative to the data directory"));
+    }
+    fs::path full = fs::weakly_canonical(root / rel, ec);
+    auto mismatch = std::mismatch(root.begin(), root.end(), full.begin(), full.end());
+    if (ec || mismatch.first != root.end()) {
+      return absl::PermissionDeniedError(
+          absl::StrCat(where, ": volume '", ds.volume(), "' lies outside the data directory"));
+    }
+    if (!fs::is_regular_file(full, ec)) {
+      return absl::NotFoundError(
+          absl::StrCat(where, ": volume '", ds.volume(), "' not found in the data directory"));
+    }
+    if (!ds.materials_file().empty() || !ds.transfer_file().empty()) {
+      return absl::InvalidArgumentError(
+          where + ": materials_file and transfer_file are read by the client; send them inline");
+    }
+    if (ds.has_materials()) {
+      if (auto c = ToClassification(ds.materials()); !c.ok()) {
+        return absl::InvalidArgumentError(absl::StrCat(where, ": ", c.status().message()));
+      }
+    } else if (ds.has_transfer()) {
+      if (auto t = ToTransferFunction(ds.transfer()); !t.ok()) {
+        return absl::InvalidArgumentError(absl::StrCat(where, ": ", t.status().message()));
+      }
+    } else {
+      return absl::InvalidArgumentError(where + ": needs materials or a transfer function");
+    }
+    if (ds.has_raw()) {
+      if (ds.raw().dims_size() != 3) {
+        return absl::InvalidArgumentError(where + ": raw.dims needs 3 sizes");
+      }
+      if (auto t = ParseScalarType(ds.raw().type()); !t.ok()) {
+        return absl::InvalidArgumentError(absl::StrCat(where, ": raw: ", t.status().message()));
+      }
+    }
+    if (ds.views_size() == 0) return absl::InvalidArgumentError(where + ": no views");
+    for (int v = 0; v < ds.views_size(); ++v) {
+      const v1::View& view = ds.views(v);
+      const std::string vw = absl::StrCat(where, ".views[", v, "]");
+      if (auto c = ToCameraSpec(view); !c.ok()) {
+        return absl::InvalidArgumentError(absl::StrCat(vw, ": ", c.status().message()));
+      }
+      if (!view.output().empty() && !SupportedOutput(view.output())) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(vw, ": output '", view.output(), "' is not .png, .jpg, .tif or .exr"));
+      }
+      ++views;
+    }
+  }
+  if (views > 10000) return absl::InvalidArgumentError("job: more than 10000 views");
+  return absl::OkStatus();
+}
+
+grpc::Status RootService::Submit(grpc::ServerContext*, const v1::Job* job, v1::SubmitReply* reply) {
+  if (auto s = ValidateJob(*job); !s.ok()) return ToGrpc(s);
+  auto record = std::make_shared<JobRecord>();
+  record->job = *job;
+  record->submitted_unix =
+      std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+  for (const auto& d : job->datasets()) record->frames_total += d.views_size();
+  std::lock_guard<std::mutex> lock(mu_);
+  if (stopping_) return grpc::Status(grpc::StatusCode::UNAVAILABLE, "root is shutting down");
+  record->id = absl::StrCat("job-", next_job_++);
+  reply->set_job_id(record->id);
+  reply->set_frames(record->frames_total);
+  reply->set_queue_position(static_cast<int>(queue_.size()));
+  queue_.push_back(record);
+  jobs_.push_back(record);
+  // Forget the oldest finished jobs beyond the history limit.
+  while (static_cast<int>(jobs_.size()) > options_.max_jobs_kept) {
+    auto it = std::find_if(jobs_.begin(), jobs_.end(), [](const auto& j) {
+      std::lock_guard<std::mutex> l(j->mu);
+      return j->finished;
+    });
+    if (it == jobs_.end()) break;
+    jobs_.erase(it);
+  }
+  spdlog::info("{} queued: '{}', {} frames, {} ahead", record->id, job->name(),
+               record->frames_total, queue_.size() - 1);
+  cv_.notify_all();
+  return grpc::Status::OK;
+}
+
+void RootService::Publish(JobRecord& job, v1::JobEvent event) {
+  std::lock_guard<std::mutex> lock(job.mu);
+  event.set_job_id(job.id);
+  event.set_state(job.state);
+  event.set_frames_total(job.frames_total);
+  event.set_frames_done(job.frames_done);
+  if (!job.error.empty()) event.set_error(job.error);
+  job.events.push_back(std::move(event));
+  job.cv.notify_all();
+}
+
+grpc::Status RootService::Watch(grpc::ServerContext* ctx, const v1::JobRef* req,
+                                grpc::ServerWriter<v1::JobEvent>* writer) {
+  std::shared_ptr<JobRecord> job;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (auto& j : jobs_) {
+      if (j->id == req->job_id()) job = j;
+    }
+  }
+  if (!job) {
+    return grpc::Status(grpc::StatusCode::NOT_FOUND, absl::StrCat("no job '", req->job_id(), "'"));
+  }
+  size_t next = 0;
+  while (true) {
+    std::vector<v1::JobEvent> batch;
+    bool finished;
+    {
+      std::unique_lock<std::mutex> lock(job->mu);
+      job->cv.wait_for(lock, std::chrono::milliseconds(500),
+                       [&] { return job->events.size() > next || job->finished; });
+      batch.assign(job->events.begin() + next, job->events.end());
+      next = job->events.size();
+      finished = job->finished;
+    }
+    for (const auto& e : batch) {
+      if (!writer->Write(e)) return grpc::Status(grpc::StatusCode::CANCELLED, "watcher left");
+    }
+    if (finished && batch.empty()) return grpc::Status::OK;
+    if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "watcher left");
+  }
+}
+
+grpc::Status RootService::Status(grpc::ServerContext*, const v1::StatusRequest*,
+                                 v1::StatusReply* reply) {
+  std::lock_guard<std::mutex> lock(mu_);
+  for (auto& j : jobs_) {
+    std::lock_guard<std::mutex> l(j->mu);
+    v1::JobSummary* s = reply->add_jobs();
+    s->set_job_id(j->id);
+    s->set_name(j->job.name());
+    s->set_state(j->state);
+    s->set_frames_total(j->frames_total);
+    s->set_frames_done(j->frames_done);
+    s->set_error(j->error);
+    s->set_submitted_unix(j->submitted_unix);
+  }
+  std::vector<std::shared_ptr<WorkerEntry>> ws;
+  for (auto& [id, w] : workers_) ws.push_back(w);
+  std::sort(ws.begin(), ws.end(), [](auto& a, auto& b) { return a->order < b->order; });
+  for (auto& w : ws) {
+    v1::WorkerInfo* info = reply->add_workers();
+    info->set_id(w->id);
+    info->set_address(w->address);
+    info->set_threads(w->threads);
+    info->set_ring(-1);
+  }
+  reply->set_rings(options_.rings);
+  return grpc::Status::OK;
+}
+
+grpc::Status RootService::Cancel(grpc::ServerContext*, const v1::JobRef* req,
+                                 v1::CancelReply* reply) {
+  std::lock_guard<std::mutex> lock(mu_);
+  for (auto& j : jobs_) {
+    if (j->id != req->job_id()) continue;
+    std::lock_guard<std::mutex> l(j->mu);
+    if (j->finished) {
+      reply->set_cancelled(false);
+      return grpc::Status::OK;
+    }
+    j->cancel = true;
+    reply->set_cancelled(true);
+    cv_.notify_all();
+    spdlog::info("{}: cancel requested", j->id);
+    return grpc::Status::OK;
+  }
+  return grpc::Status(grpc::StatusCode::NOT_FOUND, absl::StrCat("no job '", req->job_id(), "'"));
+}
+
+grpc::Status RootService::Register(grpc::ServerContext*, const v1::RegisterRequest* req,
+                                   v1::RegisterReply*) {
+  if (req->id().empty() || req->address().empty()) {
+    return Invalid("Register: a worker needs an id and an address");
+  }
+  if (req->threads() < 0 || req->threads() > 4096) return Invalid("Register: absurd thread count");
+  std::lock_guard<std::mutex> lock(mu_);
+  if (workers_.count(req->id())) {
+    return grpc::Status(grpc::StatusCode::ALREADY_EXISTS,
+                        absl::StrCat("worker ", req->id(), " is already registered (at ",
+                                     workers_[req->id()]->address, ")"));
+  }
+  // A worker restarted at the same address replaces its old entry.
+  for (auto it = workers_.begin(); it != workers_.end();) {
+    if (it->second->address == req->address()) {
+      spdlog::info("worker {} at {} replaces {}", req->id(), req->address(), it->first);
+      loaded_.erase(it->first);
+      it = workers_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  auto w = std::make_shared<WorkerEntry>();
+  w->id = req->id();
+  w->address = req->address();
+  w->threads = std::max(1, req->threads());
+  w->order = next_order_++;
+  w->stub = v1::Worker::NewStub(MakeChannel(w->address));
+  workers_[w->id] = w;
+  spdlog::info("worker {} registered at {} ({} threads); {} workers", w->id, w->address, w->threads,
+               workers_.size());
+  cv_.notify_all();
+  return grpc::Status::OK;
+}
+
+grpc::Status RootService::Unregister(grpc::ServerContext*, const v1::RegisterRequest* req,
+                                     v1::RegisterReply*) {
+  std::lock_guard<std::mutex> lock(mu_);
+  loaded_.erase(req->id());
+  if (workers_.erase(req->id()) == 0) {
+    return grpc::Status(grpc::StatusCode::NOT_FOUND,
+                        absl::StrCat("worker ", req->id(), " is not registered"));
+  }
+  spdlog::info("worker {} unregistered; {} workers", req->id(), workers_.size());
+  return grpc::Status::OK;
+}
+
+void RootService::DropWorker(const std::string& id, const std::string& why) {
+  std::lock_guard<std::mutex> lock(mu_);
+  loaded_.erase(id);
+  if (workers_.erase(id)) {
+    spdlog::warn("dropping worker {}: {}; {} workers left", id, why, workers_.size());
+  }
+}
+
+void RootService::RunnerLoop() {
+  while (true) {
+    std::shared_ptr<JobRecord> job;
+    {
+      std::unique_lock<std::mutex> lock(mu_);
+      cv_.wait(lock, [this] { return stopping_ || !queue_.empty(); });
+      if (stopping_) break;
+      job = queue_.front();
+      queue_.pop_front();
+    }
+    {
+      std::lock_guard<std::mutex> l(job->mu);
+      job->state = job->cancel ? v1::CANCELLED : v1::RUNNING;
+    }
+    absl::Status status = absl::CancelledError("cancelled before it started");
+    if (!job->cancel) {
+      Publish(*job, v1::JobEvent());
+      spdlog::info("{} running", job->id);
+      status = RunJob(*job);
+    }
+    {
+      std::lock_guard<std::mutex> l(job->mu);
+      job->state = job->cancel ? v1::CANCELLED : (status.ok() ? v1::DONE : v1::FAILED);
+      if (!status.ok()) job->error = std::string(status.message());
+    }
+    Publish(*job, v1::JobEvent());
+    {
+      std::lock_guard<std::mutex> l(job->mu);
+      job->finished = true;
+      job->cv.notify_all();
+    }
+    if (status.ok()) {
+      spdlog::info("{} done", job->id);
+    } else {
+      spdlog::warn("{} ended: {}", job->id, std::string(status.message()));
+    }
+  }
+}
+
+absl::Status RootService::RunJob(JobRecord& job) {
+  for (int d = 0; d < job.job.datasets_size(); ++d) {
+    auto data = LoadDataset(job.job.datasets(d));
+    if (!data.ok()) return data.status();
+    for (int v = 0; v < job.job.datasets(d).views_size(); ++v) {
+      if (job.cancel) return absl::CancelledError("cancelled");
+      if (auto s = RunView(job, d, v, **data); !s.ok()) return s;
+      {
+        std::lock_guard<std::mutex> l(job.mu);
+        ++job.frames_done;
+      }
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::shared_ptr<RootService::LoadedDataset>> RootService::LoadDataset(
+    const v1::Dataset& ds) {
+  const fs::path path = fs::path(options_.data_dir) / ds.volume();
+  struct stat st {};
+  if (stat(path.c_str(), &st) != 0) {
+    return absl::NotFoundError(absl::StrCat(ds.volume(), ": cannot open"));
+  }
+  v1::Dataset identity = ds;
+  identity.clear_views();
+  std::string key_text = absl::StrCat(ds.volume(), "|", st.st_size, "|", st.st_mtim.tv_sec, ".",
+                                      st.st_mtim.tv_nsec, "|", identity.SerializeAsString());
+  const std::string key = absl::StrFormat("%016x", std::hash<std::string>{}(key_text)) + "-" +
+                          absl::StrFormat("%08x", static_cast<uint32_t>(key_text.size()));
+  if (cache_ && cache_->key == key) return cache_;
+  const auto t0 = Clock::now();
+  ReadOptions ro;
+  ro.max_bytes = options_.max_volume_bytes;
+  absl::StatusOr<Volume> volume;
+  if (ds.has_raw()) {
+    RawSpec spec;
+    for (int a = 0; a < 3; ++a) spec.dims[a] = ds.raw().dims(a);
+    spec.type = *ParseScalarType(ds.raw().type());
+    spec.byte_order = ds.raw().big_endian() ? ByteOrder::kBig : ByteOrder::kLittle;
+    for (int a = 0; a < 3 && a < ds.raw().spacing_size(); ++a)
+      spec.spacing[a] = ds.raw().spacing(a);
+    spec.header_bytes = ds.raw().header_bytes();
+    volume = ReadRaw(path.string(), spec, ro);
+  } else {
+    volume = ReadVolume(path.string(), ro);
+  }
+  if (!volume.ok()) return volume.status();
+  auto data = std::make_shared<LoadedDataset>();
+  data->key = key;
+  data->spec = identity;
+  absl::StatusOr<Scene> scene;
+  if (ds.has_materials()) {
+    data->mode = "surfaces";
+    scene = Scene::ForSurfaces(*volume, *ToClassification(ds.materials()));
+  } else {
+    data->mode = "dvr";
+    scene = Scene::ForDvr(*volume, *ToTransferFunction(ds.transfer()));
+  }
+  if (!scene.ok())
+    return absl::Status(scene.status().code(),
+                        absl::StrCat(ds.volume(), ": ", scene.status().message()));
+  data->scene = *std::move(scene);
+  data->load_ms = MsSince(t0);
+  spdlog::info("dataset {} ({}): {}x{}x{}, {} sticks, prepared in {:.0f} ms", ds.volume(),
+               data->mode, volume->dims[0], volume->dims[1], volume->dims[2],
+               data->scene.sticks().StickCount(), data->load_ms);
+  cache_ = data;
+  return data;
+}
+
+absl::StatusOr<RootService::Layout> RootService::EnsureLayout(const LoadedDataset& data,
+                                                              JobRecord& job) {
+  std::vector<std::shared_ptr<WorkerEntry>> workers;
+  {
+    std::unique_lock<std::mutex> lock(mu_);
+    const auto until = Clock::now() + std::chrono::milliseconds(
+                                          static_cast<int64_t>(options_.worker_wait_s * 1000));
+    while (workers_.empty() && !stopping_ && !job.cancel) {
+      if (cv_.wait_until(lock, until) == std::cv_status::timeout && workers_.empty()) {
+        return absl::UnavailableError(
+            absl::StrCat("no worker registered within ", options_.worker_wait_s, " s"));
+      }
+    }
+    if (stopping_ || job.cancel) return absl::CancelledError("cancelled");
+    for (auto& [id, w] : workers_) workers.push_back(w);
+  }
+  std::sort(workers.begin(), workers.end(), [](auto& a, auto& b) { return a->order < b->order; });
+  const int ny = data.scene.dims()[1];
+  const int n = static_cast<int>(workers.size());
+  const int rings = std::max(1, std::min(options_.rings, n));
+  Layout layout;
+  for (int r = 0; r < rings; ++r) {
+    Layout::Ring ring;
+    const int begin = r * n / rings, end = (r + 1) * n / rings;
+    // A slab holds at least one plane: extra workers stay idle.
+    const int k = std::min(end - begin, ny);
+    for (int i = 0; i < k; ++i) ring.workers.push_back(workers[begin + i]);
+    for (int i = 0; i <= k; ++i) ring.cuts.push_back(static_cast<int>(int64_t{i} * ny / k));
+    layout.rings.push_back(std::move(ring));
+  }
+  // Send each worker its slab unless it holds it already.
+  struct Load {
+    std::shared_ptr<WorkerEntry> worker;
+    int y0, y1;
+    std::string key;
+    std::string old;  // what the worker held before
+    bool ok = false;
+  };
+  std::vector<Load> loads;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (const auto& ring : layout.rings) {
+      for (size_t i = 0; i < ring.workers.size(); ++i) {
+        std::string key = layout.SlabKey(data.key, ring, i);
+        auto it = loaded_.find(ring.workers[i]->id);
+        std::string old = it == loaded_.end() ? "" : it->second;
+        if (old != key)
+          loads.push_back({ring.workers[i], ring.cuts[i], ring.cuts[i + 1], key, old});
+      }
+    }
+  }
+  const auto t0 = Clock::now();
+  const Scene& scene = data.scene;
+  const auto& dims = scene.dims();
+  absl::Status status = ForEachParallel(loads.size(), [&](size_t li) -> absl::Status {
+    Load& l = loads[li];
+    const std::string& old = l.old;
+    if (!old.empty()) {
+      grpc::ClientContext ctx;
+      ctx.set_deadline(Deadline(10));
+      v1::DatasetRef ref;
+      ref.set_dataset_key(old);
+      v1::FrameAck ack;
+      l.worker->stub->Evict(&ctx, ref, &ack);
+    }
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(300));
+    v1::LoadReply reply;
+    auto writer = l.worker->stub->LoadSlab(&ctx, &reply);
+    v1::SlabChunk chunk;
+    v1::SlabHeader* h = chunk.mutable_header();
+    h->set_dataset_key(l.key);
+    h->set_mode(data.mode);
+    for (int a = 0; a < 3; ++a) h->add_dims(dims[a]);
+    for (int a = 0; a < 3; ++a) h->add_spacing(scene.spacing()[a]);
+    h->add_value_range(scene.value_range()[0]);
+    h->add_value_range(scene.value_range()[1]);
+    if (data.spec.has_materials()) *h->mutable_materials() = data.spec.materials();
+    if (data.spec.has_transfer()) *h->mutable_transfer() = data.spec.transfer();
+    h->set_y_begin(l.y0);
+    h->set_y_end(l.y1);
+    const auto& bricks = scene.bricks().bytes();
+    h->set_brick_map(std::string(bricks.begin(), bricks.end()));
+    const int sb = scene.ScalarBegin(l.y0), se = scene.ScalarEnd(l.y1);
+    h->set_scalar_count(static_cast<uint64_t>(dims[0]) * (se - sb) * dims[2]);
+    constexpr size_t kChunkBytes = 1 << 20;
+    size_t pending = 0;
+    auto send = [&]() -> bool {
+      bool ok = writer->Write(chunk);
+      chunk.Clear();
+      pending = 0;
+      return ok;
+    };
+    bool ok = true;
+    const Sticks& sticks = scene.sticks();
+    for (int by = l.y0 / Sticks::kBlockSize; ok && by * Sticks::kBlockSize < l.y1; ++by) {
+      for (int bx = 0; ok && bx < sticks.BlocksX(); ++bx) {
+        chunk.add_blocks(sticks.EncodeBlock(bx, by));
+        pending += chunk.blocks(chunk.blocks_size() - 1).size();
+        if (pending >= kChunkBytes) ok = send();
+      }
+    }
+    const size_t row = static_cast<size_t>(dims[0]) * (se - sb);
+    for (int z = 0; ok && z < dims[2]; ++z) {
+      const float* plane =
+          scene.scalars().data() + (static_cast<size_t>(z) * dims[1] + sb) * dims[0];
+      AppendFloats(plane, row, chunk.mutable_scalars());
+      pending += row * 4;
+      if (pending >= kChunkBytes) ok = send();
+    }
+    if (ok && (pending > 0 || chunk.has_header())) ok = send();
+    writer->WritesDone();
+    grpc::Status s = writer->Finish();
+    if (!s.ok()) {
+      if (IsWorkerFailure(s)) DropWorker(l.worker->id, s.error_message());
+      return absl::Status(FromGrpc(s).code(),
+                          absl::StrCat("loading slab [", l.y0, ", ", l.y1, ") on ",
+                                       l.worker->address, ": ", s.error_message()));
+    }
+    l.ok = true;
+    return absl::OkStatus();
+  });
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (const Load& l : loads) {
+      if (l.ok) {
+        loaded_[l.worker->id] = l.key;
+      } else {
+        loaded_.erase(l.worker->id);
+      }
+    }
+  }
+  if (!status.ok()) return status;
+  layout.load_ms = loads.empty() ? 0 : MsSince(t0);
+  if (!loads.empty()) {
+    spdlog::info("sent {} slabs in {:.0f} ms", loads.size(), layout.load_ms);
+  }
+  return layout;
+}
+
+absl::Status RootService::RunView(JobRecord& job, int d, int v, const LoadedDataset& data) {
+  // A worker that dies is dropped and the frame runs again on the others.
+  constexpr int kAttempts = 3;
+  absl::Status status;
+  for (int attempt = 0; attempt < kAttempts; ++attempt) {
+    auto layout = EnsureLayout(data, job);
+    if (!layout.ok()) {
+      status = layout.status();
+      if (status.code() != absl::StatusCode::kUnavailable) return status;
+      continue;
+    }
+    status = RunFrame(job, d, v, data, *layout);
+    if (status.ok() || status.code() != absl::StatusCode::kUnavailable || job.cancel) return status;
+    spdlog::warn("{}: frame failed ({}); retrying", job.id, std::string(status.message()));
+  }
+  return status;
+}
+
+absl::Status RootService::RunFrame(JobRecord& job, int d, int v, const LoadedDataset& data,
+                                   const Layout& layout) {
+  const v1::View& view = job.job.datasets(d).views(v);
+  const uint64_t frame_id = next_frame_id_++;
+  const auto t0 = Clock::now();
+  auto display = v1::Display::NewStub(MakeChannel(options_.display));
+  {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(10));
+    v1::DisplayFrame df;
+    df.set_frame_id(frame_id);
+    df.set_width(view.width());
+    df.set_height(view.height());
+    v1::FrameAck ack;
+    grpc::Status s = display->BeginFrame(&ctx, df, &ack);
+    if (!s.ok()) {
+      return absl::Status(FromGrpc(s).code(),
+                          absl::StrCat("display ", options_.display, ": ", s.error_message()));
+    }
+  }
+  struct Member {
+    std::shared_ptr<WorkerEntry> worker;
+    v1::FrameSpec spec;
+    int ring;
+  };
+  std::vector<Member> members;
+  const int rings = static_cast<int>(layout.rings.size());
+  for (int r = 0; r < rings; ++r) {
+    const auto& ring = layout.rings[r];
+    for (size_t i = 0; i < ring.workers.size(); ++i) {
+      v1::FrameSpec spec;
+      spec.set_frame_id(frame_id);
+      spec.set_dataset_key(layout.SlabKey(data.key, ring, i));
+      *spec.mutable_view() = view;
+      for (int c : ring.cuts) spec.add_cuts(c);
+      spec.set_index(static_cast<int>(i));
+      if (i > 0) spec.set_left(ring.workers[i - 1]->address);
+      if (i + 1 < ring.workers.size()) spec.set_right(ring.workers[i + 1]->address);
+      spec.set_display(options_.display);
+      // Rows are interleaved across rings so each ring gets an even share of
+      // every part of the image.
+      spec.set_row_begin(std::min(r, view.height()));
+      spec.set_row_end(view.height());
+      spec.set_row_step(rings);
+      members.push_back({ring.workers[i], std::move(spec), r});
+    }
+  }
+  auto call = [&](const char* what, auto&& rpc) {
+    return ForEachParallel(members.size(), [&](size_t i) -> absl::Status {
+      grpc::ClientContext ctx;
+      ctx.set_deadline(Deadline(30));
+      grpc::Status s = rpc(members[i], &ctx);
+      if (s.ok()) return absl::OkStatus();
+      if (IsWorkerFailure(s)) {
+        DropWorker(members[i].worker->id, s.error_message());
+        return absl::UnavailableError(
+            absl::StrCat(what, " on ", members[i].worker->address, ": ", s.error_message()));
+      }
+      return absl::Status(FromGrpc(s).code(), absl::StrCat(what, " on ", members[i].worker->address,
+                                                           ": ", s.error_message()));
+    });
+  };
+  std::vector<v1::WorkerFrameStats> stats(members.size());
+  auto end_all = [&](bool cancel) {
+    // Statistics of workers that fail to end are simply missing.
+    (void)ForEachParallel(members.size(), [&](size_t i) -> absl::Status {
+      grpc::ClientContext ctx;
+      ctx.set_deadline(Deadline(30));
+      v1::FrameRef ref;
+      ref.set_frame_id(frame_id);
+      ref.set_cancel(cancel);
+      grpc::Status s = members[i].worker->stub->EndFrame(&ctx, ref, &stats[i]);
+      stats[i].set_ring(members[i].ring);
+      return FromGrpc(s);
+    });
+  };
+  auto abort = [&](const absl::Status& why) {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(10));
+    v1::FrameRef ref;
+    ref.set_frame_id(frame_id);
+    v1::FrameAck ack;
+    display->AbortFrame(&ctx, ref, &ack);
+    end_all(/*cancel=*/true);
+    return why;
+  };
+  absl::Status s = call("PrepareFrame", [&](Member& m, grpc::ClientContext* ctx) {
+    v1::FrameAck ack;
+    return m.worker->stub->PrepareFrame(ctx, m.spec, &ack);
+  });
+  if (!s.ok()) return abort(s);
+  s = call("RunFrame", [&](Member& m, grpc::ClientContext* ctx) {
+    v1::FrameRef ref;
+    ref.set_frame_id(frame_id);
+    v1::FrameAck ack;
+    return m.worker->stub->RunFrame(ctx, ref, &ack);
+  });
+  if (!s.ok()) return abort(s);
+
+  // Wait for the display, relaying progress, until the image is in.
+  Image image;
+  image.width = view.width();
+  image.height = view.height();
+  image.rgb.resize(static_cast<size_t>(image.width) * image.height * 3);
+  {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(options_.frame_timeout_s));
+    v1::FrameRef ref;
+    ref.set_frame_id(frame_id);
+    auto reader = display->AwaitFrame(&ctx, ref);
+    v1::FrameProgress p;
+    int rows = 0;
+    auto last_event = Clock::now() - std::chrono::seconds(1);
+    while (reader->Read(&p)) {
+      if (job.cancel) ctx.TryCancel();
+      if (p.has_image()) {
+        const v1::ImageChunk& c = p.image();
+        if (c.width() != image.width || c.row_begin() < 0 || c.row_end() > image.height ||
+            c.rgb().size() != static_cast<size_t>(c.row_end() - c.row_begin()) * c.width() * 12) {
+          ctx.TryCancel();
+          break;
+        }
+        float* dst = image.rgb.data() + static_cast<size_t>(c.row_begin()) * image.width * 3;
+        for (size_t i = 0; i < c.rgb().size() / 4; ++i) {
+          const auto* b = reinterpret_cast<const uint8_t*>(c.rgb().data()) + 4 * i;
+          dst[i] = std::bit_cast<float>(uint32_t{b[0]} | uint32_t{b[1]} << 8 |
+                                        uint32_t{b[2]} << 16 | uint32_t{b[3]} << 24);
+        }
+        rows += c.row_end() - c.row_begin();
+      } else if (Clock::now() - last_event > std::chrono::milliseconds(200)) {
+        last_event = Clock::now();
+        v1::JobEvent e;
+        e.set_dataset(d);
+        e.set_view(v);
+        e.set_pixels_done(p.pixels_done());
+        e.set_pixels_total(p.pixels_total());
+        Publish(job, std::move(e));
+      }
+    }
+    grpc::Status st = reader->Finish();
+    if (job.cancel) return abort(absl::CancelledError("cancelled"));
+    if (!st.ok() || rows != image.height) {
+      absl::Status why =
+          st.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED
+              ? absl::DeadlineExceededError(
+                    absl::StrCat("frame not complete within ", options_.frame_timeout_s, " s"))
+              : absl::UnavailableError(absl::StrCat("display: ", st.error_message()));
+      return abort(why);
+    }
+  }
+  end_all(/*cancel=*/false);
+  const double frame_ms = MsSince(t0);
+
+  v1::ClusterFrameStats fs;
+  fs.set_job_id(job.id);
+  fs.set_dataset(d);
+  fs.set_view(v);
+  fs.set_frame_ms(frame_ms);
+  fs.set_width(image.width);
+  fs.set_height(image.height);
+  fs.set_rings(rings);
+  fs.set_load_ms(layout.load_ms);
+  double active_sum = 0, active_max = 0;
+  uint64_t rays = 0;
+  for (size_t i = 0; i < stats.size(); ++i) {
+    const v1::WorkerFrameStats& w = stats[i];
+    *fs.add_workers() = w;
+    active_sum += w.active_ms();
+    active_max = std::max(active_max, w.active_ms());
+    rays += w.rays_traced();
+    spdlog::info(
+        "frame {} ring {} worker {} ({}) slab [{}, {}): elapsed {:.1f} ms, active {:.1f} ms, "
+        "traced {} ({} primary, {} shadow), sent L {} R {}, received L {} R {} ({:.2f} MB out, "
+        "{:.2f} MB in), buffer max {}",
+        frame_id, members[i].ring, i, w.address(), w.slab_size() > 0 ? w.slab(0) : -1,
+        w.slab_size() > 1 ? w.slab(1) : -1, w.elapsed_ms(), w.active_ms(), w.rays_traced(),
+        w.primary_traced(), w.shadow_traced(), w.sent_left(), w.sent_right(), w.received_left(),
+        w.received_right(), w.bytes_sent() / 1e6, w.bytes_received() / 1e6, w.buffer_high_water());
+  }
+  const double mean_active = stats.empty() ? 0 : active_sum / stats.size();
+  spdlog::info(
+      "frame {} ({} {}/{}): {}x{} in {:.1f} ms on {} workers in {} ring(s); {} ray "
+      "segments traced; max/mean active {:.2f}",
+      frame_id, job.id, d, v, image.width, image.height, frame_ms, members.size(), rings, rays,
+      mean_active > 0 ? active_max / mean_active : 0.0);
+
+  // The image to watchers, in chunks of rows; statistics with the last.
+  const int chunk_rows = std::max(1, (1 << 20) / (image.width * 12));
+  for (int r0 = 0; r0 < image.height; r0 += chunk_rows) {
+    const int r1 = std::min(image.height, r0 + chunk_rows);
+    v1::JobEvent e;
+    e.set_dataset(d);
+    e.set_view(v);
+    e.set_pixels_done(static_cast<uint64_t>(image.width) * image.height);
+    e.set_pixels_total(static_cast<uint64_t>(image.width) * image.height);
+    v1::ImageChunk* c = e.mutable_image();
+    c->set_width(image.width);
+    c->set_height(image.height);
+    c->set_row_begin(r0);
+    c->set_row_end(r1);
+    c->set_output(view.output());
+    AppendFloats(image.rgb.data() + static_cast<size_t>(r0) * image.width * 3,
+                 static_cast<size_t>(r1 - r0) * image.width * 3, c->mutable_rgb());
+    if (r1 == image.height) *e.mutable_stats() = fs;
+    Publish(job, std::move(e));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace transtick

@@ -1,0 +1,99 @@
+// The root: the client-facing API and the coordinator. It validates and
+// queues jobs, loads datasets from its data directory, classifies them and
+// encodes their sticks, forms rings from the registered workers, sends each
+// worker its slab, drives frames through the workers and the display, and
+// gathers per-worker statistics. Thread-safe; one runner thread executes
+// jobs in submission order.
+#ifndef TRANSTICK_SERVICES_ROOT_ROOT_SERVICE_H_
+#define TRANSTICK_SERVICES_ROOT_ROOT_SERVICE_H_
+
+#include <atomic>
+#include <condition_variable>
+#include <deque>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "cluster.grpc.pb.h"
+#include "transtick/scene.h"
+
+namespace transtick {
+
+struct RootOptions {
+  std::string data_dir = "/data";
+  std::string display = "127.0.0.1:7002";
+  int rings = 1;
+  uint64_t max_volume_bytes = uint64_t{8} << 30;
+  double frame_timeout_s = 600;
+  // How long a job waits for at least one worker to register.
+  double worker_wait_s = 120;
+  int max_jobs_kept = 32;
+};
+
+class RootService final : public v1::Root::Service {
+ public:
+  explicit RootService(RootOptions options);
+  ~RootService() override;
+
+  // Cancels the running job, stops the runner. Idempotent.
+  void Stop();
+  // Workers registered now.
+  int WorkerCount();
+
+  grpc::Status Submit(grpc::ServerContext* ctx, const v1::Job* job,
+                      v1::SubmitReply* reply) override;
+  grpc::Status Watch(grpc::ServerContext* ctx, const v1::JobRef* req,
+                     grpc::ServerWriter<v1::JobEvent>* writer) override;
+  grpc::Status Status(grpc::ServerContext* ctx, const v1::StatusRequest* req,
+                      v1::StatusReply* reply) override;
+  grpc::Status Cancel(grpc::ServerContext* ctx, const v1::JobRef* req,
+                      v1::CancelReply* reply) override;
+  grpc::Status Register(grpc::ServerContext* ctx, const v1::RegisterRequest* req,
+                        v1::RegisterReply* reply) override;
+  grpc::Status Unregister(grpc::ServerContext* ctx, const v1::RegisterRequest* req,
+                          v1::RegisterReply* reply) override;
+
+ private:
+  struct WorkerEntry;
+  struct JobRecord;
+  struct Layout;
+  struct LoadedDataset;
+
+  absl::Status ValidateJob(const v1::Job& job) const;
+  void RunnerLoop();
+  absl::Status RunJob(JobRecord& job);
+  absl::Status RunView(JobRecord& job, int dataset_index, int view_index,
+                       const LoadedDataset& data);
+  absl::Status RunFrame(JobRecord& job, int dataset_index, int view_index,
+                        const LoadedDataset& data, const Layout& layout);
+  absl::StatusOr<std::shared_ptr<LoadedDataset>> LoadDataset(const v1::Dataset& dataset);
+  // The rings and slabs of the current workers for `data`, with every slab
+  // loaded on its worker.
+  absl::StatusOr<Layout> EnsureLayout(const LoadedDataset& data, JobRecord& job);
+  void DropWorker(const std::string& id, const std::string& why);
+  void Publish(JobRecord& job, v1::JobEvent event);
+
+  const RootOptions options_;
+  std::atomic<uint64_t> next_frame_id_;
+
+  std::mutex mu_;
+  std::condition_variable cv_;  // jobs queued, workers registered, stop
+  bool stopping_ = false;       // guarded by mu_
+  uint64_t next_job_ = 1;       // guarded by mu_
+  uint64_t next_order_ = 0;     // guarded by mu_
+  std::map<std::string, std::shared_ptr<WorkerEntry>> workers_;  // guarded by mu_, by id
+  std::deque<std::shared_ptr<JobRecord>> queue_;                 // guarded by mu_
+  std::vector<std::shared_ptr<JobRecord>> jobs_;                 // guarded by mu_, newest last
+  // What each worker holds: worker id -> slab key.
+  std::map<std::string, std::string> loaded_;  // guarded by mu_
+  std::shared_ptr<LoadedDataset> cache_;       // runner thread only
+  std::thread runner_;
+};
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_SERVICES_ROOT_ROOT_SERVICE_H_

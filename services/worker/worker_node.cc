@@ -1,0 +1,102 @@
+#include "worker_node.h"
+
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <random>
+#include <thread>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+
+namespace transtick {
+namespace {
+
+std::string RandomId() {
+  std::random_device rd;
+  return absl::StrFormat("w-%08x%08x", rd(), rd());
+}
+
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<WorkerNode>> WorkerNode::Start(const WorkerNodeOptions& options) {
+  if (options.root.empty()) {
+    return absl::InvalidArgumentError(
+        "worker: the root's address is required (--root or TRANSTICK_ROOT)");
+  }
+  auto node = std::unique_ptr<WorkerNode>(new WorkerNode());
+  node->options_ = options;
+  node->id_ = RandomId();
+  node->threads_ = options.threads > 0
+                       ? options.threads
+                       : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  node->service_ = std::make_unique<WorkerService>(WorkerOptions{node->id_, "", node->threads_});
+  auto server = Server::Start(options.listen, {node->service_.get()});
+  if (!server.ok()) return server.status();
+  node->server_ = *std::move(server);
+  const std::string listen_host = options.listen.substr(0, options.listen.rfind(':'));
+  if (!options.advertise.empty()) {
+    node->address_ = options.advertise;
+  } else if (!listen_host.empty() && listen_host != "0.0.0.0" && listen_host != "[::]") {
+    node->address_ = absl::StrCat(listen_host, ":", node->server_->port());
+  } else {
+    char host[256] = {0};
+    gethostname(host, sizeof host - 1);
+    node->address_ = absl::StrCat(host, ":", node->server_->port());
+  }
+  node->service_->set_address(node->address_);
+  node->registrar_ = std::thread([n = node.get()] { n->RegisterLoop(); });
+  spdlog::info("worker {} serving on {} ({} tracer threads), registering with {}", node->id_,
+               node->address_, node->threads_, options.root);
+  return node;
+}
+
+void WorkerNode::RegisterLoop() {
+  auto stub = v1::Root::NewStub(MakeChannel(options_.root));
+  std::chrono::milliseconds backoff(100);
+  while (!stopping_) {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(5));
+    v1::RegisterRequest req;
+    req.set_id(id_);
+    req.set_address(address_);
+    req.set_threads(threads_);
+    v1::RegisterReply reply;
+    grpc::Status s = stub->Register(&ctx, req, &reply);
+    if (s.ok()) {
+      registered_ = true;
+      spdlog::info("registered with the root at {}", options_.root);
+      return;
+    }
+    spdlog::warn("registration with {} failed ({}); retrying", options_.root, s.error_message());
+    std::unique_lock<std::mutex> lock(mu_);
+    cv_.wait_for(lock, backoff, [this] { return stopping_.load(); });
+    backoff = std::min(backoff * 2, std::chrono::milliseconds(3000));
+  }
+}
+
+void WorkerNode::Stop(std::chrono::milliseconds grace) {
+  if (stopping_.exchange(true)) return;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    cv_.notify_all();
+  }
+  if (registrar_.joinable()) registrar_.join();
+  if (registered_) {
+    auto stub = v1::Root::NewStub(MakeChannel(options_.root));
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(2));
+    v1::RegisterRequest req;
+    req.set_id(id_);
+    req.set_address(address_);
+    v1::RegisterReply reply;
+    grpc::Status s = stub->Unregister(&ctx, req, &reply);
+    if (!s.ok()) spdlog::warn("unregistering from the root failed: {}", s.error_message());
+  }
+  service_->CancelAll();
+  server_->Shutdown(grace);
+}
+
+WorkerNode::~WorkerNode() { Stop(std::chrono::milliseconds(0)); }
+
+}  // namespace transtick

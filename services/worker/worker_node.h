@@ -1,0 +1,55 @@
+// A running worker: its server, its service, and its registration with the
+// root (retried until it succeeds, withdrawn on Stop). Used by the
+// transtick-worker daemon and by embedded clusters. Thread-safe.
+#ifndef TRANSTICK_SERVICES_WORKER_WORKER_NODE_H_
+#define TRANSTICK_SERVICES_WORKER_WORKER_NODE_H_
+
+#include <atomic>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include "absl/status/statusor.h"
+#include "daemon.h"
+#include "worker_service.h"
+
+namespace transtick {
+
+struct WorkerNodeOptions {
+  std::string listen = "0.0.0.0:7001";
+  std::string root;       // host:port of the root
+  std::string advertise;  // empty: this host's name and the bound port
+  int threads = 0;        // 0: one per core
+};
+
+class WorkerNode {
+ public:
+  static absl::StatusOr<std::unique_ptr<WorkerNode>> Start(const WorkerNodeOptions& options);
+  ~WorkerNode();
+
+  const std::string& address() const { return address_; }
+  const std::string& id() const { return id_; }
+  // True once the root accepted the registration.
+  bool registered() const { return registered_; }
+  // Unregisters, cancels frames, stops serving within `grace`.
+  void Stop(std::chrono::milliseconds grace);
+
+ private:
+  WorkerNode() = default;
+  void RegisterLoop();
+
+  WorkerNodeOptions options_;
+  std::string id_, address_;
+  int threads_ = 1;
+  std::unique_ptr<WorkerService> service_;
+  std::unique_ptr<Server> server_;
+  std::thread registrar_;
+  std::atomic<bool> stopping_{false};
+  std::atomic<bool> registered_{false};
+  std::mutex mu_;
+  std::condition_variable cv_;
+};
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_SERVICES_WORKER_WORKER_NODE_H_

@@ -1,0 +1,57 @@
+// The worker daemon's gRPC service: holds slabs of datasets between frames
+// and runs frames (see frame.h). Thread-safe.
+#ifndef TRANSTICK_SERVICES_WORKER_WORKER_SERVICE_H_
+#define TRANSTICK_SERVICES_WORKER_WORKER_SERVICE_H_
+
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include "cluster.grpc.pb.h"
+#include "frame.h"
+
+namespace transtick {
+
+struct WorkerOptions {
+  std::string id;       // unique per process
+  std::string address;  // as registered with the root
+  int threads = 1;
+  uint64_t max_slab_bytes = uint64_t{8} << 30;
+};
+
+class WorkerService final : public v1::Worker::Service {
+ public:
+  explicit WorkerService(WorkerOptions options);
+  ~WorkerService() override;
+
+  void set_address(const std::string& address);
+  // Cancels every frame in progress (on shutdown).
+  void CancelAll();
+
+  grpc::Status LoadSlab(grpc::ServerContext* ctx, grpc::ServerReader<v1::SlabChunk>* reader,
+                        v1::LoadReply* reply) override;
+  grpc::Status Evict(grpc::ServerContext* ctx, const v1::DatasetRef* req,
+                     v1::FrameAck* reply) override;
+  grpc::Status PrepareFrame(grpc::ServerContext* ctx, const v1::FrameSpec* spec,
+                            v1::FrameAck* reply) override;
+  grpc::Status RunFrame(grpc::ServerContext* ctx, const v1::FrameRef* req,
+                        v1::FrameAck* reply) override;
+  grpc::Status EndFrame(grpc::ServerContext* ctx, const v1::FrameRef* req,
+                        v1::WorkerFrameStats* reply) override;
+  grpc::Status Rays(grpc::ServerContext* ctx,
+                    grpc::ServerReaderWriter<v1::RayBatch, v1::RayBatch>* stream) override;
+
+ private:
+  std::shared_ptr<Frame> FindFrame(uint64_t id);
+
+  WorkerOptions options_;
+  std::mutex mu_;
+  std::condition_variable frames_cv_;
+  std::map<std::string, std::shared_ptr<const Scene>> datasets_;  // guarded by mu_
+  std::map<uint64_t, std::shared_ptr<Frame>> frames_;             // guarded by mu_
+};
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_SERVICES_WORKER_WORKER_SERVICE_H_
