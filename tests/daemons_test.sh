@@ -1,0 +1,79 @@
+#!/usr/bin/env bash
+# The daemons as separate processes: a job submitted from a job file
+# renders the same image as --local 0, a malformed job file gets a clear
+# error, a worker killed with SIGKILL is dropped and the next job still
+# renders, and every daemon stops cleanly on SIGTERM.
+set -u
+build=$1
+src=$2
+dir=$(mktemp -d)
+pids=()
+cleanup() { kill -9 "${pids[@]}" 2>/dev/null; rm -rf "$dir"; }
+trap cleanup EXIT
+fails=0
+fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
+T=$build/cli/transtick
+port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])' 2>/dev/null || echo $((20000 + RANDOM % 20000)); }
+
+# A 24x20x16 float volume with a bright block in the middle.
+mkdir -p "$dir/data"
+{
+  printf 'NRRD0004\ntype: uint8\ndimension: 3\nsizes: 24 20 16\nencoding: raw\n\n'
+  for z in $(seq 0 15); do for y in $(seq 0 19); do for x in $(seq 0 23); do
+    if ((x > 5 && x < 18 && y > 4 && y < 15 && z > 3 && z < 12)); then printf '\310'; else printf '\000'; fi
+  done; done; done
+} >"$dir/data/box.nrrd"
+cat >"$dir/m.json" <<'JSON'
+{"materials":[{"name":"box","min":100,"max":256,"color":[0.8,0.7,0.6]}]}
+JSON
+cat >"$dir/job.json" <<JSON
+{"name":"t","datasets":[{"volume":"box.nrrd","materials_file":"m.json",
+  "views":[{"azimuth":35,"elevation":20,"width":48,"height":40,"output":"a.png"}]}]}
+JSON
+
+dport=$(port); rport=$(port)
+"$build/services/display/transtick-display" --listen 127.0.0.1:$dport >"$dir/display.log" 2>&1 &
+pids+=($!); dpid=$!
+"$build/services/root/transtick-root" --listen 127.0.0.1:$rport --data-dir "$dir/data" \
+  --display 127.0.0.1:$dport >"$dir/root.log" 2>&1 &
+pids+=($!); rpid=$!
+wpids=()
+for i in 1 2 3; do
+  "$build/services/worker/transtick-worker" --root 127.0.0.1:$rport --listen 127.0.0.1:0 \
+    --threads 1 >"$dir/worker$i.log" 2>&1 &
+  pids+=($!); wpids+=($!)
+done
+for _ in $(seq 100); do
+  "$T" status --root 127.0.0.1:$rport 2>/dev/null | grep -q '^3 workers' && break
+  sleep 0.1
+done
+"$T" status --root 127.0.0.1:$rport | grep -q '^3 workers' || fail "3 workers did not register"
+"$T" health --addr 127.0.0.1:$dport >/dev/null || fail "display not SERVING"
+
+"$T" submit "$dir/job.json" --root 127.0.0.1:$rport --out-dir "$dir/out" >"$dir/submit.log" 2>&1 ||
+  fail "submit: $(cat "$dir/submit.log")"
+"$T" render --local 0 --volume "$dir/data/box.nrrd" --materials "$dir/m.json" --azimuth 35 \
+  --elevation 20 --size 48x40 --out "$dir/ref.png" 2>/dev/null
+cmp -s "$dir/out/a.png" "$dir/ref.png" || fail "cluster image differs from --local 0"
+
+printf '{"datasets":[{"volume":' >"$dir/bad.json"
+"$T" submit "$dir/bad.json" --root 127.0.0.1:$rport >"$dir/bad.log" 2>&1
+[[ $? == 2 ]] && grep -q "bad.json" "$dir/bad.log" || fail "malformed job file: $(cat "$dir/bad.log")"
+
+# A worker dies: the root drops it and the next job renders on the others.
+kill -9 "${wpids[1]}"
+rm -f "$dir/out/a.png"
+"$T" submit "$dir/job.json" --root 127.0.0.1:$rport --out-dir "$dir/out" >"$dir/submit2.log" 2>&1 ||
+  fail "submit after a worker died: $(cat "$dir/submit2.log")"
+cmp -s "$dir/out/a.png" "$dir/ref.png" || fail "image after a worker died differs"
+
+# SIGTERM: every daemon exits 0 within docker's 10 s grace period.
+for p in "${wpids[0]}" "${wpids[2]}" "$rpid" "$dpid"; do
+  kill -TERM "$p"
+  for _ in $(seq 100); do kill -0 "$p" 2>/dev/null || break; sleep 0.1; done
+  if kill -0 "$p" 2>/dev/null; then fail "pid $p still running 10 s after SIGTERM"; continue; fi
+  wait "$p"; rc=$?
+  [[ $rc == 0 ]] || fail "pid $p exited $rc on SIGTERM"
+done
+echo "daemons_test: $((fails == 0 ? 1 : 0)) passed, $fails failed checks"
+[[ $fails == 0 ]]
