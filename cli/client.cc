@@ -15,6 +15,7 @@
 #include "display_service.h"
 #include "root_node.h"
 #include "transtick/image_io.h"
+#include "transtick/ray_codec.h"
 #include "worker_node.h"
 
 namespace transtick {
@@ -69,12 +70,7 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::str
           c.rgb().size() != floats * 4) {
         return absl::DataLossError("the root sent a malformed image chunk");
       }
-      float* dst = img.rgb.data() + static_cast<size_t>(c.row_begin()) * img.width * 3;
-      const auto* b = reinterpret_cast<const uint8_t*>(c.rgb().data());
-      for (size_t i = 0; i < floats; ++i, b += 4) {
-        dst[i] = std::bit_cast<float>(uint32_t{b[0]} | uint32_t{b[1]} << 8 | uint32_t{b[2]} << 16 |
-                                      uint32_t{b[3]} << 24);
-      }
+      DecodeFloats(c.rgb(), img.rgb.data() + static_cast<size_t>(c.row_begin()) * img.width * 3);
       rows_in[key] += c.row_end() - c.row_begin();
       if (e.has_stats()) stats.push_back(e.stats());
       if (rows_in[key] == img.height) {

@@ -441,7 +441,6 @@ int Submit(int argc, char** argv) {
   if (!stats.ok()) return Fail("submit", stats.status());
   for (const auto& s : *stats) PrintClusterFrame(s);
   if (flags->Has("stats")) {
-    v1::JobEvent all;  // a list of frames: written as one JSON array
     std::ofstream f(flags->Get("stats"));
     f << "[\n";
     for (size_t i = 0; i < stats->size(); ++i)

@@ -120,4 +120,14 @@ absl::StatusOr<std::vector<Deposit>> DecodeDeposits(std::string_view bytes, uint
   return deposits;
 }
 
+void AppendFloats(const float* values, size_t n, std::string* out) {
+  out->reserve(out->size() + n * 4);
+  for (size_t i = 0; i < n; ++i) PutF32(out, values[i]);
+}
+
+void DecodeFloats(std::string_view bytes, float* out) {
+  Decoder in(bytes);
+  for (size_t i = 0; i < bytes.size() / 4; ++i) GetF32(in, &out[i]);
+}
+
 }  // namespace transtick

@@ -114,13 +114,8 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
     c->set_height(image.height);
     c->set_row_begin(r0);
     c->set_row_end(r1);
-    std::string* bytes = c->mutable_rgb();
-    bytes->reserve(static_cast<size_t>(r1 - r0) * image.width * 12);
-    for (size_t i = static_cast<size_t>(r0) * image.width * 3;
-         i < static_cast<size_t>(r1) * image.width * 3; ++i) {
-      uint32_t bits = std::bit_cast<uint32_t>(image.rgb[i]);
-      for (int k = 0; k < 4; ++k) bytes->push_back(static_cast<char>((bits >> (8 * k)) & 0xff));
-    }
+    AppendFloats(image.rgb.data() + static_cast<size_t>(r0) * image.width * 3,
+                 static_cast<size_t>(r1 - r0) * image.width * 3, c->mutable_rgb());
     if (!writer->Write(p)) return grpc::Status(grpc::StatusCode::CANCELLED, "root went away");
   }
   return grpc::Status::OK;

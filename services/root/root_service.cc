@@ -15,6 +15,7 @@
 #include "convert.h"
 #include "daemon.h"
 #include "transtick/framebuffer.h"
+#include "transtick/ray_codec.h"
 #include "transtick/volume_io.h"
 
 namespace transtick {
@@ -57,14 +58,6 @@ bool SupportedOutput(const std::string& path) {
                  [](unsigned char c) { return std::tolower(c); });
   return ext == "png" || ext == "tif" || ext == "tiff" || ext == "exr" || ext == "jpg" ||
          ext == "jpeg";
-}
-
-void AppendFloats(const float* v, size_t n, std::string* out) {
-  out->reserve(out->size() + n * 4);
-  for (size_t i = 0; i < n; ++i) {
-    uint32_t bits = std::bit_cast<uint32_t>(v[i]);
-    for (int k = 0; k < 4; ++k) out->push_back(static_cast<char>((bits >> (8 * k)) & 0xff));
-  }
 }
 
 }  // namespace
@@ -771,12 +764,8 @@ absl::Status RootService::RunFrame(JobRecord& job, int d, int v, const LoadedDat
           ctx.TryCancel();
           break;
         }
-        float* dst = image.rgb.data() + static_cast<size_t>(c.row_begin()) * image.width * 3;
-        for (size_t i = 0; i < c.rgb().size() / 4; ++i) {
-          const auto* b = reinterpret_cast<const uint8_t*>(c.rgb().data()) + 4 * i;
-          dst[i] = std::bit_cast<float>(uint32_t{b[0]} | uint32_t{b[1]} << 8 |
-                                        uint32_t{b[2]} << 16 | uint32_t{b[3]} << 24);
-        }
+        DecodeFloats(c.rgb(),
+                     image.rgb.data() + static_cast<size_t>(c.row_begin()) * image.width * 3);
         rows += c.row_end() - c.row_begin();
       } else if (Clock::now() - last_event > std::chrono::milliseconds(200)) {
         last_event = Clock::now();

@@ -8,6 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "convert.h"
 #include "daemon.h"
+#include "transtick/ray_codec.h"
 
 namespace transtick {
 namespace {
@@ -49,13 +50,7 @@ absl::StatusOr<std::shared_ptr<const Scene>> AssembleSlab(const v1::SlabHeader& 
     return absl::InvalidArgumentError("slab scalars: not a whole number of floats");
   }
   std::vector<float> scalars(scalar_bytes.size() / 4);
-  for (size_t i = 0; i < scalars.size(); ++i) {
-    uint32_t bits = uint32_t{static_cast<uint8_t>(scalar_bytes[4 * i])} |
-                    uint32_t{static_cast<uint8_t>(scalar_bytes[4 * i + 1])} << 8 |
-                    uint32_t{static_cast<uint8_t>(scalar_bytes[4 * i + 2])} << 16 |
-                    uint32_t{static_cast<uint8_t>(scalar_bytes[4 * i + 3])} << 24;
-    scalars[i] = std::bit_cast<float>(bits);
-  }
+  DecodeFloats(scalar_bytes, scalars.data());
   auto scene =
       Scene::FromParts(dvr ? RenderMode::kDvr : RenderMode::kSurfaces, dims,
                        {h.spacing(0), h.spacing(1), h.spacing(2)},

@@ -25,6 +25,12 @@ void AppendDeposit(const Deposit& deposit, std::string* out);
 absl::StatusOr<std::vector<RayDescriptor>> DecodeRays(std::string_view bytes, uint32_t pixel_limit);
 absl::StatusOr<std::vector<Deposit>> DecodeDeposits(std::string_view bytes, uint32_t pixel_limit);
 
+// Float arrays on the wire (slab scalars, image rows): little-endian f32.
+void AppendFloats(const float* values, size_t n, std::string* out);
+// Decodes bytes.size() / 4 floats into `out`.
+// REQUIRES: bytes.size() is a multiple of 4; `out` holds that many floats.
+void DecodeFloats(std::string_view bytes, float* out);
+
 }  // namespace transtick
 
 #endif  // TRANSTICK_RAY_CODEC_H_
