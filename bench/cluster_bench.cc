@@ -1,0 +1,440 @@
+// cluster_bench: the render cluster measured on loopback.
+//
+//   cluster_bench scaling [--volume FILE] [--materials FILE] [--size WxH]
+//                         [--azimuth DEG] [--repeat N] [--workers 1,2,4]
+//   cluster_bench forward [--rays N]
+//   cluster_bench tables  [--volume FILE] [--materials FILE] [--size WxH]
+//                         [--repeat N]
+//
+// scaling: the in-process render on all cores, then an embedded cluster
+//   (root, display and N workers, real gRPC on 127.0.0.1) for each N. Each
+//   cluster renders one warm-up frame (it loads the slabs) and then `repeat`
+//   frames of the same view; the table gives the median frame time, the
+//   summed CPU time of all workers' tracer threads, the CPU time of the
+//   whole process (root, display, workers, gRPC) per frame, and the rays
+//   that crossed a slab plane. Ratios: summed tracer CPU of N workers over
+//   that of 1 (the cost of ray dataflow) and the 2-worker frame over the
+//   in-process frame. Every cluster image must equal the in-process image
+//   bit for bit, else the exit status is 1.
+// forward: one real worker with a prepared frame receives ray batches on
+//   its Rays stream, as from its left neighbour, for several batch sizes;
+//   prints rays per second and MB per second from the first batch sent to
+//   the worker's count of rays received (which must equal the rays sent).
+// tables: the paper's Table 1 (per worker elapsed and active times, 2 and 4
+//   workers, frontal and 45 degree views, without and with balancing) and
+//   Table 2 (elapsed time for 2, 4 and 8 workers and the relative
+//   efficiency T_2W / ((n/2) T_nW)), plus active and CPU times.
+//
+// Defaults: cthead.nrrd in $TRANSTICK_DATA_DIR (else ../shared/data),
+// examples/cthead_materials.json, 400x400, azimuth 45, shadows on, 5 repeats.
+
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
+#include "client.h"
+#include "cluster.grpc.pb.h"
+#include "convert.h"
+#include "daemon.h"
+#include "transtick/camera.h"
+#include "transtick/image_io.h"
+#include "transtick/ray_codec.h"
+#include "transtick/render.h"
+#include "transtick/scene.h"
+#include "transtick/volume_io.h"
+#include "worker_service.h"
+
+namespace transtick {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+constexpr char kUsage[] =
+    "usage: cluster_bench scaling|forward|tables [--volume FILE] [--materials FILE]\n"
+    "                     [--size WxH] [--azimuth DEG] [--repeat N] [--workers 1,2,4]\n"
+    "                     [--rays N]\n";
+
+struct Options {
+  std::string mode;
+  std::string volume;
+  std::string materials = TRANSTICK_BENCH_MATERIALS;
+  int width = 400;
+  int height = 400;
+  double azimuth = 45;
+  int repeat = 5;
+  std::vector<int> workers = {1, 2, 4};
+  int rays = 1 << 20;
+};
+
+double MsSince(Clock::time_point t) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+double ProcessCpuMs() {
+  rusage ru{};
+  getrusage(RUSAGE_SELF, &ru);
+  return (ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) * 1e3 +
+         (ru.ru_utime.tv_usec + ru.ru_stime.tv_usec) / 1e3;
+}
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+bool ParseInt(const std::string& s, int lo, int hi, int* out) {
+  char* end = nullptr;
+  long v = std::strtol(s.c_str(), &end, 10);
+  if (s.empty() || *end != '\0' || v < lo || v > hi) return false;
+  *out = static_cast<int>(v);
+  return true;
+}
+
+std::string Parse(int argc, char** argv, Options* o) {
+  const char* dir = std::getenv("TRANSTICK_DATA_DIR");
+  o->volume = std::string(dir && *dir ? dir : TRANSTICK_BENCH_DATA_DIR) + "/cthead.nrrd";
+  if (argc < 2) return "a mode is required";
+  o->mode = argv[1];
+  if (o->mode == "--help" || o->mode == "-h") return "help";
+  if (o->mode != "scaling" && o->mode != "forward" && o->mode != "tables") {
+    return "unknown mode '" + o->mode + "'";
+  }
+  for (int i = 2; i < argc; ++i) {
+    std::string flag = argv[i];
+    if (flag == "--help" || flag == "-h") return "help";
+    if (i + 1 >= argc) return flag + " needs a value (or is unknown)";
+    std::string value = argv[++i];
+    if (flag == "--volume") {
+      o->volume = value;
+    } else if (flag == "--materials") {
+      o->materials = value;
+    } else if (flag == "--size") {
+      size_t x = value.find('x');
+      if (x == std::string::npos || !ParseInt(value.substr(0, x), 1, 8192, &o->width) ||
+          !ParseInt(value.substr(x + 1), 1, 8192, &o->height)) {
+        return "--size must be WxH with each in [1, 8192]";
+      }
+    } else if (flag == "--azimuth") {
+      char* end = nullptr;
+      o->azimuth = std::strtod(value.c_str(), &end);
+      if (value.empty() || *end != '\0') return "--azimuth must be a number";
+    } else if (flag == "--repeat") {
+      if (!ParseInt(value, 1, 1000, &o->repeat)) return "--repeat must be in [1, 1000]";
+    } else if (flag == "--rays") {
+      if (!ParseInt(value, 1, 1 << 26, &o->rays)) return "--rays must be in [1, 2^26]";
+    } else if (flag == "--workers") {
+      o->workers.clear();
+      for (absl::string_view p : absl::StrSplit(value, ',')) {
+        int n = 0;
+        if (!ParseInt(std::string(p), 1, 64, &n)) return "--workers takes counts in [1, 64]";
+        o->workers.push_back(n);
+      }
+    } else {
+      return "unknown flag " + flag;
+    }
+  }
+  return "";
+}
+
+int Fail(const absl::Status& s) {
+  std::fprintf(stderr, "cluster_bench: %s\n", s.ToString().c_str());
+  return 1;
+}
+
+// ---------------------------------------------------------------- scaling
+
+struct Setup {
+  v1::MaterialSet materials;
+  std::unique_ptr<Scene> scene;  // the whole volume, for the in-process render
+  Vec3 extent;
+  std::string data_dir, file;
+};
+
+absl::StatusOr<Setup> Prepare(const Options& o) {
+  Setup s;
+  auto text = ReadTextFile(o.materials);
+  if (!text.ok()) return text.status();
+  if (auto st = ParseJson(*text, o.materials, &s.materials); !st.ok()) return st;
+  auto volume = ReadVolume(o.volume);
+  if (!volume.ok()) return volume.status();
+  auto scene = Scene::ForSurfaces(*volume, *ToClassification(s.materials));
+  if (!scene.ok()) return scene.status();
+  s.scene = std::make_unique<Scene>(*std::move(scene));
+  s.extent = {volume->dims[0] * volume->spacing[0], volume->dims[1] * volume->spacing[1],
+              volume->dims[2] * volume->spacing[2]};
+  fs::path abs = fs::absolute(o.volume);
+  s.data_dir = abs.parent_path().string();
+  s.file = abs.filename().string();
+  return s;
+}
+
+v1::View MakeView(const Options& o, double azimuth) {
+  v1::View v;
+  v.set_azimuth(azimuth);
+  v.set_width(o.width);
+  v.set_height(o.height);
+  v.set_shadows(true);
+  return v;
+}
+
+// Runs `frames` frames of `view` on `cluster` and returns their statistics;
+// `image` receives the last frame.
+absl::StatusOr<std::vector<v1::ClusterFrameStats>> RunFrames(const std::string& root,
+                                                             const Setup& s, v1::View view,
+                                                             int frames, const std::string& out,
+                                                             const std::string& balance = "") {
+  v1::Job job;
+  job.set_name("bench");
+  if (!balance.empty()) job.set_balance(balance);
+  v1::Dataset* d = job.add_datasets();
+  d->set_volume(s.file);
+  *d->mutable_materials() = s.materials;
+  view.set_output(out);
+  for (int i = 0; i < frames; ++i) *d->add_views() = view;
+  return SubmitAndWatch(root, job, WatchOptions{});
+}
+
+int Scaling(const Options& o) {
+  auto setup = Prepare(o);
+  if (!setup.ok()) return Fail(setup.status());
+  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const v1::View view = MakeView(o, o.azimuth);
+  auto camera = Camera::Create(*ToCameraSpec(view), setup->extent);
+  if (!camera.ok()) return Fail(camera.status());
+  std::printf("volume %s, %dx%d, azimuth %g, shadows on, %d cores, %d timed frames each\n\n",
+              o.volume.c_str(), o.width, o.height, o.azimuth, cores, o.repeat);
+
+  // The in-process reference on all cores.
+  Image reference;
+  std::vector<double> local_ms, local_cpu;
+  for (int i = 0; i <= o.repeat; ++i) {
+    RenderStats rs;
+    const double cpu0 = ProcessCpuMs();
+    auto t0 = Clock::now();
+    auto image = RenderLocal(*setup->scene, *camera, ToRenderSettings(view), cores, &rs);
+    if (!image.ok()) return Fail(image.status());
+    if (i == 0) {
+      reference = *std::move(image);
+      continue;
+    }
+    local_ms.push_back(MsSince(t0));
+    local_cpu.push_back(ProcessCpuMs() - cpu0);
+  }
+  const double in_process = Median(local_ms);
+  std::printf("%-22s %9s %12s %13s %11s\n", "renderer", "frame ms", "tracer CPU", "process CPU",
+              "crossings");
+  std::printf("%-22s %9.1f %12s %13.1f %11s\n", absl::StrCat("in-process, ", cores, " threads").c_str(),
+              in_process, "-", Median(local_cpu), "-");
+  std::fflush(stdout);
+
+  const std::string out = (fs::temp_directory_path() / "cluster_bench.exr").string();
+  std::map<int, double> frame_ms, tracer_cpu;
+  bool identical = true;
+  for (int n : o.workers) {
+    LocalCluster::Options co;
+    co.workers = n;
+    co.threads_per_worker = std::max(1, cores / n);
+    co.data_dir = setup->data_dir;
+    auto cluster = LocalCluster::Start(co);
+    if (!cluster.ok()) return Fail(cluster.status());
+    const std::string root = (*cluster)->root_address();
+    auto warm = RunFrames(root, *setup, view, 1, out);
+    if (!warm.ok()) return Fail(warm.status());
+    std::vector<double> ms, cpu, proc;
+    uint64_t crossings = 0;
+    for (int i = 0; i < o.repeat; ++i) {
+      const double cpu0 = ProcessCpuMs();
+      auto stats = RunFrames(root, *setup, view, 1, out);
+      if (!stats.ok()) return Fail(stats.status());
+      proc.push_back(ProcessCpuMs() - cpu0);
+      const v1::ClusterFrameStats& f = stats->front();
+      ms.push_back(f.frame_ms());
+      double sum = 0;
+      crossings = 0;
+      for (const auto& w : f.workers()) {
+        sum += w.cpu_ms();
+        crossings += w.rays_sent();
+      }
+      cpu.push_back(sum);
+    }
+    auto image = ReadImage(out);
+    if (!image.ok()) return Fail(image.status());
+    if (image->rgb != reference.rgb) {
+      identical = false;
+      std::fprintf(stderr, "cluster_bench: %d workers: image differs from the in-process one\n", n);
+    }
+    frame_ms[n] = Median(ms);
+    tracer_cpu[n] = Median(cpu);
+    std::printf("%-22s %9.1f %12.1f %13.1f %11llu\n",
+                absl::StrCat(n, " worker", n > 1 ? "s" : "", " x ", co.threads_per_worker,
+                             " thread", co.threads_per_worker > 1 ? "s" : "")
+                    .c_str(),
+                frame_ms[n], tracer_cpu[n], Median(proc), static_cast<unsigned long long>(crossings));
+    std::fflush(stdout);
+  }
+  std::printf("\n");
+  if (tracer_cpu.count(1) && tracer_cpu[1] > 0) {
+    for (auto [n, c] : tracer_cpu) {
+      if (n > 1) std::printf("tracer CPU, %d workers / 1 worker:        %.2f\n", n, c / tracer_cpu[1]);
+    }
+  }
+  if (frame_ms.count(2) && in_process > 0) {
+    std::printf("frame, 2 workers / in-process %d threads: %.2f\n", cores,
+                frame_ms[2] / in_process);
+  }
+  std::printf("%s\n", identical ? "OK: every cluster image equals the in-process image bit for bit"
+                                : "FAIL: a cluster image differs (see stderr)");
+  return identical ? 0 : 1;
+}
+
+// ---------------------------------------------------------------- forward
+
+int Forward(const Options& o) {
+  // A small real scene: the worker needs a slab to prepare a frame.
+  Volume v;
+  v.dims = {64, 64, 64};
+  v.values.assign(64 * 64 * 64, 0.0f);
+  auto scene = Scene::ForSurfaces(v, Classification{{Material{"m", 1, 2}}});
+  if (!scene.ok()) return Fail(scene.status());
+  WorkerOptions wo;
+  wo.id = "bench";
+  wo.address = "127.0.0.1";
+  WorkerService service(wo);
+  auto server = Server::Start("127.0.0.1:0", {&service});
+  if (!server.ok()) return Fail(server.status());
+  const std::string address = absl::StrCat("127.0.0.1:", (*server)->port());
+  auto stub = v1::Worker::NewStub(MakeChannel(address));
+  {
+    grpc::ClientContext ctx;
+    v1::LoadReply reply;
+    auto w = stub->LoadSlab(&ctx, &reply);
+    Scene slab = scene->Slab(32, 64);
+    v1::SlabChunk chunk;
+    v1::SlabHeader* h = chunk.mutable_header();
+    h->set_dataset_key("bench");
+    h->set_mode("surfaces");
+    for (int a = 0; a < 3; ++a) h->add_dims(64), h->add_spacing(1);
+    h->add_value_range(0);
+    h->add_value_range(1);
+    v1::Material* m = h->mutable_materials()->add_materials();
+    m->set_name("m");
+    m->set_min(1);
+    m->set_max(2);
+    for (int c = 0; c < 3; ++c) m->add_color(1);
+    h->set_y_begin(32);
+    h->set_y_end(64);
+    h->set_brick_map(std::string(slab.bricks().bytes().begin(), slab.bricks().bytes().end()));
+    for (int bx = 0; bx < 2; ++bx) chunk.add_blocks(slab.sticks().EncodeBlock(bx, 1));
+    h->set_scalar_count(slab.scalars().size());
+    AppendFloats(slab.scalars().data(), slab.scalars().size(), chunk.mutable_scalars());
+    w->Write(chunk);
+    w->WritesDone();
+    grpc::Status st = w->Finish();
+    if (!st.ok()) return Fail(FromGrpc(st));
+  }
+  // Rays as a left neighbour would send them: real descriptors.
+  v1::View view;
+  view.set_width(512);
+  view.set_height(512);
+  auto camera = Camera::Create(*ToCameraSpec(view), Vec3{64, 64, 64});
+  Tracer tracer(*scene, ToRenderSettings(view), *camera);
+  std::vector<RayDescriptor> rays;
+  for (int p = 0; rays.size() < 4096; ++p) {
+    RayDescriptor r;
+    if (tracer.MakePrimary(camera->Generate(p % 512, 256), p % 512 + 256 * 512, &r))
+      rays.push_back(r);
+  }
+  std::printf("%d rays of %zu bytes per size, one stream to a real worker on loopback\n\n", o.rays,
+              kRayRecordBytes);
+  std::printf("%12s %12s %14s %10s\n", "rays/batch", "batches", "rays/s", "MB/s");
+  uint64_t frame_id = 1;
+  bool ok = true;
+  for (int batch : {1, 16, 256, 2048, 8192}) {
+    const int n_batches = std::max(1, (batch == 1 ? o.rays / 16 : o.rays) / batch);
+    v1::FrameSpec spec;
+    spec.set_frame_id(frame_id);
+    spec.set_dataset_key("bench");
+    *spec.mutable_view() = view;
+    for (int c : {0, 32, 64}) spec.add_cuts(c);
+    spec.set_index(1);
+    spec.set_left("bench");
+    spec.set_display("unused:1");
+    spec.set_row_end(512);
+    spec.set_row_step(1);
+    {
+      grpc::ClientContext ctx;
+      v1::FrameAck ack;
+      grpc::Status st = stub->PrepareFrame(&ctx, spec, &ack);
+      if (!st.ok()) return Fail(FromGrpc(st));
+    }
+    std::string records;
+    for (int i = 0; i < batch; ++i) AppendRay(rays[i % rays.size()], &records);
+    auto t0 = Clock::now();
+    grpc::ClientContext ctx;
+    auto stream = stub->Rays(&ctx);
+    v1::RayBatch msg;
+    msg.set_frame_id(frame_id);
+    stream->Write(msg);  // the hello
+    for (int b = 0; b < n_batches; ++b) {
+      msg.set_rays(records);
+      if (!stream->Write(msg)) return Fail(absl::UnavailableError("the worker closed the stream"));
+    }
+    stream->WritesDone();
+    // EndFrame returns once the worker has read the whole stream.
+    v1::FrameRef ref;
+    ref.set_frame_id(frame_id);
+    v1::WorkerFrameStats ws;
+    grpc::ClientContext end_ctx;
+    grpc::Status st = stub->EndFrame(&end_ctx, ref, &ws);
+    const double ms = MsSince(t0);
+    stream->Finish();
+    if (!st.ok()) return Fail(FromGrpc(st));
+    const uint64_t sent = static_cast<uint64_t>(n_batches) * batch;
+    if (ws.received_left() != sent) {
+      ok = false;
+      std::fprintf(stderr, "cluster_bench: sent %llu rays, the worker received %llu\n",
+                   static_cast<unsigned long long>(sent),
+                   static_cast<unsigned long long>(ws.received_left()));
+    }
+    std::printf("%12d %12d %14.0f %10.1f\n", batch, n_batches, sent / (ms / 1e3),
+                sent * kRayRecordBytes / 1e6 / (ms / 1e3));
+    std::fflush(stdout);
+    ++frame_id;
+  }
+  (*server)->Shutdown(std::chrono::milliseconds(500));
+  std::printf("%s\n", ok ? "OK: every ray sent was received" : "FAIL: rays lost (see stderr)");
+  return ok ? 0 : 1;
+}
+
+}  // namespace
+}  // namespace transtick
+
+int main(int argc, char** argv) {
+  transtick::Options options;
+  std::string error = transtick::Parse(argc, argv, &options);
+  if (error == "help") {
+    std::fputs(transtick::kUsage, stdout);
+    return 0;
+  }
+  if (!error.empty()) {
+    std::fprintf(stderr, "cluster_bench: %s\n%s", error.c_str(), transtick::kUsage);
+    return 2;
+  }
+  if (options.mode == "forward") return transtick::Forward(options);
+  if (options.mode == "scaling") return transtick::Scaling(options);
+  return transtick::Fail(absl::UnimplementedError("tables"));
+}
