@@ -59,6 +59,10 @@ render options:
   --local N              render on an embedded cluster of N workers (default: one per
                          core); 0 renders in this process without gRPC (the reference)
   --rings R              rings of the embedded cluster (default 1)
+  --balance off|test-rays|previous-frame   static load balancing of the slabs on a
+                         cluster (default off; docs/balancing.md)
+  --balance-grid N       test rays per side of the image for test-rays (default 16)
+  --balance-rule cost|paper   how cuts follow from costs (default cost)
   --root HOST:PORT       render on a running cluster; --volume is then relative to
                          the root's data directory
   --threads N            tracing threads of --local 0 (default: one per core)
@@ -284,9 +288,17 @@ int RenderInProcess(const Flags& flags, const v1::View& view, bool dvr,
 }
 
 void PrintClusterFrame(const v1::ClusterFrameStats& fs) {
-  std::fprintf(stderr, "frame %dx%d in %.1f ms on %d workers (%d ring%s)\n", fs.width(),
-               fs.height(), fs.frame_ms(), fs.workers_size(), fs.rings(),
-               fs.rings() == 1 ? "" : "s");
+  std::fprintf(stderr, "frame %dx%d in %.1f ms on %d workers (%d ring%s), max/mean active %.2f\n",
+               fs.width(), fs.height(), fs.frame_ms(), fs.workers_size(), fs.rings(),
+               fs.rings() == 1 ? "" : "s", fs.active_imbalance());
+  if (fs.balance() != "off") {
+    std::string before, after;
+    for (int c : fs.cuts_before()) before += std::to_string(c) + " ";
+    for (int c : fs.cuts_after()) after += std::to_string(c) + " ";
+    std::fprintf(stderr, "  balance %s: cuts [%s] -> [%s], %.1f ms, %d planes moved\n",
+                 fs.balance().c_str(), before.c_str(), after.c_str(), fs.balance_ms(),
+                 fs.planes_moved());
+  }
   for (const auto& w : fs.workers()) {
     std::fprintf(stderr,
                  "  ring %d slab [%3d, %3d): elapsed %7.1f ms, active %7.1f ms, traced %8llu, "
@@ -303,7 +315,8 @@ int Render(int argc, char** argv) {
   for (const char* f :
        {"materials", "transfer", "mode",   "azimuth", "elevation", "zoom",    "projection",
         "fov",       "eye",      "target", "up",      "size",      "shadows", "background",
-        "step",      "threads",  "out",    "stats",   "local",     "root",    "rings"}) {
+        "step",      "threads",  "out",    "stats",   "local",     "root",    "rings",
+        "balance",   "balance-grid", "balance-rule"}) {
     known.insert(f);
   }
   auto fail = [](const absl::Status& s) { return Fail("render", s); };
@@ -409,6 +422,11 @@ int Render(int argc, char** argv) {
   v1::Job job;
   job.set_name("render");
   *job.add_datasets() = dataset;
+  job.set_balance(flags->Get("balance", "off"));
+  auto grid = flags->GetInt("balance-grid", 16);
+  if (!grid.ok()) return fail(grid.status());
+  job.set_balance_grid(*grid);
+  job.set_balance_rule(flags->Get("balance-rule", "cost"));
   WatchOptions wo;
   wo.progress = isatty(STDERR_FILENO);
   auto stats = SubmitAndWatch(root, job, wo);

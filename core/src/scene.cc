@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
+#include "transtick/check.h"
 
 namespace transtick {
 namespace {
@@ -198,6 +199,33 @@ absl::StatusOr<Scene> Scene::FromParts(RenderMode mode, std::array<int, 3> dims,
 }
 
 Scene Scene::Slab(int y_begin, int y_end) const {
+  const int sb = ScalarBegin(y_begin), se = ScalarEnd(y_end);
+  auto slab = Reslab(y_begin, y_end, sticks_.EncodeRows(y_begin, y_end), {CopyScalars(sb, se)});
+  TRANSTICK_CHECK(slab.ok());
+  return *std::move(slab);
+}
+
+ScalarPlanes Scene::CopyScalars(int y_begin, int y_end) const {
+  TRANSTICK_CHECK(y_begin >= scalar_y_begin_ && y_end <= scalar_y_begin_ + scalar_planes_);
+  ScalarPlanes p;
+  p.y_begin = y_begin;
+  p.y_end = y_end;
+  const size_t row = static_cast<size_t>(y_end - y_begin) * dims_[0];
+  p.values.reserve(row * dims_[2]);
+  for (int z = 0; z < dims_[2]; ++z) {
+    auto first = scalars_.begin() +
+                 (static_cast<size_t>(z) * scalar_planes_ + (y_begin - scalar_y_begin_)) * dims_[0];
+    p.values.insert(p.values.end(), first, first + row);
+  }
+  return p;
+}
+
+absl::StatusOr<Scene> Scene::Reslab(int y_begin, int y_end, const std::vector<std::string>& blocks,
+                                    const std::vector<ScalarPlanes>& planes) const {
+  const int max_material =
+      mode_ == RenderMode::kSurfaces ? static_cast<int>(classification_.materials.size()) : 1;
+  auto sticks = Sticks::FromBlocks(dims_, y_begin, y_end, max_material, blocks);
+  if (!sticks.ok()) return sticks.status();
   Scene s;
   s.mode_ = mode_;
   s.dims_ = dims_;
@@ -206,22 +234,35 @@ Scene Scene::Slab(int y_begin, int y_end) const {
   s.bricks_ = bricks_;
   s.classification_ = classification_;
   s.transfer_ = transfer_;
-  std::vector<std::string> blocks;
-  for (int by = y_begin / Sticks::kBlockSize; by * Sticks::kBlockSize < y_end; ++by) {
-    for (int bx = 0; bx < sticks_.BlocksX(); ++bx) blocks.push_back(sticks_.EncodeBlock(bx, by));
-  }
-  int max_material =
-      mode_ == RenderMode::kSurfaces ? static_cast<int>(classification_.materials.size()) : 1;
-  s.sticks_ = *Sticks::FromBlocks(dims_, y_begin, y_end, max_material, blocks);
+  s.sticks_ = *std::move(sticks);
   s.scalar_y_begin_ = ScalarBegin(y_begin);
   s.scalar_planes_ = ScalarEnd(y_end) - s.scalar_y_begin_;
-  s.scalars_.reserve(static_cast<size_t>(dims_[0]) * s.scalar_planes_ * dims_[2]);
-  for (int z = 0; z < dims_[2]; ++z) {
-    auto first = scalars_.begin() +
-                 (static_cast<size_t>(z) * scalar_planes_ + (s.scalar_y_begin_ - scalar_y_begin_)) *
-                     dims_[0];
-    s.scalars_.insert(s.scalars_.end(), first,
-                      first + static_cast<size_t>(s.scalar_planes_) * dims_[0]);
+  const size_t nx = dims_[0];
+  s.scalars_.resize(nx * s.scalar_planes_ * dims_[2]);
+  std::vector<uint8_t> covered(s.scalar_planes_, 0);
+  for (const ScalarPlanes& p : planes) {
+    const int n = p.y_end - p.y_begin;
+    if (n <= 0 || p.values.size() != static_cast<size_t>(n) * nx * dims_[2]) {
+      return absl::InvalidArgumentError(absl::StrCat("scalar planes [", p.y_begin, ", ", p.y_end,
+                                                     "): ", p.values.size(), " values"));
+    }
+    const int lo = std::max(p.y_begin, s.scalar_y_begin_);
+    const int hi = std::min(p.y_end, s.scalar_y_begin_ + s.scalar_planes_);
+    for (int y = lo; y < hi; ++y) covered[y - s.scalar_y_begin_] = 1;
+    if (lo >= hi) continue;
+    for (int z = 0; z < dims_[2]; ++z) {
+      const float* from = p.values.data() + (static_cast<size_t>(z) * n + (lo - p.y_begin)) * nx;
+      float* to = s.scalars_.data() +
+                  (static_cast<size_t>(z) * s.scalar_planes_ + (lo - s.scalar_y_begin_)) * nx;
+      std::copy(from, from + static_cast<size_t>(hi - lo) * nx, to);
+    }
+  }
+  for (int i = 0; i < s.scalar_planes_; ++i) {
+    if (!covered[i]) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("slab [", y_begin, ", ", y_end, "): no scalars for plane ",
+                       s.scalar_y_begin_ + i));
+    }
   }
   return s;
 }

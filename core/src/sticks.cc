@@ -40,13 +40,16 @@ Sticks Sticks::Encode(std::span<const uint8_t> labels, std::array<int, 3> dims, 
   return s;
 }
 
-std::string Sticks::EncodeBlock(int bx, int by) const {
+std::string Sticks::EncodeBlock(int bx, int by, int y_lo, int y_hi) const {
   const int x0 = bx * kBlockSize, x1 = std::min(x0 + kBlockSize, dims_[0]);
-  const int y0 = by * kBlockSize, y1 = std::min(y0 + kBlockSize, dims_[1]);
+  const int y0 = std::max({by * kBlockSize, y_begin_, y_lo});
+  const int y1 = std::min({by * kBlockSize + kBlockSize, dims_[1], y_end_, y_hi});
   std::string out(kMagic, 4);
   PutFixed16(&out, static_cast<uint16_t>(bx));
   PutFixed16(&out, static_cast<uint16_t>(by));
   for (int a = 0; a < 3; ++a) PutFixed16(&out, static_cast<uint16_t>(dims_[a]));
+  PutFixed16(&out, static_cast<uint16_t>(y0));
+  PutFixed16(&out, static_cast<uint16_t>(y1));
   uint32_t total = 0;
   for (int y = y0; y < y1; ++y)
     for (int x = x0; x < x1; ++x) total += static_cast<uint32_t>(Track(x, y).size());
@@ -65,6 +68,14 @@ std::string Sticks::EncodeBlock(int bx, int by) const {
     }
   }
   return out;
+}
+
+std::vector<std::string> Sticks::EncodeRows(int y_lo, int y_hi) const {
+  std::vector<std::string> blocks;
+  for (int by = y_lo / kBlockSize; by * kBlockSize < y_hi; ++by) {
+    for (int bx = 0; bx < BlocksX(); ++bx) blocks.push_back(EncodeBlock(bx, by, y_lo, y_hi));
+  }
+  return blocks;
 }
 
 absl::StatusOr<Sticks> Sticks::FromBlocks(std::array<int, 3> dims, int y_begin, int y_end,
@@ -94,10 +105,11 @@ absl::StatusOr<Sticks> Sticks::FromBlocks(std::array<int, 3> dims, int y_begin, 
     if (!in.GetBytes(magic, 4) || std::memcmp(magic, kMagic, 4) != 0) {
       return absl::InvalidArgumentError(where + ": bad magic (not a sticks block)");
     }
-    uint16_t bx, by, d[3];
+    uint16_t bx, by, d[3], row_begin, row_end;
     uint32_t total;
     if (!in.GetFixed16(&bx) || !in.GetFixed16(&by) || !in.GetFixed16(&d[0]) ||
-        !in.GetFixed16(&d[1]) || !in.GetFixed16(&d[2]) || !in.GetFixed32(&total)) {
+        !in.GetFixed16(&d[1]) || !in.GetFixed16(&d[2]) || !in.GetFixed16(&row_begin) ||
+        !in.GetFixed16(&row_end) || !in.GetFixed32(&total)) {
       return absl::InvalidArgumentError(where + ": truncated header");
     }
     if (d[0] != dims[0] || d[1] != dims[1] || d[2] != dims[2]) {
@@ -110,7 +122,11 @@ absl::StatusOr<Sticks> Sticks::FromBlocks(std::array<int, 3> dims, int y_begin, 
           absl::StrCat(where, ": block index (", bx, ", ", by, ") out of range"));
     }
     const int x0 = bx * kBlockSize, x1 = std::min(x0 + kBlockSize, dims[0]);
-    const int y0 = by * kBlockSize, y1 = std::min(y0 + kBlockSize, dims[1]);
+    const int y0 = row_begin, y1 = row_end;
+    if (y0 < by * kBlockSize || y0 >= y1 || y1 > std::min((by + 1) * kBlockSize, dims[1])) {
+      return absl::InvalidArgumentError(absl::StrCat(where, ": rows [", y0, ", ", y1,
+                                                     ") are not in block row ", by));
+    }
     const size_t n_tracks = static_cast<size_t>(x1 - x0) * (y1 - y0);
     std::vector<uint32_t> counts(n_tracks);
     uint64_t sum = 0;

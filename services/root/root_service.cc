@@ -12,9 +12,11 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
 #include "convert.h"
 #include "daemon.h"
 #include "transtick/framebuffer.h"
+#include "transtick/partition.h"
 #include "transtick/ray_codec.h"
 #include "transtick/volume_io.h"
 
@@ -90,6 +92,13 @@ struct RootService::LoadedDataset {
   v1::Dataset spec;
   Scene scene;
   double load_ms = 0;
+  // Balancing state, for the ring members `members` (Layout::Members).
+  std::string members;
+  // Cuts the next frame starts from: those of the last frame, or the re-cut
+  // from its costs in "previous-frame" mode.
+  std::vector<std::vector<int>> next_cuts;
+  // "test-rays" cuts by view (ViewKey), reused without a new prerender.
+  std::map<std::string, std::vector<std::vector<int>>> view_cuts;
 };
 
 struct RootService::Layout {
@@ -98,10 +107,16 @@ struct RootService::Layout {
     std::vector<int> cuts;  // workers.size() + 1 bounds along Y
   };
   std::vector<Ring> rings;
-  double load_ms = 0;  // slab transfers done for this layout
+  double load_ms = 0;    // slab transfers done for this layout
+  int planes_moved = 0;  // planes fetched between workers for it
   std::string SlabKey(const std::string& data_key, const Ring& ring, size_t i) const {
     return absl::StrCat(data_key, "@", ring.cuts[i], "-", ring.cuts[i + 1]);
   }
+  // The workers' ids, ring by ring.
+  std::string Members() const;
+  std::vector<std::vector<int>> Cuts() const;
+  // Takes `cuts` (one list per ring) when they fit the rings; else false.
+  bool SetCuts(const std::vector<std::vector<int>>& cuts, int planes);
 };
 
 RootService::RootService(RootOptions options) : options_(std::move(options)) {
@@ -136,6 +151,17 @@ absl::Status RootService::ValidateJob(const v1::Job& job) const {
   if (job.datasets_size() == 0) return absl::InvalidArgumentError("job: no datasets");
   if (job.balance_grid() < 0 || job.balance_grid() > 256) {
     return absl::InvalidArgumentError("job: balance_grid must be in [0, 256]");
+  }
+  auto balance_mode = [](const std::string& where, const std::string& mode) {
+    if (mode.empty() || mode == "off" || mode == "test-rays" || mode == "previous-frame") {
+      return absl::OkStatus();
+    }
+    return absl::InvalidArgumentError(absl::StrCat(
+        where, ": balance '", mode, "' is not 'off', 'test-rays' or 'previous-frame'"));
+  };
+  if (auto s = balance_mode("job", job.balance()); !s.ok()) return s;
+  if (auto r = ParseBalanceRule(job.balance_rule()); !r.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("job: ", r.status().message()));
   }
   int views = 0;
   std::error_code ec;
@@ -189,6 +215,7 @@ absl::Status RootService::ValidateJob(const v1::Job& job) const {
       if (auto c = ToCameraSpec(view); !c.ok()) {
         return absl::InvalidArgumentError(absl::StrCat(vw, ": ", c.status().message()));
       }
+      if (auto s = balance_mode(vw, view.balance()); !s.ok()) return s;
       if (!view.output().empty() && !SupportedOutput(view.output())) {
         return absl::InvalidArgumentError(
             absl::StrCat(vw, ": output '", view.output(), "' is not .png, .jpg, .tif or .exr"));
@@ -295,7 +322,12 @@ grpc::Status RootService::Status(grpc::ServerContext*, const v1::StatusRequest*,
     info->set_id(w->id);
     info->set_address(w->address);
     info->set_threads(w->threads);
-    info->set_ring(-1);
+    auto held = loaded_.find(w->id);
+    info->set_ring(held == loaded_.end() ? -1 : held->second.ring);
+    if (held != loaded_.end()) {
+      info->set_slab_begin(held->second.y0);
+      info->set_slab_end(held->second.y1);
+    }
   }
   reply->set_rings(options_.rings);
   return grpc::Status::OK;
@@ -484,8 +516,8 @@ absl::StatusOr<std::shared_ptr<RootService::LoadedDataset>> RootService::LoadDat
   return data;
 }
 
-absl::StatusOr<RootService::Layout> RootService::EnsureLayout(const LoadedDataset& data,
-                                                              JobRecord& job) {
+absl::StatusOr<RootService::Layout> RootService::FormRings(const LoadedDataset& data,
+                                                           JobRecord& job) {
   std::vector<std::shared_ptr<WorkerEntry>> workers;
   {
     std::unique_lock<std::mutex> lock(mu_);
@@ -511,140 +543,357 @@ absl::StatusOr<RootService::Layout> RootService::EnsureLayout(const LoadedDatase
     // A slab holds at least one plane: extra workers stay idle.
     const int k = std::min(end - begin, ny);
     for (int i = 0; i < k; ++i) ring.workers.push_back(workers[begin + i]);
-    for (int i = 0; i <= k; ++i) ring.cuts.push_back(static_cast<int>(int64_t{i} * ny / k));
+    ring.cuts = UniformCuts(ny, k);
     layout.rings.push_back(std::move(ring));
-  }
-  // Send each worker its slab unless it holds it already.
-  struct Load {
-    std::shared_ptr<WorkerEntry> worker;
-    int y0, y1;
-    std::string key;
-    std::string old;  // what the worker held before
-    bool ok = false;
-  };
-  std::vector<Load> loads;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    for (const auto& ring : layout.rings) {
-      for (size_t i = 0; i < ring.workers.size(); ++i) {
-        std::string key = layout.SlabKey(data.key, ring, i);
-        auto it = loaded_.find(ring.workers[i]->id);
-        std::string old = it == loaded_.end() ? "" : it->second;
-        if (old != key)
-          loads.push_back({ring.workers[i], ring.cuts[i], ring.cuts[i + 1], key, old});
-      }
-    }
-  }
-  const auto t0 = Clock::now();
-  const Scene& scene = data.scene;
-  const auto& dims = scene.dims();
-  absl::Status status = ForEachParallel(loads.size(), [&](size_t li) -> absl::Status {
-    Load& l = loads[li];
-    const std::string& old = l.old;
-    if (!old.empty()) {
-      grpc::ClientContext ctx;
-      ctx.set_deadline(Deadline(10));
-      v1::DatasetRef ref;
-      ref.set_dataset_key(old);
-      v1::FrameAck ack;
-      l.worker->stub->Evict(&ctx, ref, &ack);
-    }
-    grpc::ClientContext ctx;
-    ctx.set_deadline(Deadline(300));
-    v1::LoadReply reply;
-    auto writer = l.worker->stub->LoadSlab(&ctx, &reply);
-    v1::SlabChunk chunk;
-    v1::SlabHeader* h = chunk.mutable_header();
-    h->set_dataset_key(l.key);
-    h->set_mode(data.mode);
-    for (int a = 0; a < 3; ++a) h->add_dims(dims[a]);
-    for (int a = 0; a < 3; ++a) h->add_spacing(scene.spacing()[a]);
-    h->add_value_range(scene.value_range()[0]);
-    h->add_value_range(scene.value_range()[1]);
-    if (data.spec.has_materials()) *h->mutable_materials() = data.spec.materials();
-    if (data.spec.has_transfer()) *h->mutable_transfer() = data.spec.transfer();
-    h->set_y_begin(l.y0);
-    h->set_y_end(l.y1);
-    const auto& bricks = scene.bricks().bytes();
-    h->set_brick_map(std::string(bricks.begin(), bricks.end()));
-    const int sb = scene.ScalarBegin(l.y0), se = scene.ScalarEnd(l.y1);
-    h->set_scalar_count(static_cast<uint64_t>(dims[0]) * (se - sb) * dims[2]);
-    constexpr size_t kChunkBytes = 1 << 20;
-    size_t pending = 0;
-    auto send = [&]() -> bool {
-      bool ok = writer->Write(chunk);
-      chunk.Clear();
-      pending = 0;
-      return ok;
-    };
-    bool ok = true;
-    const Sticks& sticks = scene.sticks();
-    for (int by = l.y0 / Sticks::kBlockSize; ok && by * Sticks::kBlockSize < l.y1; ++by) {
-      for (int bx = 0; ok && bx < sticks.BlocksX(); ++bx) {
-        chunk.add_blocks(sticks.EncodeBlock(bx, by));
-        pending += chunk.blocks(chunk.blocks_size() - 1).size();
-        if (pending >= kChunkBytes) ok = send();
-      }
-    }
-    const size_t row = static_cast<size_t>(dims[0]) * (se - sb);
-    for (int z = 0; ok && z < dims[2]; ++z) {
-      const float* plane =
-          scene.scalars().data() + (static_cast<size_t>(z) * dims[1] + sb) * dims[0];
-      AppendFloats(plane, row, chunk.mutable_scalars());
-      pending += row * 4;
-      if (pending >= kChunkBytes) ok = send();
-    }
-    if (ok && (pending > 0 || chunk.has_header())) ok = send();
-    writer->WritesDone();
-    grpc::Status s = writer->Finish();
-    if (!s.ok()) {
-      if (IsWorkerFailure(s)) DropWorker(l.worker->id, s.error_message());
-      return absl::Status(FromGrpc(s).code(),
-                          absl::StrCat("loading slab [", l.y0, ", ", l.y1, ") on ",
-                                       l.worker->address, ": ", s.error_message()));
-    }
-    l.ok = true;
-    return absl::OkStatus();
-  });
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    for (const Load& l : loads) {
-      if (l.ok) {
-        loaded_[l.worker->id] = l.key;
-      } else {
-        loaded_.erase(l.worker->id);
-      }
-    }
-  }
-  if (!status.ok()) return status;
-  layout.load_ms = loads.empty() ? 0 : MsSince(t0);
-  if (!loads.empty()) {
-    spdlog::info("sent {} slabs in {:.0f} ms", loads.size(), layout.load_ms);
   }
   return layout;
 }
 
-absl::Status RootService::RunView(JobRecord& job, int d, int v, const LoadedDataset& data) {
+std::string RootService::Layout::Members() const {
+  std::string m;
+  for (const Ring& ring : rings) {
+    for (const auto& w : ring.workers) absl::StrAppend(&m, w->id, ",");
+    m += ";";
+  }
+  return m;
+}
+
+std::vector<std::vector<int>> RootService::Layout::Cuts() const {
+  std::vector<std::vector<int>> cuts;
+  for (const Ring& ring : rings) cuts.push_back(ring.cuts);
+  return cuts;
+}
+
+bool RootService::Layout::SetCuts(const std::vector<std::vector<int>>& cuts, int planes) {
+  if (cuts.size() != rings.size()) return false;
+  for (size_t r = 0; r < rings.size(); ++r) {
+    if (!ValidCuts(cuts[r], planes, static_cast<int>(rings[r].workers.size()))) return false;
+  }
+  for (size_t r = 0; r < rings.size(); ++r) rings[r].cuts = cuts[r];
+  return true;
+}
+
+absl::Status RootService::LoadSlab(const LoadedDataset& data, WorkerEntry& worker,
+                                   const std::string& key, int y0, int y1) {
+  const Scene& scene = data.scene;
+  const auto& dims = scene.dims();
+  grpc::ClientContext ctx;
+  ctx.set_deadline(Deadline(300));
+  v1::LoadReply reply;
+  auto writer = worker.stub->LoadSlab(&ctx, &reply);
+  v1::SlabChunk chunk;
+  v1::SlabHeader* h = chunk.mutable_header();
+  h->set_dataset_key(key);
+  h->set_mode(data.mode);
+  for (int a = 0; a < 3; ++a) h->add_dims(dims[a]);
+  for (int a = 0; a < 3; ++a) h->add_spacing(scene.spacing()[a]);
+  h->add_value_range(scene.value_range()[0]);
+  h->add_value_range(scene.value_range()[1]);
+  if (data.spec.has_materials()) *h->mutable_materials() = data.spec.materials();
+  if (data.spec.has_transfer()) *h->mutable_transfer() = data.spec.transfer();
+  h->set_y_begin(y0);
+  h->set_y_end(y1);
+  const auto& bricks = scene.bricks().bytes();
+  h->set_brick_map(std::string(bricks.begin(), bricks.end()));
+  const int sb = scene.ScalarBegin(y0), se = scene.ScalarEnd(y1);
+  h->set_scalar_count(static_cast<uint64_t>(dims[0]) * (se - sb) * dims[2]);
+  constexpr size_t kChunkBytes = 1 << 20;
+  size_t pending = 0;
+  auto send = [&]() -> bool {
+    bool ok = writer->Write(chunk);
+    chunk.Clear();
+    pending = 0;
+    return ok;
+  };
+  bool ok = true;
+  for (std::string& block : scene.sticks().EncodeRows(y0, y1)) {
+    if (!ok) break;
+    pending += block.size();
+    chunk.add_blocks(std::move(block));
+    if (pending >= kChunkBytes) ok = send();
+  }
+  const size_t row = static_cast<size_t>(dims[0]) * (se - sb);
+  for (int z = 0; ok && z < dims[2]; ++z) {
+    const float* plane =
+        scene.scalars().data() + (static_cast<size_t>(z) * dims[1] + sb) * dims[0];
+    AppendFloats(plane, row, chunk.mutable_scalars());
+    pending += row * 4;
+    if (pending >= kChunkBytes) ok = send();
+  }
+  if (ok && (pending > 0 || chunk.has_header())) ok = send();
+  writer->WritesDone();
+  grpc::Status s = writer->Finish();
+  if (!s.ok()) {
+    if (IsWorkerFailure(s)) DropWorker(worker.id, s.error_message());
+    return absl::Status(FromGrpc(s).code(),
+                        absl::StrCat("loading slab [", y0, ", ", y1, ") on ", worker.address, ": ",
+                                     s.error_message()));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status RootService::Distribute(const LoadedDataset& data, Layout& layout) {
+  // What must change: each worker of the layout holds its slab under the
+  // slab's key. A worker that holds another slab of the same dataset
+  // re-slabs, taking the planes it lacks from the workers that hold them
+  // (its neighbours, when cuts move a little); any other is sent its slab.
+  struct Move {
+    std::shared_ptr<WorkerEntry> worker;
+    int ring, y0, y1;
+    std::string key;
+    HeldSlab old;  // empty key: holds nothing of this dataset
+    bool ok = false;
+    bool reslabbed = false;
+  };
+  std::vector<Move> moves;
+  std::map<std::string, HeldSlab> held;  // by worker id
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    held = loaded_;
+  }
+  for (size_t r = 0; r < layout.rings.size(); ++r) {
+    const auto& ring = layout.rings[r];
+    for (size_t i = 0; i < ring.workers.size(); ++i) {
+      std::string key = layout.SlabKey(data.key, ring, i);
+      auto it = held.find(ring.workers[i]->id);
+      HeldSlab old = it == held.end() ? HeldSlab{} : it->second;
+      if (old.key == key) continue;
+      moves.push_back({ring.workers[i], static_cast<int>(r), ring.cuts[i], ring.cuts[i + 1], key,
+                       old});
+    }
+  }
+  if (moves.empty()) return absl::OkStatus();
+  // Sources of planes: slabs of this dataset held now, the mover's own ring
+  // first (its neighbours hold the planes a moved cut hands over).
+  auto sources_for = [&](const Move& m) {
+    std::vector<std::pair<int, v1::PlaneSource>> ranked;
+    for (auto& [id, h] : held) {
+      if (id == m.worker->id || h.data_key != data.key) continue;
+      std::shared_ptr<WorkerEntry> w;
+      for (const auto& ring : layout.rings)
+        for (const auto& x : ring.workers)
+          if (x->id == id) w = x;
+      if (!w) continue;  // no longer in the layout: it may be gone
+      v1::PlaneSource src;
+      src.set_address(w->address);
+      src.set_dataset_key(h.key);
+      src.set_y_begin(h.y0);
+      src.set_y_end(h.y1);
+      ranked.push_back({h.ring == m.ring ? 0 : 1, src});
+    }
+    std::stable_sort(ranked.begin(), ranked.end(),
+                     [](const auto& a, const auto& b) { return a.first < b.first; });
+    return ranked;
+  };
+  const auto t0 = Clock::now();
+  absl::Status status = ForEachParallel(moves.size(), [&](size_t mi) -> absl::Status {
+    Move& m = moves[mi];
+    if (!m.old.key.empty() && m.old.data_key == data.key) {
+      grpc::ClientContext ctx;
+      ctx.set_deadline(Deadline(300));
+      v1::ReslabRequest req;
+      req.set_old_key(m.old.key);
+      req.set_new_key(m.key);
+      req.set_y_begin(m.y0);
+      req.set_y_end(m.y1);
+      for (auto& [rank, src] : sources_for(m)) *req.add_sources() = src;
+      v1::LoadReply reply;
+      grpc::Status s = m.worker->stub->Reslab(&ctx, req, &reply);
+      if (s.ok()) {
+        m.ok = m.reslabbed = true;
+        return absl::OkStatus();
+      }
+      if (IsWorkerFailure(s) && s.error_message().find("fetching") == std::string::npos) {
+        DropWorker(m.worker->id, s.error_message());
+        return absl::UnavailableError(
+            absl::StrCat("re-slabbing on ", m.worker->address, ": ", s.error_message()));
+      }
+      // A source could not help: the root sends the slab itself.
+      spdlog::warn("re-slabbing [{}, {}) on {} failed ({}); sending the slab instead", m.y0, m.y1,
+                   m.worker->address, s.error_message());
+    }
+    absl::Status s = LoadSlab(data, *m.worker, m.key, m.y0, m.y1);
+    m.ok = s.ok();
+    return s;
+  });
+  // Old slabs go only now: until every move is done they are sources.
+  std::vector<std::pair<std::shared_ptr<WorkerEntry>, std::string>> evictions;
+  int reslabbed = 0, planes = 0;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (const Move& m : moves) {
+      if (!m.old.key.empty()) evictions.push_back({m.worker, m.old.key});
+      if (m.ok) {
+        loaded_[m.worker->id] = HeldSlab{m.key, data.key, m.y0, m.y1, m.ring};
+      } else {
+        loaded_.erase(m.worker->id);
+      }
+      if (m.reslabbed) {
+        ++reslabbed;
+        planes += std::max(0, m.old.y0 - m.y0) + std::max(0, m.y1 - m.old.y1);
+      }
+    }
+  }
+  (void)ForEachParallel(evictions.size(), [&](size_t i) -> absl::Status {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(10));
+    v1::DatasetRef ref;
+    ref.set_dataset_key(evictions[i].second);
+    v1::FrameAck ack;
+    evictions[i].first->stub->Evict(&ctx, ref, &ack);
+    return absl::OkStatus();
+  });
+  if (!status.ok()) return status;
+  layout.load_ms = MsSince(t0);
+  layout.planes_moved = planes;
+  spdlog::info("slabs: {} sent by the root, {} re-cut with {} planes from neighbours, in {:.0f} ms",
+               moves.size() - reslabbed, reslabbed, planes, layout.load_ms);
+  return absl::OkStatus();
+}
+
+namespace {
+
+// The view as it determines the image's rays: what balancing cuts depend on.
+std::string ViewKey(const v1::View& view) {
+  v1::View k = view;
+  k.clear_output();
+  k.clear_balance();
+  return k.SerializeAsString();
+}
+
+std::string FormatCuts(const std::vector<std::vector<int>>& cuts) {
+  std::string out;
+  for (size_t r = 0; r < cuts.size(); ++r) {
+    absl::StrAppend(&out, r ? " | " : "", "[", absl::StrJoin(cuts[r], " "), "]");
+  }
+  return out;
+}
+
+// Costs of the workers of each ring (their tracers' CPU time), in ring order.
+std::vector<std::vector<double>> RingCosts(const RootService::FrameResult& frame,
+                                           const std::vector<size_t>& ring_sizes) {
+  std::vector<std::vector<double>> costs(ring_sizes.size());
+  size_t k = 0;
+  for (size_t r = 0; r < ring_sizes.size(); ++r) {
+    for (size_t i = 0; i < ring_sizes[r]; ++i, ++k) {
+      costs[r].push_back(k < frame.workers.size() ? frame.workers[k].cpu_ms() : 0.0);
+    }
+  }
+  return costs;
+}
+
+}  // namespace
+
+absl::Status RootService::RunView(JobRecord& job, int d, int v, LoadedDataset& data) {
+  const v1::View& view = job.job.datasets(d).views(v);
+  const std::string mode = view.balance().empty() ? job.job.balance() : view.balance();
+  const BalanceRule rule = *ParseBalanceRule(job.job.balance_rule());
+  const int planes = data.scene.dims()[1];
   // A worker that dies is dropped and the frame runs again on the others.
   constexpr int kAttempts = 3;
   absl::Status status;
   for (int attempt = 0; attempt < kAttempts; ++attempt) {
-    auto layout = EnsureLayout(data, job);
+    auto layout = FormRings(data, job);
     if (!layout.ok()) {
       status = layout.status();
       if (status.code() != absl::StatusCode::kUnavailable) return status;
       continue;
     }
-    status = RunFrame(job, d, v, data, *layout);
-    if (status.ok() || status.code() != absl::StatusCode::kUnavailable || job.cancel) return status;
-    spdlog::warn("{}: frame failed ({}); retrying", job.id, std::string(status.message()));
+    // Cuts computed for other ring members mean nothing to these.
+    const std::string members = layout->Members();
+    if (members != data.members) {
+      data.members = members;
+      data.view_cuts.clear();
+      data.next_cuts.clear();
+    }
+    std::vector<size_t> sizes;
+    for (const auto& ring : layout->rings) sizes.push_back(ring.workers.size());
+    BalanceReport report;
+    report.mode = mode.empty() ? "off" : mode;
+    if (mode == "test-rays") {
+      auto cached = data.view_cuts.find(ViewKey(view));
+      if (cached != data.view_cuts.end()) {
+        layout->SetCuts(cached->second, planes);
+        report.cuts_before = report.cuts_after = cached->second;
+      } else {
+        // Start from the cuts the workers hold when they are this ring's.
+        if (!data.next_cuts.empty()) layout->SetCuts(data.next_cuts, planes);
+        report.cuts_before = layout->Cuts();
+        const auto t0 = Clock::now();
+        status = Distribute(data, *layout);
+        if (!status.ok()) {
+          if (status.code() == absl::StatusCode::kUnavailable && !job.cancel) continue;
+          return status;
+        }
+        // The prerender: a grid of test rays through the same camera.
+        const int grid = job.job.balance_grid() > 0 ? job.job.balance_grid() : 16;
+        v1::View test = view;
+        test.clear_output();
+        test.set_width(grid);
+        test.set_height(std::max(1, static_cast<int>(std::lround(
+                                        static_cast<double>(grid) * view.height() / view.width()))));
+        auto probe = RunFrame(job, d, v, test, data, *layout, /*test=*/true);
+        if (!probe.ok()) {
+          status = probe.status();
+          if (status.code() == absl::StatusCode::kUnavailable && !job.cancel) continue;
+          return status;
+        }
+        const auto costs = RingCosts(*probe, sizes);
+        std::vector<std::vector<int>> cuts;
+        for (size_t r = 0; r < sizes.size(); ++r) {
+          cuts.push_back(BalancedCuts(layout->rings[r].cuts, costs[r], rule));
+        }
+        for (const auto& w : probe->workers) report.test_ray_ms[w.id()] = w.cpu_ms();
+        layout->SetCuts(cuts, planes);
+        report.cuts_after = cuts;
+        data.view_cuts[ViewKey(view)] = cuts;
+        report.balance_ms = MsSince(t0);
+        std::vector<std::string> times;
+        for (const auto& c : costs) times.push_back(absl::StrJoin(c, " ", [](std::string* o, double x) {
+          absl::StrAppend(o, absl::StrFormat("%.2f", x));
+        }));
+        spdlog::info("{} balance ({}x{} test rays, rule {}): test-ray CPU ms [{}]; cuts {} -> {}",
+                     job.id, test.width(), test.height(),
+                     rule == BalanceRule::kPaper ? "paper" : "cost", absl::StrJoin(times, " | "),
+                     FormatCuts(report.cuts_before), FormatCuts(report.cuts_after));
+      }
+    } else if (mode == "previous-frame") {
+      if (!data.next_cuts.empty()) layout->SetCuts(data.next_cuts, planes);
+      report.cuts_before = report.cuts_after = layout->Cuts();
+    }
+    status = Distribute(data, *layout);
+    if (!status.ok()) {
+      if (status.code() == absl::StatusCode::kUnavailable && !job.cancel) continue;
+      return status;
+    }
+    auto frame = RunFrame(job, d, v, view, data, *layout, /*test=*/false);
+    if (!frame.ok()) {
+      status = frame.status();
+      if (status.code() != absl::StatusCode::kUnavailable || job.cancel) return status;
+      spdlog::warn("{}: frame failed ({}); retrying", job.id, std::string(status.message()));
+      continue;
+    }
+    if (mode == "previous-frame") {
+      // This frame's costs cut the slabs of the next one.
+      const auto costs = RingCosts(*frame, sizes);
+      data.next_cuts.clear();
+      for (size_t r = 0; r < sizes.size(); ++r) {
+        data.next_cuts.push_back(BalancedCuts(layout->rings[r].cuts, costs[r], rule));
+      }
+      report.cuts_after = data.next_cuts;
+    } else {
+      data.next_cuts = layout->Cuts();
+    }
+    PublishFrame(job, d, v, view, *layout, *frame, report);
+    return absl::OkStatus();
   }
   return status;
 }
 
-absl::Status RootService::RunFrame(JobRecord& job, int d, int v, const LoadedDataset& data,
-                                   const Layout& layout) {
-  const v1::View& view = job.job.datasets(d).views(v);
+absl::StatusOr<RootService::FrameResult> RootService::RunFrame(JobRecord& job, int d, int v,
+                                                               const v1::View& view,
+                                                               const LoadedDataset& data,
+                                                               const Layout& layout, bool test) {
   const uint64_t frame_id = next_frame_id_++;
   const auto t0 = Clock::now();
   auto display = v1::Display::NewStub(MakeChannel(options_.display));
@@ -767,7 +1016,7 @@ absl::Status RootService::RunFrame(JobRecord& job, int d, int v, const LoadedDat
         DecodeFloats(c.rgb(),
                      image.rgb.data() + static_cast<size_t>(c.row_begin()) * image.width * 3);
         rows += c.row_end() - c.row_begin();
-      } else if (Clock::now() - last_event > std::chrono::milliseconds(200)) {
+      } else if (!test && Clock::now() - last_event > std::chrono::milliseconds(200)) {
         last_event = Clock::now();
         v1::JobEvent e;
         e.set_dataset(d);
@@ -789,40 +1038,66 @@ absl::Status RootService::RunFrame(JobRecord& job, int d, int v, const LoadedDat
     }
   }
   end_all(/*cancel=*/false);
-  const double frame_ms = MsSince(t0);
+  FrameResult result;
+  result.frame_ms = MsSince(t0);
+  result.frame_id = frame_id;
+  result.image = std::move(image);
+  for (size_t i = 0; i < stats.size(); ++i) {
+    if (stats[i].id().empty()) stats[i].set_id(members[i].worker->id);
+    if (stats[i].address().empty()) stats[i].set_address(members[i].worker->address);
+  }
+  result.workers = std::move(stats);
+  return result;
+}
 
+void RootService::PublishFrame(JobRecord& job, int d, int v, const v1::View& view,
+                               const Layout& layout, const FrameResult& frame,
+                               const BalanceReport& balance) {
+  const Image& image = frame.image;
   v1::ClusterFrameStats fs;
   fs.set_job_id(job.id);
   fs.set_dataset(d);
   fs.set_view(v);
-  fs.set_frame_ms(frame_ms);
+  fs.set_frame_ms(frame.frame_ms);
   fs.set_width(image.width);
   fs.set_height(image.height);
-  fs.set_rings(rings);
+  fs.set_rings(static_cast<int>(layout.rings.size()));
   fs.set_load_ms(layout.load_ms);
+  fs.set_planes_moved(layout.planes_moved);
+  fs.set_balance(balance.mode);
+  fs.set_balance_ms(balance.balance_ms);
+  for (const auto& ring : balance.cuts_before)
+    for (int c : ring) fs.add_cuts_before(c);
+  for (const auto& ring : balance.cuts_after)
+    for (int c : ring) fs.add_cuts_after(c);
   double active_sum = 0, active_max = 0;
   uint64_t rays = 0;
-  for (size_t i = 0; i < stats.size(); ++i) {
-    const v1::WorkerFrameStats& w = stats[i];
-    *fs.add_workers() = w;
-    active_sum += w.active_ms();
-    active_max = std::max(active_max, w.active_ms());
-    rays += w.rays_traced();
+  for (const v1::WorkerFrameStats& stats : frame.workers) {
+    v1::WorkerFrameStats* w = fs.add_workers();
+    *w = stats;
+    if (auto t = balance.test_ray_ms.find(w->id()); t != balance.test_ray_ms.end()) {
+      w->set_test_ray_ms(t->second);
+    }
+    active_sum += w->active_ms();
+    active_max = std::max(active_max, w->active_ms());
+    rays += w->rays_traced();
     spdlog::info(
-        "frame {} ring {} worker {} ({}) slab [{}, {}): elapsed {:.1f} ms, active {:.1f} ms, "
-        "traced {} ({} primary, {} shadow), sent L {} R {}, received L {} R {} ({:.2f} MB out, "
+        "frame {} ring {} worker {} slab [{}, {}): elapsed {:.1f} ms, active {:.1f} ms, CPU {:.1f} "
+        "ms, traced {} ({} primary, {} shadow), sent L {} R {}, received L {} R {} ({:.2f} MB out, "
         "{:.2f} MB in), buffer max {}",
-        frame_id, members[i].ring, i, w.address(), w.slab_size() > 0 ? w.slab(0) : -1,
-        w.slab_size() > 1 ? w.slab(1) : -1, w.elapsed_ms(), w.active_ms(), w.rays_traced(),
-        w.primary_traced(), w.shadow_traced(), w.sent_left(), w.sent_right(), w.received_left(),
-        w.received_right(), w.bytes_sent() / 1e6, w.bytes_received() / 1e6, w.buffer_high_water());
+        frame.frame_id, w->ring(), w->address(), w->slab_size() > 0 ? w->slab(0) : -1,
+        w->slab_size() > 1 ? w->slab(1) : -1, w->elapsed_ms(), w->active_ms(), w->cpu_ms(),
+        w->rays_traced(), w->primary_traced(), w->shadow_traced(), w->sent_left(), w->sent_right(),
+        w->received_left(), w->received_right(), w->bytes_sent() / 1e6, w->bytes_received() / 1e6,
+        w->buffer_high_water());
   }
-  const double mean_active = stats.empty() ? 0 : active_sum / stats.size();
+  const double mean_active = frame.workers.empty() ? 0 : active_sum / frame.workers.size();
+  fs.set_active_imbalance(mean_active > 0 ? active_max / mean_active : 0.0);
   spdlog::info(
-      "frame {} ({} {}/{}): {}x{} in {:.1f} ms on {} workers in {} ring(s); {} ray "
-      "segments traced; max/mean active {:.2f}",
-      frame_id, job.id, d, v, image.width, image.height, frame_ms, members.size(), rings, rays,
-      mean_active > 0 ? active_max / mean_active : 0.0);
+      "frame {} ({} {}/{}): {}x{} in {:.1f} ms on {} workers in {} ring(s); {} rays traced; "
+      "max/mean active {:.2f}; balance {}",
+      frame.frame_id, job.id, d, v, image.width, image.height, frame.frame_ms,
+      frame.workers.size(), layout.rings.size(), rays, fs.active_imbalance(), balance.mode);
 
   // The image to watchers, in chunks of rows; statistics with the last.
   const int chunk_rows = std::max(1, (1 << 20) / (image.width * 12));
@@ -844,7 +1119,6 @@ absl::Status RootService::RunFrame(JobRecord& job, int d, int v, const LoadedDat
     if (r1 == image.height) *e.mutable_stats() = fs;
     Publish(job, std::move(e));
   }
-  return absl::OkStatus();
 }
 
 }  // namespace transtick

@@ -19,6 +19,7 @@
 
 #include "absl/status/statusor.h"
 #include "cluster.grpc.pb.h"
+#include "transtick/framebuffer.h"
 #include "transtick/scene.h"
 
 namespace transtick {
@@ -36,6 +37,15 @@ struct RootOptions {
 
 class RootService final : public v1::Root::Service {
  public:
+  // One frame's outcome on the workers: the image and each worker's
+  // statistics, ring by ring.
+  struct FrameResult {
+    uint64_t frame_id = 0;
+    double frame_ms = 0;
+    Image image;
+    std::vector<v1::WorkerFrameStats> workers;
+  };
+
   explicit RootService(RootOptions options);
   ~RootService() override;
 
@@ -62,18 +72,42 @@ class RootService final : public v1::Root::Service {
   struct JobRecord;
   struct Layout;
   struct LoadedDataset;
+  // A slab a worker holds.
+  struct HeldSlab {
+    std::string key;       // dataset key @ bounds
+    std::string data_key;  // the dataset's key
+    int y0 = 0, y1 = 0;
+    int ring = -1;
+  };
+  // What balancing did for a frame, for its statistics.
+  struct BalanceReport {
+    std::string mode;
+    std::vector<std::vector<int>> cuts_before, cuts_after;
+    std::map<std::string, double> test_ray_ms;  // by worker id
+    double balance_ms = 0;
+  };
 
   absl::Status ValidateJob(const v1::Job& job) const;
   void RunnerLoop();
   absl::Status RunJob(JobRecord& job);
-  absl::Status RunView(JobRecord& job, int dataset_index, int view_index,
-                       const LoadedDataset& data);
-  absl::Status RunFrame(JobRecord& job, int dataset_index, int view_index,
-                        const LoadedDataset& data, const Layout& layout);
+  // One view: rings, balancing, slabs, the frame, and its image published.
+  absl::Status RunView(JobRecord& job, int dataset_index, int view_index, LoadedDataset& data);
+  // Runs one frame of `view` on the layout (a prerender of test rays when
+  // `test`: no progress events).
+  absl::StatusOr<FrameResult> RunFrame(JobRecord& job, int dataset_index, int view_index,
+                                       const v1::View& view, const LoadedDataset& data,
+                                       const Layout& layout, bool test);
+  void PublishFrame(JobRecord& job, int dataset_index, int view_index, const v1::View& view,
+                    const Layout& layout, const FrameResult& frame, const BalanceReport& balance);
   absl::StatusOr<std::shared_ptr<LoadedDataset>> LoadDataset(const v1::Dataset& dataset);
-  // The rings and slabs of the current workers for `data`, with every slab
-  // loaded on its worker.
-  absl::StatusOr<Layout> EnsureLayout(const LoadedDataset& data, JobRecord& job);
+  // The registered workers split into rings, each ring's slabs cut uniformly.
+  absl::StatusOr<Layout> FormRings(const LoadedDataset& data, JobRecord& job);
+  // Makes every worker of `layout` hold its slab: workers that hold another
+  // slab of the dataset re-cut theirs with planes from their neighbours; the
+  // root sends the others theirs.
+  absl::Status Distribute(const LoadedDataset& data, Layout& layout);
+  absl::Status LoadSlab(const LoadedDataset& data, WorkerEntry& worker, const std::string& key,
+                        int y0, int y1);
   void DropWorker(const std::string& id, const std::string& why);
   void Publish(JobRecord& job, v1::JobEvent event);
 
@@ -88,8 +122,8 @@ class RootService final : public v1::Root::Service {
   std::map<std::string, std::shared_ptr<WorkerEntry>> workers_;  // guarded by mu_, by id
   std::deque<std::shared_ptr<JobRecord>> queue_;                 // guarded by mu_
   std::vector<std::shared_ptr<JobRecord>> jobs_;                 // guarded by mu_, newest last
-  // What each worker holds: worker id -> slab key.
-  std::map<std::string, std::string> loaded_;  // guarded by mu_
+  // What each worker holds, by worker id.
+  std::map<std::string, HeldSlab> loaded_;  // guarded by mu_
   std::shared_ptr<LoadedDataset> cache_;       // runner thread only
   std::thread runner_;
 };

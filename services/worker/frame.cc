@@ -269,7 +269,6 @@ bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>*
 void Frame::TraceLoop(int thread_index) {
   NameThread("tt-tracer");
   ThreadStats& st = thread_stats_[thread_index];
-  const double cpu_start = ThreadCpuMs();
   std::vector<RayDescriptor> work;
   std::vector<Deposit> misses;
   std::string to_left, to_right, deposits;
@@ -284,6 +283,7 @@ void Frame::TraceLoop(int thread_index) {
   };
   while (!stop_.load(std::memory_order_relaxed)) {
     const auto t0 = Clock::now();
+    const double cpu0 = ThreadCpuMs();
     work.clear();
     // Rays from neighbours first: they free the nodes waiting on them.
     bool got = inbox_.TryPop(kWorkUnit, &work) || NextPrimaries(&work, &misses);
@@ -308,9 +308,9 @@ void Frame::TraceLoop(int thread_index) {
       }
     }
     flush();
+    st.cpu_ms += ThreadCpuMs() - cpu0;
   }
   flush();
-  st.cpu_ms = ThreadCpuMs() - cpu_start;
 }
 
 v1::WorkerFrameStats Frame::End(bool cancel) {

@@ -148,7 +148,7 @@ class Frame {
   // Per tracer thread, written by that thread only until joined.
   struct ThreadStats {
     double idle_ms = 0;
-    double cpu_ms = 0;  // the thread's CPU time (CLOCK_THREAD_CPUTIME_ID)
+    double cpu_ms = 0;  // CPU time (CLOCK_THREAD_CPUTIME_ID) spent tracing
     TraceCounters counters;
     uint64_t primary = 0, shadow = 0;
   };

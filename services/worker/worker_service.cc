@@ -4,6 +4,7 @@
 
 #include <bit>
 #include <cstring>
+#include <thread>
 
 #include "absl/strings/str_cat.h"
 #include "convert.h"
@@ -126,6 +127,193 @@ grpc::Status WorkerService::Evict(grpc::ServerContext*, const v1::DatasetRef* re
   } else {
     datasets_.erase(req->dataset_key());
   }
+  return grpc::Status::OK;
+}
+
+std::shared_ptr<const Scene> WorkerService::FindDataset(const std::string& key) {
+  std::lock_guard<std::mutex> lock(mu_);
+  auto it = datasets_.find(key);
+  return it == datasets_.end() ? nullptr : it->second;
+}
+
+grpc::Status WorkerService::FetchPlanes(grpc::ServerContext*, const v1::PlanesRequest* req,
+                                        grpc::ServerWriter<v1::SlabChunk>* writer) {
+  std::shared_ptr<const Scene> scene = FindDataset(req->dataset_key());
+  if (!scene) {
+    return grpc::Status(grpc::StatusCode::NOT_FOUND,
+                        absl::StrCat("FetchPlanes: dataset ", req->dataset_key(), " is not here"));
+  }
+  const int sb = scene->scalar_y_begin();
+  const int se = sb + static_cast<int>(scene->scalars().size() /
+                                       (static_cast<size_t>(scene->dims()[0]) * scene->dims()[2]));
+  // An empty range asks for nothing of that kind.
+  const bool sticks_ok = req->y_begin() == req->y_end() ||
+                         (req->y_begin() >= scene->y_begin() && req->y_end() <= scene->y_end() &&
+                          req->y_begin() < req->y_end());
+  const bool scalars_ok = req->scalar_begin() == req->scalar_end() ||
+                          (req->scalar_begin() >= sb && req->scalar_end() <= se &&
+                           req->scalar_begin() < req->scalar_end());
+  if (!sticks_ok || !scalars_ok) {
+    return Invalid(absl::StrCat("FetchPlanes: asked for sticks [", req->y_begin(), ", ",
+                                req->y_end(), ") and scalars [", req->scalar_begin(), ", ",
+                                req->scalar_end(), "); this worker holds sticks [",
+                                scene->y_begin(), ", ", scene->y_end(), ") and scalars [", sb,
+                                ", ", se, ")"));
+  }
+  constexpr size_t kChunkBytes = 1 << 20;
+  v1::SlabChunk chunk;
+  size_t pending = 0;
+  if (req->y_begin() < req->y_end()) {
+    for (std::string& b : scene->sticks().EncodeRows(req->y_begin(), req->y_end())) {
+      pending += b.size();
+      chunk.add_blocks(std::move(b));
+      if (pending >= kChunkBytes) {
+        if (!writer->Write(chunk)) return grpc::Status(grpc::StatusCode::CANCELLED, "reader left");
+        chunk.Clear();
+        pending = 0;
+      }
+    }
+  }
+  if (req->scalar_begin() < req->scalar_end()) {
+    ScalarPlanes planes = scene->CopyScalars(req->scalar_begin(), req->scalar_end());
+    const size_t per_chunk = kChunkBytes / 4;
+    for (size_t i = 0; i < planes.values.size(); i += per_chunk) {
+      AppendFloats(planes.values.data() + i, std::min(per_chunk, planes.values.size() - i),
+                   chunk.mutable_scalars());
+      if (!writer->Write(chunk)) return grpc::Status(grpc::StatusCode::CANCELLED, "reader left");
+      chunk.Clear();
+    }
+  }
+  if (chunk.blocks_size() > 0) writer->Write(chunk);
+  return grpc::Status::OK;
+}
+
+namespace {
+
+// Planes of a new slab that its worker fetches from one other worker.
+struct Fetch {
+  const v1::PlaneSource* source;
+  int y_begin, y_end;            // sticks
+  int scalar_begin, scalar_end;  // scalars
+  std::vector<std::string> blocks;
+  ScalarPlanes scalars;
+  absl::Status status;
+};
+
+// Parts of [lo, hi) outside [held_lo, held_hi): at most two intervals.
+std::vector<std::pair<int, int>> Missing(int lo, int hi, int held_lo, int held_hi) {
+  std::vector<std::pair<int, int>> out;
+  if (held_lo >= held_hi) return {{lo, hi}};
+  if (lo < std::min(hi, held_lo)) out.push_back({lo, std::min(hi, held_lo)});
+  if (std::max(lo, held_hi) < hi) out.push_back({std::max(lo, held_hi), hi});
+  return out;
+}
+
+void RunFetch(Fetch& f, const std::array<int, 3>& dims) {
+  auto stub = v1::Worker::NewStub(MakeChannel(f.source->address()));
+  grpc::ClientContext ctx;
+  ctx.set_deadline(Deadline(120));
+  v1::PlanesRequest req;
+  req.set_dataset_key(f.source->dataset_key());
+  req.set_y_begin(f.y_begin);
+  req.set_y_end(f.y_end);
+  req.set_scalar_begin(f.scalar_begin);
+  req.set_scalar_end(f.scalar_end);
+  auto reader = stub->FetchPlanes(&ctx, req);
+  std::string bytes;
+  v1::SlabChunk chunk;
+  while (reader->Read(&chunk)) {
+    for (auto& b : *chunk.mutable_blocks()) f.blocks.push_back(std::move(b));
+    bytes += chunk.scalars();
+  }
+  grpc::Status s = reader->Finish();
+  if (!s.ok()) {
+    f.status = absl::Status(FromGrpc(s).code(), absl::StrCat("fetching planes from ",
+                                                             f.source->address(), ": ",
+                                                             s.error_message()));
+    return;
+  }
+  f.scalars.y_begin = f.scalar_begin;
+  f.scalars.y_end = f.scalar_end;
+  const size_t want =
+      static_cast<size_t>(f.scalar_end - f.scalar_begin) * dims[0] * dims[2] * sizeof(float);
+  if (bytes.size() != want) {
+    f.status = absl::DataLossError(absl::StrCat("planes from ", f.source->address(), ": ",
+                                                bytes.size(), " bytes of scalars, expected ",
+                                                want));
+    return;
+  }
+  f.scalars.values.resize(want / sizeof(float));
+  DecodeFloats(bytes, f.scalars.values.data());
+}
+
+}  // namespace
+
+grpc::Status WorkerService::Reslab(grpc::ServerContext*, const v1::ReslabRequest* req,
+                                   v1::LoadReply* reply) {
+  std::shared_ptr<const Scene> old = FindDataset(req->old_key());
+  if (!old) {
+    return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                        absl::StrCat("Reslab: dataset ", req->old_key(), " is not loaded here"));
+  }
+  const auto& dims = old->dims();
+  const int y0 = req->y_begin(), y1 = req->y_end();
+  if (req->new_key().empty() || y0 < 0 || y0 >= y1 || y1 > dims[1]) {
+    return Invalid(absl::StrCat("Reslab: bad slab [", y0, ", ", y1, ") or empty key"));
+  }
+  // What this worker has already.
+  const int sb = old->ScalarBegin(y0), se = old->ScalarEnd(y1);
+  const int own_sb = old->scalar_y_begin();
+  const int own_se =
+      own_sb + static_cast<int>(old->scalars().size() / (static_cast<size_t>(dims[0]) * dims[2]));
+  std::vector<std::string> blocks;
+  std::vector<ScalarPlanes> planes;
+  const int keep0 = std::max(y0, old->y_begin()), keep1 = std::min(y1, old->y_end());
+  if (keep0 < keep1) blocks = old->sticks().EncodeRows(keep0, keep1);
+  if (std::max(sb, own_sb) < std::min(se, own_se)) {
+    planes.push_back(old->CopyScalars(std::max(sb, own_sb), std::min(se, own_se)));
+  }
+  // The rest from the workers whose slabs hold them.
+  std::vector<Fetch> fetches;
+  auto plan = [&](const std::vector<std::pair<int, int>>& missing, bool sticks) -> grpc::Status {
+    for (auto [lo, hi] : missing) {
+      while (lo < hi) {
+        const v1::PlaneSource* from = nullptr;
+        for (const auto& src : req->sources()) {
+          if (src.y_begin() <= lo && lo < src.y_end()) from = &src;
+          if (from) break;
+        }
+        if (!from) {
+          return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                              absl::StrCat("Reslab: no source holds plane ", lo));
+        }
+        const int end = std::min(hi, from->y_end());
+        Fetch f{from, 0, 0, 0, 0, {}, {}, {}};
+        (sticks ? f.y_begin : f.scalar_begin) = lo;
+        (sticks ? f.y_end : f.scalar_end) = end;
+        fetches.push_back(std::move(f));
+        lo = end;
+      }
+    }
+    return grpc::Status::OK;
+  };
+  if (auto s = plan(Missing(y0, y1, old->y_begin(), old->y_end()), true); !s.ok()) return s;
+  if (auto s = plan(Missing(sb, se, own_sb, own_se), false); !s.ok()) return s;
+  std::vector<std::thread> threads;
+  for (Fetch& f : fetches) threads.emplace_back([&f, &dims] { RunFetch(f, dims); });
+  for (auto& t : threads) t.join();
+  for (Fetch& f : fetches) {
+    if (!f.status.ok()) return ToGrpc(f.status);
+    for (auto& b : f.blocks) blocks.push_back(std::move(b));
+    if (f.scalar_begin < f.scalar_end) planes.push_back(std::move(f.scalars));
+  }
+  auto scene = old->Reslab(y0, y1, blocks, planes);
+  if (!scene.ok()) return ToGrpc(scene.status());
+  reply->set_memory_bytes(scene->MemoryBytes());
+  spdlog::info("re-slabbed {} [{}, {}) -> [{}, {}) with planes from {} neighbour fetch(es)",
+               req->new_key(), old->y_begin(), old->y_end(), y0, y1, fetches.size());
+  std::lock_guard<std::mutex> lock(mu_);
+  datasets_[req->new_key()] = std::make_shared<const Scene>(*std::move(scene));
   return grpc::Status::OK;
 }
 

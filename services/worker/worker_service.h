@@ -33,6 +33,10 @@ class WorkerService final : public v1::Worker::Service {
                         v1::LoadReply* reply) override;
   grpc::Status Evict(grpc::ServerContext* ctx, const v1::DatasetRef* req,
                      v1::FrameAck* reply) override;
+  grpc::Status Reslab(grpc::ServerContext* ctx, const v1::ReslabRequest* req,
+                      v1::LoadReply* reply) override;
+  grpc::Status FetchPlanes(grpc::ServerContext* ctx, const v1::PlanesRequest* req,
+                           grpc::ServerWriter<v1::SlabChunk>* writer) override;
   grpc::Status PrepareFrame(grpc::ServerContext* ctx, const v1::FrameSpec* spec,
                             v1::FrameAck* reply) override;
   grpc::Status RunFrame(grpc::ServerContext* ctx, const v1::FrameRef* req,
@@ -44,6 +48,7 @@ class WorkerService final : public v1::Worker::Service {
 
  private:
   std::shared_ptr<Frame> FindFrame(uint64_t id);
+  std::shared_ptr<const Scene> FindDataset(const std::string& key);
 
   WorkerOptions options_;
   std::mutex mu_;

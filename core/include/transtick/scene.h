@@ -49,6 +49,13 @@ class BrickMap {
   std::vector<uint8_t> bricks_;
 };
 
+// Scalars of planes [y_begin, y_end) of a volume: x fastest, then y, then z.
+struct ScalarPlanes {
+  int y_begin = 0;
+  int y_end = 0;
+  std::vector<float> values;
+};
+
 // Planes of scalars kept beyond each side of a slab: gradients by central
 // differences at a point interpolated from the 8 nearest voxel centres reach
 // two planes out.
@@ -80,8 +87,20 @@ class Scene {
                                          std::vector<float> scalars, BrickMap bricks,
                                          Classification classification, TransferFunction transfer);
 
-  // A copy of the slab [y_begin, y_end) of this (whole-volume) scene.
+  // A copy of the slab [y_begin, y_end) of this scene.
+  // REQUIRES: this scene holds the slab and its ghost planes.
   Scene Slab(int y_begin, int y_end) const;
+
+  // The scalars of planes [y_begin, y_end) in the layout of the store.
+  // REQUIRES: the planes are stored here.
+  ScalarPlanes CopyScalars(int y_begin, int y_end) const;
+
+  // A new slab [y_begin, y_end) of this scene's volume, classification and
+  // brick map, from sticks blocks and scalar planes gathered here and from
+  // the other slabs (balancing moves planes between workers this way).
+  // Fails when a track or a scalar plane of the new slab is missing.
+  absl::StatusOr<Scene> Reslab(int y_begin, int y_end, const std::vector<std::string>& blocks,
+                               const std::vector<ScalarPlanes>& planes) const;
 
   int ScalarBegin(int y_begin) const { return std::max(0, y_begin - kGhostPlanes); }
   int ScalarEnd(int y_end) const { return std::min(dims_[1], y_end + kGhostPlanes); }

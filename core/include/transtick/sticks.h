@@ -47,18 +47,22 @@ class Sticks {
   static Sticks Encode(std::span<const uint8_t> labels, std::array<int, 3> dims, int y_begin,
                        int y_end);
 
-  // Assembles the slab [y_begin, y_end) from serialised blocks (any order,
-  // blocks outside the slab ignored, tracks of partly covered blocks kept only
-  // inside the slab). Fails on a corrupt block, a block for other dims, a
-  // material above `max_material`, or a track of the slab no block covered.
+  // Assembles the slab [y_begin, y_end) from serialised blocks (any order;
+  // a block may carry only some of its rows, as a slab that holds part of it
+  // encodes it; tracks outside the slab are ignored). Fails on a corrupt
+  // block, a block for other dims, a material above `max_material`, or a
+  // track of the slab no block covered.
   static absl::StatusOr<Sticks> FromBlocks(std::array<int, 3> dims, int y_begin, int y_end,
                                            int max_material,
                                            const std::vector<std::string>& blocks);
 
-  // Serialises block (bx, by): tracks x in [32 bx, 32 bx + 32), y in
-  // [32 by, 32 by + 32), clipped to the volume.
-  // REQUIRES: the block's tracks lie in [y_begin, y_end).
-  std::string EncodeBlock(int bx, int by) const;
+  // Serialises the tracks of block (bx, by) that this slab holds: x in
+  // [32 bx, 32 bx + 32) and y in [32 by, 32 by + 32), clipped to the volume,
+  // to [y_begin, y_end) and to [y_lo, y_hi).
+  // REQUIRES: at least one row is left.
+  std::string EncodeBlock(int bx, int by, int y_lo = 0, int y_hi = kMaxExtent) const;
+  // Every block of rows [y_lo, y_hi), which this slab holds.
+  std::vector<std::string> EncodeRows(int y_lo, int y_hi) const;
 
   const std::array<int, 3>& dims() const { return dims_; }
   int y_begin() const { return y_begin_; }
