@@ -4,7 +4,11 @@
 #include <filesystem>
 #include <fstream>
 
+#include <random>
+
 #include "client.h"
+#include "cluster.grpc.pb.h"
+#include "daemon.h"
 #include "convert.h"
 #include "gtest/gtest.h"
 #include "testing.h"
@@ -140,6 +144,182 @@ TEST_F(ClusterTest, BadJobsGetClearErrorsAndTheClusterGoesOn) {
   auto ok = SubmitAndWatch(root, MakeJob({good}), WatchOptions{});
   ASSERT_TRUE(ok.ok()) << ok.status();
   EXPECT_TRUE(fs::exists(good.output()));
+}
+
+TEST_F(ClusterTest, BalancingAndRingsNeverChangeTheImage) {
+  // Every combination of 1-8 workers, 1-3 rings and each balancing mode
+  // renders the in-process image, on views across and along the slab axis.
+  std::vector<v1::View> views = {View(45, 0, true, "a.exr"), View(0, 90, true, "b.exr")};
+  std::vector<Image> want;
+  for (const auto& v : views) want.push_back(Reference(dir_ + "/" + volume_, Materials(), v));
+  for (int workers = 1; workers <= 8; ++workers) {
+    for (int rings = 1; rings <= 3; ++rings) {
+      LocalCluster::Options o;
+      o.workers = workers;
+      o.rings = rings;
+      o.data_dir = dir_;
+      auto cluster = LocalCluster::Start(o);
+      ASSERT_TRUE(cluster.ok()) << cluster.status();
+      for (const char* balance : {"off", "test-rays", "previous-frame", "test-rays"}) {
+        v1::Job job = MakeJob(views);
+        job.set_balance(balance);
+        job.set_balance_grid(8);
+        auto stats = SubmitAndWatch((*cluster)->root_address(), job, WatchOptions{});
+        ASSERT_TRUE(stats.ok()) << stats.status();
+        ASSERT_EQ(stats->size(), views.size());
+        EXPECT_EQ(stats->front().rings(), std::min(rings, workers));
+        EXPECT_EQ(stats->front().workers_size(), workers);
+        for (size_t i = 0; i < views.size(); ++i) {
+          auto got = ReadImage(views[i].output());
+          ASSERT_TRUE(got.ok()) << got.status();
+          ASSERT_EQ(got->rgb, want[i].rgb) << workers << " workers, " << rings << " rings, balance "
+                                           << balance << ", view " << i;
+        }
+      }
+    }
+  }
+}
+
+// A volume whose content lies in the planes y < 24 of 96: noise of a
+// faint material (see FaintMaterials), costly to trace (a hundred surfaces
+// a ray, a shadow ray each), and empty space above.
+std::string WriteConcentrated(const std::string& dir) {
+  const std::array<int, 3> dims = {64, 96, 128};
+  std::vector<float> values(static_cast<size_t>(dims[0]) * dims[1] * dims[2], 0.0f);
+  std::mt19937 rng(3);
+  for (int z = 0; z < dims[2]; ++z)
+    for (int y = 0; y < 24; ++y)
+      for (int x = 0; x < dims[0]; ++x)
+        values[(static_cast<size_t>(z) * dims[1] + y) * dims[0] + x] = rng() % 3 == 0 ? 30 : 0;
+  std::ofstream f(dir + "/concentrated.nrrd", std::ios::binary);
+  f << "NRRD0004\ntype: float\ndimension: 3\nsizes: " << dims[0] << " " << dims[1] << " "
+    << dims[2] << "\nendian: little\nencoding: raw\n\n";
+  f.write(reinterpret_cast<const char*>(values.data()), values.size() * 4);
+  return "concentrated.nrrd";
+}
+
+v1::MaterialSet FaintMaterials() {
+  v1::MaterialSet m;
+  v1::Material* x = m.add_materials();
+  x->set_name("faint");
+  x->set_min(20);
+  x->set_max(45);
+  for (float c : {0.9f, 0.7f, 0.6f}) x->add_color(c);
+  x->set_opacity(0.04f);
+  return m;
+}
+
+TEST_F(ClusterTest, BalancingEvensOutConcentratedContent) {
+  const std::string file = WriteConcentrated(dir_);
+  LocalCluster::Options o;
+  o.workers = 4;
+  o.data_dir = dir_;
+  auto cluster = LocalCluster::Start(o);
+  ASSERT_TRUE(cluster.ok()) << cluster.status();
+  v1::View view = View(0, 0, true, "c.exr");
+  view.set_width(160);
+  view.set_height(160);
+  const Image want = Reference(dir_ + "/" + file, FaintMaterials(), view);
+  auto run = [&](const std::string& balance) {
+    v1::Job job = MakeJob({view});
+    job.mutable_datasets(0)->set_volume(file);
+    *job.mutable_datasets(0)->mutable_materials() = FaintMaterials();
+    job.set_balance(balance);
+    auto stats = SubmitAndWatch((*cluster)->root_address(), job, WatchOptions{});
+    EXPECT_TRUE(stats.ok()) << stats.status();
+    EXPECT_EQ(ReadImage(view.output())->rgb, want.rgb) << balance;
+    return stats.ok() ? stats->front() : v1::ClusterFrameStats();
+  };
+  const v1::ClusterFrameStats off = run("off");
+  const v1::ClusterFrameStats on = run("test-rays");
+  // Uniform slabs of 24 planes leave all the work to the first worker
+  // (max/mean 2.2-2.9 seen on 2 cores, where idle workers still generate
+  // and skip their primary rays).
+  EXPECT_GT(off.active_imbalance(), 1.5);
+  // The re-cut slabs share the content: every inner cut lies in it, and
+  // the busiest worker is much nearer the mean.
+  ASSERT_EQ(on.cuts_after_size(), 5);
+  EXPECT_EQ((std::vector<int>(on.cuts_before().begin(), on.cuts_before().end())),
+            (std::vector<int>{0, 24, 48, 72, 96}));
+  for (int i = 1; i < 4; ++i) EXPECT_LE(on.cuts_after(i), 32) << i;
+  EXPECT_GT(on.planes_moved(), 0);
+  // Seen: 1.2-1.5 against 2.2-2.9 unbalanced; the test checks the direction.
+  EXPECT_LT(on.active_imbalance(), 0.85 * off.active_imbalance())
+      << "off " << off.active_imbalance() << ", balanced " << on.active_imbalance();
+  // The next frame of the same view reuses the cuts without a prerender.
+  const v1::ClusterFrameStats again = run("test-rays");
+  EXPECT_EQ(again.planes_moved(), 0);
+  EXPECT_EQ(std::vector<int>(again.cuts_after().begin(), again.cuts_after().end()),
+            std::vector<int>(on.cuts_after().begin(), on.cuts_after().end()));
+  for (const auto& w : again.workers()) EXPECT_EQ(w.test_ray_ms(), 0.0);
+}
+
+TEST_F(ClusterTest, PreviousFrameBalancingCarriesCutsForward) {
+  const std::string file = WriteConcentrated(dir_);
+  LocalCluster::Options o;
+  o.workers = 3;
+  o.data_dir = dir_;
+  auto cluster = LocalCluster::Start(o);
+  ASSERT_TRUE(cluster.ok()) << cluster.status();
+  v1::View a = View(0, 0, true, "p0.exr"), b = View(10, 0, true, "p1.exr");
+  v1::Job job = MakeJob({a, b});
+  job.mutable_datasets(0)->set_volume(file);
+  job.set_balance("previous-frame");
+  auto stats = SubmitAndWatch((*cluster)->root_address(), job, WatchOptions{});
+  ASSERT_TRUE(stats.ok()) << stats.status();
+  ASSERT_EQ(stats->size(), 2u);
+  const auto& first = (*stats)[0];
+  const auto& second = (*stats)[1];
+  // The first frame runs on uniform slabs and re-cuts toward the content;
+  // the second runs on those cuts.
+  EXPECT_EQ(std::vector<int>(first.cuts_before().begin(), first.cuts_before().end()),
+            (std::vector<int>{0, 32, 64, 96}));
+  EXPECT_LE(first.cuts_after(2), 32);
+  EXPECT_EQ(std::vector<int>(second.cuts_before().begin(), second.cuts_before().end()),
+            std::vector<int>(first.cuts_after().begin(), first.cuts_after().end()));
+  EXPECT_EQ(second.workers(0).slab(1), first.cuts_after(1));
+  EXPECT_EQ(ReadImage(b.output())->rgb,
+            Reference(dir_ + "/" + file, Materials(), b).rgb);
+}
+
+TEST_F(ClusterTest, AWorkerRegisteringTwiceIsRefused) {
+  LocalCluster::Options o;
+  o.workers = 2;
+  o.data_dir = dir_;
+  auto cluster = LocalCluster::Start(o);
+  ASSERT_TRUE(cluster.ok()) << cluster.status();
+  auto root = v1::Root::NewStub(MakeChannel((*cluster)->root_address()));
+  v1::RegisterRequest req;
+  req.set_id("twice");
+  req.set_address("127.0.0.1:1");
+  req.set_threads(1);
+  v1::RegisterReply reply;
+  {
+    grpc::ClientContext ctx;
+    ASSERT_TRUE(root->Register(&ctx, req, &reply).ok());
+  }
+  {
+    grpc::ClientContext ctx;
+    grpc::Status s = root->Register(&ctx, req, &reply);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::ALREADY_EXISTS);
+    EXPECT_NE(s.error_message().find("twice"), std::string::npos) << s.error_message();
+  }
+  {
+    grpc::ClientContext ctx;
+    v1::StatusReply status;
+    ASSERT_TRUE(root->Status(&ctx, v1::StatusRequest(), &status).ok());
+    EXPECT_EQ(status.workers_size(), 3);
+  }
+  {
+    grpc::ClientContext ctx;
+    ASSERT_TRUE(root->Unregister(&ctx, req, &reply).ok());
+  }
+  // The two real workers render the next job.
+  v1::View v = View(30, 10, true, "after.exr");
+  auto ok = SubmitAndWatch((*cluster)->root_address(), MakeJob({v}), WatchOptions{});
+  ASSERT_TRUE(ok.ok()) << ok.status();
+  EXPECT_EQ(ok->front().workers_size(), 2);
+  EXPECT_EQ(ReadImage(v.output())->rgb, Reference(dir_ + "/" + volume_, Materials(), v).rgb);
 }
 
 TEST_F(ClusterTest, StressEveryRayCrossesEverySlab) {

@@ -70,6 +70,33 @@ TEST(SticksTest, RandomVolumesRoundTripExhaustively) {
   }
 }
 
+TEST(SticksTest, PartialBlocksFromSeveralSlabsRebuildAnother) {
+  // Balancing: slabs that end inside a block each send the rows they hold,
+  // and those partial blocks rebuild a slab cut elsewhere.
+  std::array<int, 3> dims = {45, 100, 23};
+  Volume v = MakeRandom(dims, 9, 3);
+  auto labels = Labels(v, 3);
+  std::vector<std::string> blocks;
+  for (auto [y0, y1] : {std::pair{0, 17}, std::pair{17, 50}, std::pair{50, 51},
+                        std::pair{51, 100}}) {
+    Sticks part = Sticks::Encode(labels, dims, y0, y1);
+    for (std::string& b : part.EncodeRows(y0, y1)) blocks.push_back(std::move(b));
+  }
+  for (auto [y0, y1] : {std::pair{0, 100}, std::pair{10, 60}, std::pair{50, 51}}) {
+    auto slab = Sticks::FromBlocks(dims, y0, y1, 3, blocks);
+    ASSERT_TRUE(slab.ok()) << slab.status();
+    ExpectMatches(*slab, labels, dims);
+  }
+  // Rows asked of a slab are exactly the rows it sends.
+  Sticks whole = Sticks::Encode(labels, dims, 0, dims[1]);
+  auto rows = whole.EncodeRows(40, 70);
+  EXPECT_TRUE(Sticks::FromBlocks(dims, 40, 70, 3, rows).ok());
+  EXPECT_NE(Sticks::FromBlocks(dims, 39, 70, 3, rows).status().message().find("no block covers"),
+            std::string::npos);
+  EXPECT_NE(Sticks::FromBlocks(dims, 40, 71, 3, rows).status().message().find("no block covers"),
+            std::string::npos);
+}
+
 TEST(SticksTest, PhantomCompresses) {
   std::array<int, 3> dims = {64, 64, 64};
   Volume v = MakeSphere(dims, {32, 32, 32}, 20);
@@ -136,6 +163,13 @@ TEST_F(CorruptBlockTest, NamesWhatIsWrong) {
             std::string::npos);
   EXPECT_NE(Sticks::FromBlocks(dims_, 0, 20, 2, {}).status().message().find("no block covers"),
             std::string::npos);
+  // Rows outside the block's row of blocks (bytes 14-17: y0, y1).
+  std::string rows = block_;
+  rows[16] = 40;  // y1 = 40 > 32
+  EXPECT_NE(Decode(rows).message().find("not in block row"), std::string::npos);
+  rows = block_;
+  rows[14] = rows[16];  // y0 = y1: no rows
+  EXPECT_NE(Decode(rows).message().find("not in block row"), std::string::npos);
 }
 
 TEST_F(CorruptBlockTest, RandomByteFlipsNeverCrash) {
