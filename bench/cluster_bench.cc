@@ -4,7 +4,7 @@
 //                         [--azimuth DEG] [--repeat N] [--workers 1,2,4]
 //   cluster_bench forward [--rays N]
 //   cluster_bench tables  [--volume FILE] [--materials FILE] [--size WxH]
-//                         [--repeat N]
+//                         [--repeat N] [--grid N]
 //
 // scaling: the in-process render on all cores, then an embedded cluster
 //   (root, display and N workers, real gRPC on 127.0.0.1) for each N. Each
@@ -64,7 +64,7 @@ using Clock = std::chrono::steady_clock;
 constexpr char kUsage[] =
     "usage: cluster_bench scaling|forward|tables [--volume FILE] [--materials FILE]\n"
     "                     [--size WxH] [--azimuth DEG] [--repeat N] [--workers 1,2,4]\n"
-    "                     [--rays N]\n";
+    "                     [--rays N] [--grid N]\n";
 
 struct Options {
   std::string mode;
@@ -76,6 +76,7 @@ struct Options {
   int repeat = 5;
   std::vector<int> workers = {1, 2, 4};
   int rays = 1 << 20;
+  int grid = 0;  // test rays per side for balancing, 0 = the root's default
 };
 
 double MsSince(Clock::time_point t) {
@@ -134,6 +135,8 @@ std::string Parse(int argc, char** argv, Options* o) {
       if (value.empty() || *end != '\0') return "--azimuth must be a number";
     } else if (flag == "--repeat") {
       if (!ParseInt(value, 1, 1000, &o->repeat)) return "--repeat must be in [1, 1000]";
+    } else if (flag == "--grid") {
+      if (!ParseInt(value, 1, 256, &o->grid)) return "--grid must be in [1, 256]";
     } else if (flag == "--rays") {
       if (!ParseInt(value, 1, 1 << 26, &o->rays)) return "--rays must be in [1, 2^26]";
     } else if (flag == "--workers") {
@@ -196,10 +199,12 @@ v1::View MakeView(const Options& o, double azimuth) {
 absl::StatusOr<std::vector<v1::ClusterFrameStats>> RunFrames(const std::string& root,
                                                              const Setup& s, v1::View view,
                                                              int frames, const std::string& out,
-                                                             const std::string& balance = "") {
+                                                             const std::string& balance = "",
+                                                             int grid = 0) {
   v1::Job job;
   job.set_name("bench");
   if (!balance.empty()) job.set_balance(balance);
+  job.set_balance_grid(grid);
   v1::Dataset* d = job.add_datasets();
   d->set_volume(s.file);
   *d->mutable_materials() = s.materials;
@@ -420,6 +425,148 @@ int Forward(const Options& o) {
   return ok ? 0 : 1;
 }
 
+// ---------------------------------------------------------------- tables
+
+// `repeat` frames of one view after a warm-up frame (slab loads, and the
+// prerender when balancing), on a running cluster.
+struct Series {
+  std::vector<v1::ClusterFrameStats> frames;  // the timed ones
+  bool identical = true;
+  double FrameMs() const {
+    std::vector<double> ms;
+    for (const auto& f : frames) ms.push_back(f.frame_ms());
+    return Median(ms);
+  }
+  // Mean over the frames of each worker's field.
+  std::vector<double> PerWorker(double (v1::WorkerFrameStats::*field)() const) const {
+    std::vector<double> out(frames.empty() ? 0 : frames.front().workers_size(), 0.0);
+    for (const auto& f : frames)
+      for (int i = 0; i < f.workers_size() && i < static_cast<int>(out.size()); ++i)
+        out[i] += (f.workers(i).*field)() / frames.size();
+    return out;
+  }
+};
+
+absl::StatusOr<Series> RunSeries(const std::string& root, const Setup& s, const v1::View& view,
+                                 int repeat, const std::string& balance, int grid,
+                                 const Image& want) {
+  const std::string out = (fs::temp_directory_path() / "cluster_bench_tables.exr").string();
+  auto stats = RunFrames(root, s, view, repeat + 1, out, balance, grid);
+  if (!stats.ok()) return stats.status();
+  Series series;
+  series.frames.assign(stats->begin() + 1, stats->end());
+  auto image = ReadImage(out);
+  if (!image.ok()) return image.status();
+  series.identical = image->rgb == want.rgb;
+  return series;
+}
+
+double Sum(const std::vector<double>& v) {
+  double s = 0;
+  for (double x : v) s += x;
+  return s;
+}
+
+double Imbalance(const std::vector<double>& active) {
+  if (active.empty()) return 0;
+  double mean = Sum(active) / active.size();
+  return mean > 0 ? *std::max_element(active.begin(), active.end()) / mean : 0;
+}
+
+int Tables(const Options& o) {
+  auto setup = Prepare(o);
+  if (!setup.ok()) return Fail(setup.status());
+  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  struct NamedView {
+    const char* name;
+    v1::View view;
+    Image want;
+  };
+  std::vector<NamedView> views = {{"frontal", MakeView(o, 0), {}}, {"45 deg", MakeView(o, 45), {}}};
+  for (auto& v : views) {
+    auto camera = Camera::Create(*ToCameraSpec(v.view), setup->extent);
+    if (!camera.ok()) return Fail(camera.status());
+    RenderStats rs;
+    auto image = RenderLocal(*setup->scene, *camera, ToRenderSettings(v.view), cores, &rs);
+    if (!image.ok()) return Fail(image.status());
+    v.want = *std::move(image);
+  }
+  std::printf("volume %s, %dx%d, shadows on, %d cores; each figure: mean of %d frames after a "
+              "warm-up frame (slab loads, prerender)\n",
+              o.volume.c_str(), o.width, o.height, cores, o.repeat);
+  bool identical = true;
+  // (workers, view, balance) -> series
+  std::map<std::tuple<int, int, std::string>, Series> results;
+  for (int n : {2, 4, 8}) {
+    LocalCluster::Options co;
+    co.workers = n;
+    co.threads_per_worker = std::max(1, cores / n);
+    co.data_dir = setup->data_dir;
+    auto cluster = LocalCluster::Start(co);
+    if (!cluster.ok()) return Fail(cluster.status());
+    for (size_t vi = 0; vi < views.size(); ++vi) {
+      for (const std::string balance : {"off", "test-rays"}) {
+        auto series = RunSeries((*cluster)->root_address(), *setup, views[vi].view, o.repeat,
+                                balance, o.grid, views[vi].want);
+        if (!series.ok()) return Fail(series.status());
+        if (!series->identical) {
+          identical = false;
+          std::fprintf(stderr, "cluster_bench: %d workers, %s, balance %s: image differs\n", n,
+                       views[vi].name, balance.c_str());
+        }
+        results[{n, static_cast<int>(vi), balance}] = *std::move(series);
+      }
+    }
+  }
+
+  std::printf("\nTable 1: per worker, elapsed / active / tracer CPU in ms\n");
+  std::printf("%-8s %-8s %-10s %-7s %-11s %9s %9s %9s %12s %12s\n", "workers", "view",
+              "balance", "worker", "slab", "elapsed", "active", "CPU", "max/mean act",
+              "max/mean CPU");
+  for (int n : {2, 4}) {
+    for (size_t vi = 0; vi < views.size(); ++vi) {
+      for (const std::string balance : {"off", "test-rays"}) {
+        const Series& s = results[{n, static_cast<int>(vi), balance}];
+        const auto elapsed = s.PerWorker(&v1::WorkerFrameStats::elapsed_ms);
+        const auto active = s.PerWorker(&v1::WorkerFrameStats::active_ms);
+        const auto cpu = s.PerWorker(&v1::WorkerFrameStats::cpu_ms);
+        const auto& last = s.frames.back();
+        for (size_t i = 0; i < elapsed.size(); ++i) {
+          const auto& w = last.workers(static_cast<int>(i));
+          std::printf("%-8d %-8s %-10s %-7zu [%3d, %3d) %9.1f %9.1f %9.1f", n, views[vi].name,
+                      balance.c_str(), i, w.slab(0), w.slab(1), elapsed[i], active[i], cpu[i]);
+          if (i + 1 == elapsed.size()) {
+            std::printf(" %12.2f %12.2f", Imbalance(active), Imbalance(cpu));
+          }
+          std::printf("\n");
+        }
+      }
+    }
+  }
+
+  std::printf("\nTable 2: frame time (ms) and relative efficiency T_2W / ((n/2) T_nW)\n");
+  std::printf("%-8s %-10s %-8s %9s %10s %11s %12s %12s %12s\n", "view", "balance", "workers",
+              "frame", "efficiency", "mean active", "max/mean act", "summed CPU", "max/mean CPU");
+  for (size_t vi = 0; vi < views.size(); ++vi) {
+    for (const std::string balance : {"off", "test-rays"}) {
+      const double t2 = results[{2, static_cast<int>(vi), balance}].FrameMs();
+      for (int n : {2, 4, 8}) {
+        const Series& s = results[{n, static_cast<int>(vi), balance}];
+        const auto active = s.PerWorker(&v1::WorkerFrameStats::active_ms);
+        const auto cpu = s.PerWorker(&v1::WorkerFrameStats::cpu_ms);
+        const double t = s.FrameMs();
+        std::printf("%-8s %-10s %-8d %9.1f %10.2f %11.1f %12.2f %12.1f %12.2f\n", views[vi].name,
+                    balance.c_str(), n, t, t > 0 ? t2 / ((n / 2.0) * t) : 0.0,
+                    active.empty() ? 0.0 : Sum(active) / active.size(), Imbalance(active),
+                    Sum(cpu), Imbalance(cpu));
+      }
+    }
+  }
+  std::printf("\n%s\n", identical ? "OK: every cluster image equals the in-process image bit for bit"
+                                   : "FAIL: a cluster image differs (see stderr)");
+  return identical ? 0 : 1;
+}
+
 }  // namespace
 }  // namespace transtick
 
@@ -436,5 +583,5 @@ int main(int argc, char** argv) {
   }
   if (options.mode == "forward") return transtick::Forward(options);
   if (options.mode == "scaling") return transtick::Scaling(options);
-  return transtick::Fail(absl::UnimplementedError("tables"));
+  return transtick::Tables(options);
 }
