@@ -481,8 +481,11 @@ int StatusCommand(int argc, char** argv) {
   if (!s.ok()) return Fail("status", FromGrpc(s));
   std::printf("%d workers, %d ring(s)\n", reply.workers_size(), reply.rings());
   for (const auto& w : reply.workers()) {
-    std::printf("  worker %s at %s, %d threads\n", w.id().c_str(), w.address().c_str(),
-                w.threads());
+    std::printf("  worker %s at %s, %d threads", w.id().c_str(), w.address().c_str(), w.threads());
+    if (w.ring() >= 0) {
+      std::printf(", ring %d, slab [%d, %d)", w.ring(), w.slab_begin(), w.slab_end());
+    }
+    std::printf("\n");
   }
   for (const auto& j : reply.jobs()) {
     std::printf("%-10s %-10s %3d/%-3d %s%s%s\n", j.job_id().c_str(),

@@ -5,6 +5,8 @@
 #include <spdlog/spdlog.h>
 
 #include <cstdlib>
+#include <map>
+#include <mutex>
 
 #include "absl/strings/str_cat.h"
 
@@ -91,6 +93,22 @@ std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address) {
   // slab transfers to the same peer.
   args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
   return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+}
+
+std::shared_ptr<grpc::Channel> SharedChannel(const std::string& address,
+                                             const std::string& purpose) {
+  static std::mutex mu;
+  static auto* channels = new std::map<std::string, std::shared_ptr<grpc::Channel>>();
+  const std::string key = purpose + "|" + address;
+  std::lock_guard<std::mutex> lock(mu);
+  auto& channel = (*channels)[key];
+  // A peer that went away (and may be back at the same address) leaves its
+  // channel failing; a fresh one connects at once instead of backing off.
+  if (!channel || channel->GetState(false) == GRPC_CHANNEL_TRANSIENT_FAILURE ||
+      channel->GetState(false) == GRPC_CHANNEL_SHUTDOWN) {
+    channel = MakeChannel(address);
+  }
+  return channel;
 }
 
 std::chrono::system_clock::time_point Deadline(double seconds) {

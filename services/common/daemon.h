@@ -55,6 +55,14 @@ std::string Setting(const Flags& flags, const std::string& flag, const char* env
 // A channel with the cluster's message limits (large ray and image batches).
 std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address);
 
+// A channel to `address` kept for the life of the process and shared by
+// every caller with the same `purpose` ("rays", "deposits", ...), so that
+// per-frame streams reuse a warm connection instead of opening one each
+// frame. A channel whose peer has failed is replaced by a fresh one.
+// Thread-safe.
+std::shared_ptr<grpc::Channel> SharedChannel(const std::string& address,
+                                             const std::string& purpose);
+
 // A deadline `seconds` from now, for unary calls.
 std::chrono::system_clock::time_point Deadline(double seconds);
 

@@ -896,7 +896,7 @@ absl::StatusOr<RootService::FrameResult> RootService::RunFrame(JobRecord& job, i
                                                                const Layout& layout, bool test) {
   const uint64_t frame_id = next_frame_id_++;
   const auto t0 = Clock::now();
-  auto display = v1::Display::NewStub(MakeChannel(options_.display));
+  auto display = v1::Display::NewStub(SharedChannel(options_.display, "control"));
   {
     grpc::ClientContext ctx;
     ctx.set_deadline(Deadline(10));

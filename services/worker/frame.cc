@@ -151,7 +151,7 @@ Frame::~Frame() {
 absl::Status Frame::Start() {
   if (started_.exchange(true)) return absl::FailedPreconditionError("frame already running");
   run_start_ = Clock::now();
-  display_stub_ = v1::Display::NewStub(MakeChannel(spec_.display()));
+  display_stub_ = v1::Display::NewStub(SharedChannel(spec_.display(), "deposits"));
   display_ctx_ = std::make_unique<grpc::ClientContext>();
   display_stream_ = display_stub_->Deposits(display_ctx_.get(), &display_ack_);
   deposit_writer_ = std::thread([this] {
@@ -169,7 +169,7 @@ absl::Status Frame::Start() {
     display_stream_->WritesDone();
   });
   if (!spec_.right().empty()) {
-    right_stub_ = v1::Worker::NewStub(MakeChannel(spec_.right()));
+    right_stub_ = v1::Worker::NewStub(SharedChannel(spec_.right(), "rays"));
     right_ctx_ = std::make_unique<grpc::ClientContext>();
     right_stream_ = right_stub_->Rays(right_ctx_.get());
     v1::RayBatch hello;
