@@ -2,6 +2,7 @@
 //
 //   cluster_bench scaling [--volume FILE] [--materials FILE] [--size WxH]
 //                         [--azimuth DEG] [--repeat N] [--workers 1,2,4]
+//                         [--threads N] [--balance MODE] [--grid N]
 //   cluster_bench forward [--rays N]
 //   cluster_bench tables  [--volume FILE] [--materials FILE] [--size WxH]
 //                         [--repeat N] [--grid N]
@@ -64,7 +65,7 @@ using Clock = std::chrono::steady_clock;
 constexpr char kUsage[] =
     "usage: cluster_bench scaling|forward|tables [--volume FILE] [--materials FILE]\n"
     "                     [--size WxH] [--azimuth DEG] [--repeat N] [--workers 1,2,4]\n"
-    "                     [--rays N] [--grid N]\n";
+    "                     [--rays N] [--grid N] [--threads N] [--balance MODE]\n";
 
 struct Options {
   std::string mode;
@@ -77,6 +78,8 @@ struct Options {
   std::vector<int> workers = {1, 2, 4};
   int rays = 1 << 20;
   int grid = 0;  // test rays per side for balancing, 0 = the root's default
+  int threads = 0;  // tracer threads per worker; 0 = cores / workers
+  std::string balance = "off";  // for scaling
 };
 
 double MsSince(Clock::time_point t) {
@@ -135,6 +138,10 @@ std::string Parse(int argc, char** argv, Options* o) {
       if (value.empty() || *end != '\0') return "--azimuth must be a number";
     } else if (flag == "--repeat") {
       if (!ParseInt(value, 1, 1000, &o->repeat)) return "--repeat must be in [1, 1000]";
+    } else if (flag == "--threads") {
+      if (!ParseInt(value, 0, 64, &o->threads)) return "--threads must be in [0, 64]";
+    } else if (flag == "--balance") {
+      o->balance = value;
     } else if (flag == "--grid") {
       if (!ParseInt(value, 1, 256, &o->grid)) return "--grid must be in [1, 256]";
     } else if (flag == "--rays") {
@@ -220,86 +227,105 @@ int Scaling(const Options& o) {
   const v1::View view = MakeView(o, o.azimuth);
   auto camera = Camera::Create(*ToCameraSpec(view), setup->extent);
   if (!camera.ok()) return Fail(camera.status());
-  std::printf("volume %s, %dx%d, azimuth %g, shadows on, %d cores, %d timed frames each\n\n",
-              o.volume.c_str(), o.width, o.height, o.azimuth, cores, o.repeat);
+  std::printf(
+      "volume %s, %dx%d, azimuth %g, shadows on, %d cores, balance %s\n"
+      "%d rounds; each round renders one frame in-process and one on every cluster, so "
+      "ratios are taken within a round (this machine is shared and noisy)\n\n",
+      o.volume.c_str(), o.width, o.height, o.azimuth, cores, o.balance.c_str(), o.repeat);
 
-  // The in-process reference on all cores.
-  Image reference;
-  std::vector<double> local_ms, local_cpu;
-  for (int i = 0; i <= o.repeat; ++i) {
-    RenderStats rs;
-    const double cpu0 = ProcessCpuMs();
-    auto t0 = Clock::now();
-    auto image = RenderLocal(*setup->scene, *camera, ToRenderSettings(view), cores, &rs);
-    if (!image.ok()) return Fail(image.status());
-    if (i == 0) {
-      reference = *std::move(image);
-      continue;
-    }
-    local_ms.push_back(MsSince(t0));
-    local_cpu.push_back(ProcessCpuMs() - cpu0);
-  }
-  const double in_process = Median(local_ms);
-  std::printf("%-22s %9s %12s %13s %11s\n", "renderer", "frame ms", "tracer CPU", "process CPU",
-              "crossings");
-  std::printf("%-22s %9.1f %12s %13.1f %11s\n", absl::StrCat("in-process, ", cores, " threads").c_str(),
-              in_process, "-", Median(local_cpu), "-");
-  std::fflush(stdout);
-
+  // The clusters, each warmed up with one frame (slab loads, prerender).
   const std::string out = (fs::temp_directory_path() / "cluster_bench.exr").string();
-  std::map<int, double> frame_ms, tracer_cpu;
-  bool identical = true;
+  struct Run {
+    int workers = 0, threads = 0;
+    std::unique_ptr<LocalCluster> cluster;
+    std::vector<double> ms, cpu, proc, ratio;
+    uint64_t crossings = 0;
+  };
+  std::vector<Run> runs;
   for (int n : o.workers) {
+    Run run;
+    run.workers = n;
+    run.threads = o.threads > 0 ? o.threads : std::max(1, cores / n);
     LocalCluster::Options co;
     co.workers = n;
-    co.threads_per_worker = std::max(1, cores / n);
+    co.threads_per_worker = run.threads;
     co.data_dir = setup->data_dir;
     auto cluster = LocalCluster::Start(co);
     if (!cluster.ok()) return Fail(cluster.status());
-    const std::string root = (*cluster)->root_address();
-    auto warm = RunFrames(root, *setup, view, 1, out);
+    run.cluster = *std::move(cluster);
+    auto warm = RunFrames(run.cluster->root_address(), *setup, view, 1, out, o.balance, o.grid);
     if (!warm.ok()) return Fail(warm.status());
-    std::vector<double> ms, cpu, proc;
-    uint64_t crossings = 0;
-    for (int i = 0; i < o.repeat; ++i) {
-      const double cpu0 = ProcessCpuMs();
-      auto stats = RunFrames(root, *setup, view, 1, out);
+    runs.push_back(std::move(run));
+  }
+  Image reference;
+  std::vector<double> local_ms, local_cpu;
+  bool identical = true;
+  for (int round = 0; round <= o.repeat; ++round) {  // round 0 warms up
+    RenderStats rs;
+    double cpu0 = ProcessCpuMs();
+    auto t0 = Clock::now();
+    auto image = RenderLocal(*setup->scene, *camera, ToRenderSettings(view), cores, &rs);
+    if (!image.ok()) return Fail(image.status());
+    const double in_process = MsSince(t0);
+    if (round == 0) reference = *std::move(image);
+    if (round > 0) {
+      local_ms.push_back(in_process);
+      local_cpu.push_back(ProcessCpuMs() - cpu0);
+    }
+    for (Run& run : runs) {
+      cpu0 = ProcessCpuMs();
+      auto stats = RunFrames(run.cluster->root_address(), *setup, view, 1, out, o.balance, o.grid);
       if (!stats.ok()) return Fail(stats.status());
-      proc.push_back(ProcessCpuMs() - cpu0);
+      if (round == 0) continue;
+      run.proc.push_back(ProcessCpuMs() - cpu0);
       const v1::ClusterFrameStats& f = stats->front();
-      ms.push_back(f.frame_ms());
+      run.ms.push_back(f.frame_ms());
+      run.ratio.push_back(f.frame_ms() / in_process);
       double sum = 0;
-      crossings = 0;
+      run.crossings = 0;
       for (const auto& w : f.workers()) {
         sum += w.cpu_ms();
-        crossings += w.rays_sent();
+        run.crossings += w.rays_sent();
       }
-      cpu.push_back(sum);
+      run.cpu.push_back(sum);
+      auto got = ReadImage(out);
+      if (!got.ok()) return Fail(got.status());
+      if (got->rgb != reference.rgb) {
+        identical = false;
+        std::fprintf(stderr, "cluster_bench: %d workers: image differs from the in-process one\n",
+                     run.workers);
+      }
     }
-    auto image = ReadImage(out);
-    if (!image.ok()) return Fail(image.status());
-    if (image->rgb != reference.rgb) {
-      identical = false;
-      std::fprintf(stderr, "cluster_bench: %d workers: image differs from the in-process one\n", n);
-    }
-    frame_ms[n] = Median(ms);
-    tracer_cpu[n] = Median(cpu);
-    std::printf("%-22s %9.1f %12.1f %13.1f %11llu\n",
-                absl::StrCat(n, " worker", n > 1 ? "s" : "", " x ", co.threads_per_worker,
-                             " thread", co.threads_per_worker > 1 ? "s" : "")
+  }
+  std::printf("%-22s %9s %12s %13s %11s %14s\n", "renderer", "frame ms", "tracer CPU",
+              "process CPU", "crossings", "frame ratio");
+  std::printf("%-22s %9.1f %12s %13.1f %11s %14s\n",
+              absl::StrCat("in-process, ", cores, " threads").c_str(), Median(local_ms), "-",
+              Median(local_cpu), "-", "1");
+  for (const Run& run : runs) {
+    std::printf("%-22s %9.1f %12.1f %13.1f %11llu %14.2f\n",
+                absl::StrCat(run.workers, " worker", run.workers > 1 ? "s" : "", " x ",
+                             run.threads, " thread", run.threads > 1 ? "s" : "")
                     .c_str(),
-                frame_ms[n], tracer_cpu[n], Median(proc), static_cast<unsigned long long>(crossings));
-    std::fflush(stdout);
+                Median(run.ms), Median(run.cpu), Median(run.proc),
+                static_cast<unsigned long long>(run.crossings), Median(run.ratio));
   }
-  std::printf("\n");
-  if (tracer_cpu.count(1) && tracer_cpu[1] > 0) {
-    for (auto [n, c] : tracer_cpu) {
-      if (n > 1) std::printf("tracer CPU, %d workers / 1 worker:        %.2f\n", n, c / tracer_cpu[1]);
+  std::printf("\n(frame ratio: the median over rounds of the cluster frame over the in-process "
+              "frame of the same round)\n");
+  const Run* one = nullptr;
+  for (const Run& run : runs) {
+    if (run.workers == 1) one = &run;
+  }
+  for (const Run& run : runs) {
+    if (one && run.workers > 1 && Median(one->cpu) > 0) {
+      std::printf("tracer CPU, %d workers / 1 worker:        %.2f\n", run.workers,
+                  Median(run.cpu) / Median(one->cpu));
     }
   }
-  if (frame_ms.count(2) && in_process > 0) {
-    std::printf("frame, 2 workers / in-process %d threads: %.2f\n", cores,
-                frame_ms[2] / in_process);
+  for (const Run& run : runs) {
+    if (run.workers == 2) {
+      std::printf("frame, 2 workers / in-process %d threads: %.2f\n", cores, Median(run.ratio));
+    }
   }
   std::printf("%s\n", identical ? "OK: every cluster image equals the in-process image bit for bit"
                                 : "FAIL: a cluster image differs (see stderr)");

@@ -111,7 +111,7 @@ materials='{"materials":[
 echo "$materials" >"$work/materials.json"
 # Two views; the reference renders below use the same parameters as flags.
 cat >"$work/job.json" <<EOF
-{"name":"deploy-test","datasets":[{"volume":"$volume","materials":$materials,"views":[
+{"name":"deploy-test","balance":"test-rays","datasets":[{"volume":"$volume","materials":$materials,"views":[
   {"azimuth":45,"width":200,"height":200,"shadows":true,"output":"view45.png"},
   {"azimuth":120,"elevation":20,"width":160,"height":120,"shadows":true,"output":"view120.png"}]}]}
 EOF

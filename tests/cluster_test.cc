@@ -3,13 +3,13 @@
 // for bit, and bad jobs must get clear errors without hurting the cluster.
 #include <filesystem>
 #include <fstream>
-
 #include <random>
+#include <thread>
 
 #include "client.h"
 #include "cluster.grpc.pb.h"
-#include "daemon.h"
 #include "convert.h"
+#include "daemon.h"
 #include "gtest/gtest.h"
 #include "testing.h"
 #include "transtick/image_io.h"
@@ -192,8 +192,8 @@ std::string WriteConcentrated(const std::string& dir) {
       for (int x = 0; x < dims[0]; ++x)
         values[(static_cast<size_t>(z) * dims[1] + y) * dims[0] + x] = rng() % 3 == 0 ? 30 : 0;
   std::ofstream f(dir + "/concentrated.nrrd", std::ios::binary);
-  f << "NRRD0004\ntype: float\ndimension: 3\nsizes: " << dims[0] << " " << dims[1] << " "
-    << dims[2] << "\nendian: little\nencoding: raw\n\n";
+  f << "NRRD0004\ntype: float\ndimension: 3\nsizes: " << dims[0] << " " << dims[1] << " " << dims[2]
+    << "\nendian: little\nencoding: raw\n\n";
   f.write(reinterpret_cast<const char*>(values.data()), values.size() * 4);
   return "concentrated.nrrd";
 }
@@ -278,8 +278,7 @@ TEST_F(ClusterTest, PreviousFrameBalancingCarriesCutsForward) {
   EXPECT_EQ(std::vector<int>(second.cuts_before().begin(), second.cuts_before().end()),
             std::vector<int>(first.cuts_after().begin(), first.cuts_after().end()));
   EXPECT_EQ(second.workers(0).slab(1), first.cuts_after(1));
-  EXPECT_EQ(ReadImage(b.output())->rgb,
-            Reference(dir_ + "/" + file, Materials(), b).rgb);
+  EXPECT_EQ(ReadImage(b.output())->rgb, Reference(dir_ + "/" + file, Materials(), b).rgb);
 }
 
 TEST_F(ClusterTest, AWorkerRegisteringTwiceIsRefused) {
@@ -319,6 +318,84 @@ TEST_F(ClusterTest, AWorkerRegisteringTwiceIsRefused) {
   auto ok = SubmitAndWatch((*cluster)->root_address(), MakeJob({v}), WatchOptions{});
   ASSERT_TRUE(ok.ok()) << ok.status();
   EXPECT_EQ(ok->front().workers_size(), 2);
+  EXPECT_EQ(ReadImage(v.output())->rgb, Reference(dir_ + "/" + volume_, Materials(), v).rgb);
+}
+
+TEST_F(ClusterTest, ConcurrentClientsAllComplete) {
+  LocalCluster::Options o;
+  o.workers = 4;
+  o.rings = 2;
+  o.data_dir = dir_;
+  auto cluster = LocalCluster::Start(o);
+  ASSERT_TRUE(cluster.ok()) << cluster.status();
+  constexpr int kClients = 3;
+  std::vector<v1::View> views;
+  for (int c = 0; c < kClients; ++c)
+    views.push_back(View(20.0 * c, 10, c != 1, "client" + std::to_string(c) + ".exr"));
+  std::vector<absl::Status> results(kClients);
+  std::vector<std::thread> clients;
+  for (int c = 0; c < kClients; ++c) {
+    clients.emplace_back([&, c] {
+      v1::Job job = MakeJob({views[c], views[c]});
+      job.set_balance(c == 2 ? "test-rays" : "off");
+      auto stats = SubmitAndWatch((*cluster)->root_address(), job, WatchOptions{});
+      results[c] = stats.status();
+      if (stats.ok() && stats->size() != 2) results[c] = absl::InternalError("frames missing");
+    });
+  }
+  for (auto& t : clients) t.join();
+  for (int c = 0; c < kClients; ++c) {
+    ASSERT_TRUE(results[c].ok()) << "client " << c << ": " << results[c];
+    EXPECT_EQ(ReadImage(views[c].output())->rgb,
+              Reference(dir_ + "/" + volume_, Materials(), views[c]).rgb)
+        << "client " << c;
+  }
+}
+
+TEST_F(ClusterTest, CancelStopsAJobAndTheNextOneRuns) {
+  LocalCluster::Options o;
+  o.workers = 2;
+  o.data_dir = dir_;
+  auto cluster = LocalCluster::Start(o);
+  ASSERT_TRUE(cluster.ok()) << cluster.status();
+  auto root = v1::Root::NewStub(MakeChannel((*cluster)->root_address()));
+  std::vector<v1::View> many(200, View(10, 0, true, "many.exr"));
+  v1::SubmitReply submitted;
+  {
+    grpc::ClientContext ctx;
+    ASSERT_TRUE(root->Submit(&ctx, MakeJob(many), &submitted).ok());
+  }
+  EXPECT_EQ(submitted.frames(), 200);
+  {
+    grpc::ClientContext ctx;
+    v1::JobRef ref;
+    ref.set_job_id(submitted.job_id());
+    v1::CancelReply reply;
+    ASSERT_TRUE(root->Cancel(&ctx, ref, &reply).ok());
+    EXPECT_TRUE(reply.cancelled());
+  }
+  // The job's events end with CANCELLED, well before its 200 frames.
+  {
+    grpc::ClientContext ctx;
+    v1::JobRef ref;
+    ref.set_job_id(submitted.job_id());
+    auto reader = root->Watch(&ctx, ref);
+    v1::JobEvent e, last;
+    while (reader->Read(&e)) last = e;
+    EXPECT_TRUE(reader->Finish().ok());
+    EXPECT_EQ(last.state(), v1::CANCELLED);
+    EXPECT_LT(last.frames_done(), 200);
+  }
+  {
+    grpc::ClientContext ctx;
+    v1::JobRef ref;
+    ref.set_job_id("job-999");
+    v1::CancelReply reply;
+    EXPECT_EQ(root->Cancel(&ctx, ref, &reply).error_code(), grpc::StatusCode::NOT_FOUND);
+  }
+  v1::View v = View(30, 10, true, "after-cancel.exr");
+  auto ok = SubmitAndWatch((*cluster)->root_address(), MakeJob({v}), WatchOptions{});
+  ASSERT_TRUE(ok.ok()) << ok.status();
   EXPECT_EQ(ReadImage(v.output())->rgb, Reference(dir_ + "/" + volume_, Materials(), v).rgb);
 }
 

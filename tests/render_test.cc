@@ -237,6 +237,60 @@ TEST(CameraTest, RejectsAbsurdSizesAndViews) {
   EXPECT_FALSE(Camera::Create(spec, Vec3{1, 1, 1}).ok());
 }
 
+// Whether the ray meets the box [lo, hi] (slab method; touching counts).
+bool HitsBox(const WorldRay& r, const Vec3& lo, const Vec3& hi) {
+  double t0 = 0, t1 = HUGE_VAL;
+  for (int a = 0; a < 3; ++a) {
+    if (r.direction[a] == 0) {
+      if (r.origin[a] < lo[a] || r.origin[a] > hi[a]) return false;
+      continue;
+    }
+    double ta = (lo[a] - r.origin[a]) / r.direction[a], tb = (hi[a] - r.origin[a]) / r.direction[a];
+    t0 = std::max(t0, std::min(ta, tb));
+    t1 = std::min(t1, std::max(ta, tb));
+  }
+  return t0 <= t1;
+}
+
+TEST(CameraTest, FootprintHoldsEveryPixelWhoseRayMeetsTheBox) {
+  // Slabs of a 80x60x40 volume, from many views: no pixel outside a slab's
+  // footprint sees the slab, and thin slabs seen from the side leave most
+  // rows out.
+  const Vec3 extent{80, 60, 40};
+  int rows_left_out = 0;
+  for (Projection projection : {Projection::kPerspective, Projection::kOrthographic}) {
+    for (auto [az, el, zoom] : {std::tuple{0.0, 0.0, 1.0}, std::tuple{45.0, 0.0, 1.0},
+                                std::tuple{120.0, 35.0, 1.0}, std::tuple{10.0, 89.0, 1.0},
+                                std::tuple{200.0, -50.0, 2.5}, std::tuple{300.0, 10.0, 0.5}}) {
+      CameraSpec spec;
+      spec.projection = projection;
+      spec.azimuth_deg = az;
+      spec.elevation_deg = el;
+      spec.zoom = zoom;
+      spec.width = 90;
+      spec.height = 70;
+      auto cam = Camera::Create(spec, extent);
+      ASSERT_TRUE(cam.ok());
+      for (auto [y0, y1] : {std::pair{0, 60}, std::pair{0, 7}, std::pair{29, 31}, std::pair{50, 60}}) {
+        const Vec3 lo{-40, y0 - 30.0, -20}, hi{40, y1 - 30.0, 20};
+        const ImageRect r = cam->Footprint(lo, hi);
+        rows_left_out += 70 - (r.y1 - r.y0);
+        for (int py = 0; py < 70; ++py)
+          for (int px = 0; px < 90; ++px)
+            if (HitsBox(cam->Generate(px, py), lo, hi))
+              ASSERT_TRUE(r.Contains(px, py)) << az << " " << el << " slab " << y0 << "-" << y1
+                                               << " pixel " << px << "," << py;
+      }
+    }
+  }
+  EXPECT_GT(rows_left_out, 1000);
+  // A box behind a perspective eye: the whole image, not a guess.
+  auto cam = Camera::Create(CameraSpec{}, extent);
+  const ImageRect all = cam->Footprint({-1, -1, 1000}, {1, 1, 1001});
+  EXPECT_EQ(all.x1 - all.x0, 400);
+  EXPECT_EQ(all.y1 - all.y0, 400);
+}
+
 TEST(FramebufferTest, CompletesPixelsInAnyOrder) {
   Framebuffer fb(2, 1);
   // Pixel 0: a primary that spawned two shadow rays; they arrive first.

@@ -86,4 +86,40 @@ WorldRay Camera::Generate(int px, int py) const {
   return {eye_ + right_ * sx + up_ * sy, forward_};
 }
 
+ImageRect Camera::Footprint(const Vec3& lo, const Vec3& hi) const {
+  const ImageRect whole{0, width_, 0, height_};
+  const double aspect = static_cast<double>(width_) / height_;
+  double sx_min = HUGE_VAL, sx_max = -HUGE_VAL, sy_min = HUGE_VAL, sy_max = -HUGE_VAL;
+  for (int corner = 0; corner < 8; ++corner) {
+    const Vec3 p{corner & 1 ? hi[0] : lo[0], corner & 2 ? hi[1] : lo[1], corner & 4 ? hi[2] : lo[2]};
+    const Vec3 d = p - eye_;
+    double sx = Dot(d, right_), sy = Dot(d, up_);
+    if (projection_ == Projection::kPerspective) {
+      const double depth = Dot(d, forward_);
+      if (depth <= 1e-9 * (1 + Length(d))) return whole;
+      sx /= depth;
+      sy /= depth;
+    }
+    sx_min = std::min(sx_min, sx);
+    sx_max = std::max(sx_max, sx);
+    sy_min = std::min(sy_min, sy);
+    sy_max = std::max(sy_max, sy);
+  }
+  // Inverse of Generate: pixel centre px + 0.5 = (sx / (aspect h) + 1) w / 2.
+  auto px = [&](double sx) { return (sx / (aspect * half_height_) + 1.0) * 0.5 * width_ - 0.5; };
+  auto py = [&](double sy) { return (1.0 - sy / half_height_) * 0.5 * height_ - 0.5; };
+  constexpr double kMargin = 2;  // pixels, against rounding
+  auto clamp = [](double v, int lo_limit, int hi_limit) {
+    if (!(v > lo_limit)) return lo_limit;  // also NaN
+    if (v > hi_limit) return hi_limit;
+    return static_cast<int>(v);
+  };
+  ImageRect r;
+  r.x0 = clamp(std::floor(px(sx_min) - kMargin), 0, width_);
+  r.x1 = clamp(std::ceil(px(sx_max) + kMargin) + 1, 0, width_);
+  r.y0 = clamp(std::floor(py(sy_max) - kMargin), 0, height_);
+  r.y1 = clamp(std::ceil(py(sy_min) + kMargin) + 1, 0, height_);
+  return r;
+}
+
 }  // namespace transtick

@@ -39,6 +39,20 @@ constexpr auto kIdleWait = std::chrono::milliseconds(5);
 // How long End waits for a neighbour to close its side before cancelling.
 constexpr auto kCloseWait = std::chrono::seconds(10);
 
+// The footprints of the ring's slabs, from the cuts.
+std::vector<ImageRect> SlabFootprints(const v1::FrameSpec& spec, const Scene& scene,
+                                      const Camera& camera) {
+  const auto& d = scene.dims();
+  const auto& sp = scene.spacing();
+  std::vector<ImageRect> rects;
+  for (int i = 0; i + 1 < spec.cuts_size(); ++i) {
+    const Vec3 lo{-0.5 * d[0] * sp[0], (spec.cuts(i) - 0.5 * d[1]) * sp[1], -0.5 * d[2] * sp[2]};
+    const Vec3 hi{0.5 * d[0] * sp[0], (spec.cuts(i + 1) - 0.5 * d[1]) * sp[1], 0.5 * d[2] * sp[2]};
+    rects.push_back(camera.Footprint(lo, hi));
+  }
+  return rects;
+}
+
 }  // namespace
 
 void Inbox::Push(std::vector<RayDescriptor> rays) {
@@ -139,6 +153,7 @@ Frame::Frame(const v1::FrameSpec& spec, std::shared_ptr<const Scene> scene, Came
           static_cast<int64_t>((spec.row_end() - spec.row_begin() + spec.row_step() - 1) /
                                std::max(1, spec.row_step())) *
           camera_.width()),
+      footprints_(SlabFootprints(spec, *scene_, camera_)),
       left_(std::make_unique<Link>(options)),
       right_(std::make_unique<Link>(options)),
       deposits_(kDepositRecordBytes, options.batch_rays * 2, options.linger),
@@ -249,15 +264,28 @@ bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>*
   const int64_t k1 = std::min<int64_t>(k0 + kWorkUnit, pixels_in_rows_);
   const int width = camera_.width();
   const int y0 = scene_->y_begin(), y1 = scene_->y_end();
-  // Misses are deposited by the first worker of the ring alone.
-  const bool owns_misses = spec_.index() == 0;
+  const int me = spec_.index();
+  const ImageRect& mine = footprints_[me];
+  // A miss is deposited once: by the first slab whose footprint holds the
+  // pixel, or by slab 0 for a pixel in no footprint (its ray meets no slab).
+  auto first_footprint = [&](int col, int row) {
+    for (size_t i = 0; i < footprints_.size(); ++i) {
+      if (footprints_[i].Contains(col, row)) return static_cast<int>(i);
+    }
+    return -1;
+  };
   for (int64_t k = k0; k < k1; ++k) {
     const int row = spec_.row_begin() + static_cast<int>(k / width) * spec_.row_step();
     const int col = static_cast<int>(k % width);
     const uint32_t pixel = static_cast<uint32_t>(row) * width + col;
+    if (!mine.Contains(col, row)) {
+      // The ray cannot enter this slab.
+      if (me == 0 && first_footprint(col, row) < 0) misses->push_back(tracer_.MissDeposit(pixel));
+      continue;
+    }
     RayDescriptor ray;
     if (!tracer_.MakePrimary(camera_.Generate(col, row), pixel, &ray)) {
-      if (owns_misses) misses->push_back(tracer_.MissDeposit(pixel));
+      if (first_footprint(col, row) == me) misses->push_back(tracer_.MissDeposit(pixel));
       continue;
     }
     // The paper's distributed policy: keep only rays entering this slab.

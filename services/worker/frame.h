@@ -121,6 +121,10 @@ class Frame {
   const Tracer tracer_;
   const uint32_t pixel_limit_;
   const int64_t pixels_in_rows_;  // pixels of this ring's rows
+  // Each slab's footprint on the image (Camera::Footprint): the only pixels
+  // whose primary rays can enter that slab. This worker generates the rays
+  // of its own footprint only.
+  const std::vector<ImageRect> footprints_;
 
   Inbox inbox_;
   std::unique_ptr<Link> left_, right_;

@@ -39,6 +39,13 @@ struct WorldRay {
   Vec3 direction;  // unit length
 };
 
+// Pixels [x0, x1) x [y0, y1) of an image.
+struct ImageRect {
+  int x0 = 0, x1 = 0, y0 = 0, y1 = 0;
+  bool Contains(int x, int y) const { return x >= x0 && x < x1 && y >= y0 && y < y1; }
+  bool empty() const { return x0 >= x1 || y0 >= y1; }
+};
+
 // Immutable, thread-safe.
 class Camera {
  public:
@@ -48,6 +55,12 @@ class Camera {
 
   // The ray through the centre of pixel (px, py); py = 0 is the top row.
   WorldRay Generate(int px, int py) const;
+
+  // Pixels whose rays may meet the world-space box [lo, hi]: a conservative
+  // rectangle (the box's corners projected, plus a margin against
+  // rounding), clipped to the image. The whole image when a corner lies
+  // behind a perspective eye.
+  ImageRect Footprint(const Vec3& lo, const Vec3& hi) const;
 
   int width() const { return width_; }
   int height() const { return height_; }
