@@ -1,6 +1,7 @@
 // The render cluster as it runs: real gRPC servers on 127.0.0.1, real ray
 // streams between workers. Its images must equal the in-process render bit
 // for bit, and bad jobs must get clear errors without hurting the cluster.
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -45,6 +46,29 @@ v1::MaterialSet Materials() {
   add("soft", 20, 45, 0.3f);
   add("hard", 45, 1000, 1.0f);
   return m;
+}
+
+v1::TransferFunction Transfer() {
+  v1::TransferFunction t;
+  auto add = [&](float value, std::array<float, 4> rgba) {
+    v1::TransferPoint* p = t.add_points();
+    p->set_value(value);
+    for (float c : rgba) p->add_rgba(c);
+  };
+  add(0, {0, 0, 0, 0});
+  add(25, {0.2f, 0.4f, 0.9f, 0.02f});
+  add(60, {1.0f, 0.8f, 0.5f, 0.3f});
+  return t;
+}
+
+Image DvrReference(const std::string& path, const v1::View& view) {
+  auto volume = ReadVolume(path);
+  EXPECT_TRUE(volume.ok()) << volume.status();
+  auto scene = Scene::ForDvr(*volume, *ToTransferFunction(Transfer()));
+  Vec3 extent{volume->dims[0] * volume->spacing[0], volume->dims[1] * volume->spacing[1],
+              volume->dims[2] * volume->spacing[2]};
+  auto camera = Camera::Create(*ToCameraSpec(view), extent);
+  return testing::RenderWhole(*scene, *camera, ToRenderSettings(view));
 }
 
 Image Reference(const std::string& path, const v1::MaterialSet& m, const v1::View& view) {
@@ -148,10 +172,19 @@ TEST_F(ClusterTest, BadJobsGetClearErrorsAndTheClusterGoesOn) {
 
 TEST_F(ClusterTest, BalancingAndRingsNeverChangeTheImage) {
   // Every combination of 1-8 workers, 1-3 rings and each balancing mode
-  // renders the in-process image, on views across and along the slab axis.
+  // renders the in-process image, on views across and along the slab axis,
+  // in surfaces mode and (a second dataset of the job) in dvr mode.
   std::vector<v1::View> views = {View(45, 0, true, "a.exr"), View(0, 90, true, "b.exr")};
-  std::vector<Image> want;
+  std::vector<v1::View> dvr_views = {View(60, 20, false, "dvr-a.exr"),
+                                     View(0, -90, false, "dvr-b.exr")};
+  std::vector<Image> want, dvr_want;
   for (const auto& v : views) want.push_back(Reference(dir_ + "/" + volume_, Materials(), v));
+  for (const auto& v : dvr_views) dvr_want.push_back(DvrReference(dir_ + "/" + volume_, v));
+  // The dvr images show something: many pixels lit, not a black frame.
+  for (const Image& img : dvr_want) {
+    EXPECT_GT(std::count_if(img.rgb.begin(), img.rgb.end(), [](float c) { return c > 0.05f; }),
+              static_cast<long>(img.rgb.size() / 10));
+  }
   for (int workers = 1; workers <= 8; ++workers) {
     for (int rings = 1; rings <= 3; ++rings) {
       LocalCluster::Options o;
@@ -162,11 +195,15 @@ TEST_F(ClusterTest, BalancingAndRingsNeverChangeTheImage) {
       ASSERT_TRUE(cluster.ok()) << cluster.status();
       for (const char* balance : {"off", "test-rays", "previous-frame", "test-rays"}) {
         v1::Job job = MakeJob(views);
+        v1::Dataset* dvr = job.add_datasets();
+        dvr->set_volume(volume_);
+        *dvr->mutable_transfer() = Transfer();
+        for (const auto& v : dvr_views) *dvr->add_views() = v;
         job.set_balance(balance);
         job.set_balance_grid(8);
         auto stats = SubmitAndWatch((*cluster)->root_address(), job, WatchOptions{});
         ASSERT_TRUE(stats.ok()) << stats.status();
-        ASSERT_EQ(stats->size(), views.size());
+        ASSERT_EQ(stats->size(), views.size() + dvr_views.size());
         EXPECT_EQ(stats->front().rings(), std::min(rings, workers));
         EXPECT_EQ(stats->front().workers_size(), workers);
         for (size_t i = 0; i < views.size(); ++i) {
@@ -174,6 +211,12 @@ TEST_F(ClusterTest, BalancingAndRingsNeverChangeTheImage) {
           ASSERT_TRUE(got.ok()) << got.status();
           ASSERT_EQ(got->rgb, want[i].rgb) << workers << " workers, " << rings << " rings, balance "
                                            << balance << ", view " << i;
+        }
+        for (size_t i = 0; i < dvr_views.size(); ++i) {
+          auto got = ReadImage(dvr_views[i].output());
+          ASSERT_TRUE(got.ok()) << got.status();
+          ASSERT_EQ(got->rgb, dvr_want[i].rgb) << workers << " workers, " << rings
+                                               << " rings, balance " << balance << ", dvr view " << i;
         }
       }
     }
