@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <functional>
 #include <numeric>
+#include <optional>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -703,7 +704,9 @@ absl::Status RootService::Distribute(const LoadedDataset& data, Layout& layout) 
         m.ok = m.reslabbed = true;
         return absl::OkStatus();
       }
-      if (IsWorkerFailure(s) && s.error_message().find("fetching") == std::string::npos) {
+      // A source that failed comes back as ABORTED; only the mover's own
+      // failure drops it.
+      if (IsWorkerFailure(s)) {
         DropWorker(m.worker->id, s.error_message());
         return absl::UnavailableError(
             absl::StrCat("re-slabbing on ", m.worker->address, ": ", s.error_message()));
@@ -810,6 +813,7 @@ absl::Status RootService::RunView(JobRecord& job, int d, int v, LoadedDataset& d
     for (const auto& ring : layout->rings) sizes.push_back(ring.workers.size());
     BalanceReport report;
     report.mode = mode.empty() ? "off" : mode;
+    std::optional<Clock::time_point> balance_start;  // when a prerender began
     if (mode == "test-rays") {
       auto cached = data.view_cuts.find(ViewKey(view));
       if (cached != data.view_cuts.end()) {
@@ -847,7 +851,7 @@ absl::Status RootService::RunView(JobRecord& job, int d, int v, LoadedDataset& d
         layout->SetCuts(cuts, planes);
         report.cuts_after = cuts;
         data.view_cuts[ViewKey(view)] = cuts;
-        report.balance_ms = MsSince(t0);
+        balance_start = t0;
         std::vector<std::string> times;
         for (const auto& c : costs) times.push_back(absl::StrJoin(c, " ", [](std::string* o, double x) {
           absl::StrAppend(o, absl::StrFormat("%.2f", x));
@@ -866,6 +870,8 @@ absl::Status RootService::RunView(JobRecord& job, int d, int v, LoadedDataset& d
       if (status.code() == absl::StatusCode::kUnavailable && !job.cancel) continue;
       return status;
     }
+    // The prerender and the plane moves it caused.
+    if (balance_start) report.balance_ms = MsSince(*balance_start);
     auto frame = RunFrame(job, d, v, view, data, *layout, /*test=*/false);
     if (!frame.ok()) {
       status = frame.status();

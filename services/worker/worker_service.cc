@@ -228,9 +228,9 @@ void RunFetch(Fetch& f, const std::array<int, 3>& dims) {
   }
   grpc::Status s = reader->Finish();
   if (!s.ok()) {
-    f.status = absl::Status(FromGrpc(s).code(), absl::StrCat("fetching planes from ",
-                                                             f.source->address(), ": ",
-                                                             s.error_message()));
+    // ABORTED, whatever the source said: this worker is fine, a source is not.
+    f.status = absl::AbortedError(
+        absl::StrCat("fetching planes from ", f.source->address(), ": ", s.error_message()));
     return;
   }
   f.scalars.y_begin = f.scalar_begin;
@@ -238,7 +238,7 @@ void RunFetch(Fetch& f, const std::array<int, 3>& dims) {
   const size_t want =
       static_cast<size_t>(f.scalar_end - f.scalar_begin) * dims[0] * dims[2] * sizeof(float);
   if (bytes.size() != want) {
-    f.status = absl::DataLossError(absl::StrCat("planes from ", f.source->address(), ": ",
+    f.status = absl::AbortedError(absl::StrCat("planes from ", f.source->address(), ": ",
                                                 bytes.size(), " bytes of scalars, expected ",
                                                 want));
     return;
