@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # The daemons as separate processes: a job submitted from a job file
-# renders the same image as --local 0, a malformed job file gets a clear
+# renders the same image as --local 0 (balanced with test rays, so planes
+# move between the worker processes), a malformed job file gets a clear
 # error, a worker killed with SIGKILL is dropped and the next job still
-# renders, and every daemon stops cleanly on SIGTERM.
+# renders (the survivors re-cut their slabs without the dead one's planes),
+# and every daemon stops cleanly on SIGTERM.
 set -u
 build=$1
 src=$2
@@ -27,7 +29,7 @@ cat >"$dir/m.json" <<'JSON'
 {"materials":[{"name":"box","min":100,"max":256,"color":[0.8,0.7,0.6]}]}
 JSON
 cat >"$dir/job.json" <<JSON
-{"name":"t","datasets":[{"volume":"box.nrrd","materials_file":"m.json",
+{"name":"t","balance":"test-rays","datasets":[{"volume":"box.nrrd","materials_file":"m.json",
   "views":[{"azimuth":35,"elevation":20,"width":48,"height":40,"output":"a.png"}]}]}
 JSON
 
