@@ -8,7 +8,8 @@
 #                         starts dockerd when none answers (log: TT_DOCKERD_LOG)
 #   tt_pick_clients       sets TT_DOCKER (a client that can build with BuildKit
 #                         when one is here) and TT_COMPOSE (docker compose v2,
-#                         else docker-compose 1.29)
+#                         else docker-compose 1.29; TRANSTICK_COMPOSE=v1|v2
+#                         chooses, and v2 is fetched from Debian when missing)
 #   tt_ensure_base_image  makes debian:bookworm-slim with debootstrap and
 #                         docker import when the daemon does not have it
 #   tt_build_image TAG    builds deploy/Dockerfile from the repository's
@@ -80,16 +81,69 @@ tt_pick_clients() {
     TT_DOCKER=$(type -P docker)
     tt_log "no docker client with BuildKit here: using the classic builder (no ccache)"
   fi
+  # TRANSTICK_COMPOSE: v2 (docker compose), v1 (docker-compose 1.29), or
+  # auto (v2 when this machine has it).
+  case ${TRANSTICK_COMPOSE:-auto} in
+    v2)
+      tt_compose_v2 || return 1
+      ;;
+    v1)
+      if ! type -P docker-compose >/dev/null; then
+        tt_log "docker-compose 1.29 is not installed"
+        return 1
+      fi
+      # shellcheck disable=SC2034  # used by the scripts that source this file
+      TT_COMPOSE=(docker-compose)
+      ;;
+    *)
+      if "$TT_DOCKER" compose version >/dev/null 2>&1; then
+        # shellcheck disable=SC2034
+        TT_COMPOSE=("$TT_DOCKER" compose)
+      elif type -P docker-compose >/dev/null; then
+        # shellcheck disable=SC2034
+        TT_COMPOSE=(docker-compose)
+      else
+        tt_log "neither 'docker compose' nor docker-compose is installed"
+        return 1
+      fi
+      ;;
+  esac
+}
+
+# Docker Compose v2 as a CLI plugin: the one on this machine, else Debian's
+# own package of it (docker-compose 2.x, from the next release, trixie),
+# fetched with apt into .cache/ without installing it or touching the
+# machine's apt sources. The plugin is found through DOCKER_CONFIG.
+tt_compose_v2() {
   if "$TT_DOCKER" compose version >/dev/null 2>&1; then
-    # shellcheck disable=SC2034  # used by the scripts that source this file
     TT_COMPOSE=("$TT_DOCKER" compose)
-  elif type -P docker-compose >/dev/null; then
-    # shellcheck disable=SC2034
-    TT_COMPOSE=(docker-compose)
-  else
-    tt_log "neither 'docker compose' nor docker-compose is installed"
+    return 0
+  fi
+  local cache=$TT_REPO/.cache/compose-v2
+  if [[ ! -x $cache/cli-plugins/docker-compose ]]; then
+    tt_log "fetching Debian's docker-compose v2 package into $cache"
+    mkdir -p "$cache/apt/lists/partial" "$cache/apt/archives/partial" "$cache/cli-plugins"
+    echo "deb http://deb.debian.org/debian trixie main" >"$cache/apt/sources.list"
+    local apt=(-o "Dir::Etc::SourceList=$cache/apt/sources.list" -o Dir::Etc::SourceParts=/dev/null
+      -o "Dir::State::Lists=$cache/apt/lists" -o "Dir::Cache::pkgcache=$cache/apt/pkgcache.bin"
+      -o "Dir::Cache::srcpkgcache=$cache/apt/srcpkgcache.bin" -o APT::Sandbox::User=root)
+    if ! apt-get -q "${apt[@]}" update >"$cache/apt.log" 2>&1 ||
+      ! (cd "$cache/apt" && apt-get -q "${apt[@]}" download docker-compose >>"$cache/apt.log" 2>&1); then
+      tt_log "could not fetch docker-compose v2; last lines of $cache/apt.log:"
+      tail -5 "$cache/apt.log" >&2
+      return 1
+    fi
+    dpkg-deb -x "$cache"/apt/docker-compose_*.deb "$cache/root"
+    cp "$cache/root/usr/libexec/docker/cli-plugins/docker-compose" "$cache/cli-plugins/"
+    rm -rf "$cache/root" "$cache"/apt/*.deb
+  fi
+  export DOCKER_CONFIG=$cache
+  if ! "$TT_DOCKER" compose version >/dev/null 2>&1; then
+    tt_log "$TT_DOCKER does not take the compose plugin in $cache/cli-plugins"
     return 1
   fi
+  # shellcheck disable=SC2034
+  TT_COMPOSE=("$TT_DOCKER" compose)
 }
 
 tt_ensure_base_image() {
