@@ -78,7 +78,7 @@ struct Options {
   std::vector<int> workers = {1, 2, 4};
   int rays = 1 << 20;
   int grid = 0;  // test rays per side for balancing, 0 = the root's default
-  int threads = 0;  // tracer threads per worker; 0 = cores / workers
+  int threads = 0;  // tracer threads per worker; 0 = one per core, as transtick render
   std::string balance = "off";  // for scaling
 };
 
@@ -245,7 +245,7 @@ int Scaling(const Options& o) {
   for (int n : o.workers) {
     Run run;
     run.workers = n;
-    run.threads = o.threads > 0 ? o.threads : std::max(1, cores / n);
+    run.threads = o.threads > 0 ? o.threads : cores;
     LocalCluster::Options co;
     co.workers = n;
     co.threads_per_worker = run.threads;
@@ -526,7 +526,7 @@ int Tables(const Options& o) {
   for (int n : {2, 4, 8}) {
     LocalCluster::Options co;
     co.workers = n;
-    co.threads_per_worker = std::max(1, cores / n);
+    co.threads_per_worker = o.threads > 0 ? o.threads : cores;
     co.data_dir = setup->data_dir;
     auto cluster = LocalCluster::Start(co);
     if (!cluster.ok()) return Fail(cluster.status());

@@ -65,7 +65,8 @@ render options:
   --balance-rule cost|paper   how cuts follow from costs (default cost)
   --root HOST:PORT       render on a running cluster; --volume is then relative to
                          the root's data directory
-  --threads N            tracing threads of --local 0 (default: one per core)
+  --threads N            tracing threads of --local 0, and of each worker of --local N
+                         (default: one per core)
   --out FILE             .png (8-bit), .tif/.exr (float) (default transtick.png)
   --stats FILE.json      write frame statistics as JSON
   --max-volume-mb N      refuse volumes larger than N MiB in memory (default 8192)
@@ -388,7 +389,15 @@ int Render(int argc, char** argv) {
     LocalCluster::Options co;
     co.workers = *local;
     co.rings = *rings;
-    co.threads_per_worker = std::max(1, cores / *local);
+    // Each worker runs as its daemon would: one tracer thread per core. On
+    // one machine the workers then share the cores as their loads need,
+    // where a fixed share each would leave a core idle beside a busy slab.
+    auto threads = flags->GetInt("threads", cores);
+    if (!threads.ok()) return fail(threads.status());
+    if (*threads < 1 || *threads > 1024) {
+      return fail(absl::InvalidArgumentError("--threads must be in [1, 1024]"));
+    }
+    co.threads_per_worker = *threads;
     co.data_dir = abs.parent_path().string();
     dataset.set_volume(abs.filename().string());
     auto c = LocalCluster::Start(co);

@@ -36,7 +36,16 @@ grpc::Status DisplayService::BeginFrame(grpc::ServerContext*, const v1::DisplayF
     return grpc::Status(grpc::StatusCode::ALREADY_EXISTS,
                         absl::StrCat("display: frame ", req->frame_id(), " already begun"));
   }
-  frames_[req->frame_id()] = std::make_shared<FrameState>(req->width(), req->height());
+  // A framebuffer of a finished frame of the same size is cleared and used
+  // again: faulting in fresh pages for every frame costs more.
+  std::unique_ptr<Framebuffer> fb;
+  if (spare_ && spare_->width() == req->width() && spare_->height() == req->height()) {
+    fb = std::move(spare_);
+    fb->Clear();
+  } else {
+    fb = std::make_unique<Framebuffer>(req->width(), req->height());
+  }
+  frames_[req->frame_id()] = std::make_shared<FrameState>(std::move(fb));
   return grpc::Status::OK;
 }
 
@@ -55,17 +64,22 @@ grpc::Status DisplayService::Deposits(grpc::ServerContext*,
       }
     }
     std::lock_guard<std::mutex> lock(frame->mu);
+    if (!frame->fb) {
+      return grpc::Status(
+          grpc::StatusCode::FAILED_PRECONDITION,
+          absl::StrCat("display: frame ", frame_id, " is complete; deposits after it are refused"));
+    }
     const uint32_t limit =
-        static_cast<uint32_t>(frame->fb.width()) * static_cast<uint32_t>(frame->fb.height());
+        static_cast<uint32_t>(frame->fb->width()) * static_cast<uint32_t>(frame->fb->height());
     auto deposits = DecodeDeposits(batch.deposits(), limit);
     if (!deposits.ok()) {
       return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
                           absl::StrCat("display: ", deposits.status().message()));
     }
     bool completed = false;
-    for (const Deposit& d : *deposits) completed |= frame->fb.Add(d);
+    for (const Deposit& d : *deposits) completed |= frame->fb->Add(d);
     frame->deposits += deposits->size();
-    if (completed && frame->fb.Complete()) frame->cv.notify_all();
+    if (completed && frame->fb->Complete()) frame->cv.notify_all();
   }
   return grpc::Status::OK;
 }
@@ -77,16 +91,16 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
     return grpc::Status(grpc::StatusCode::NOT_FOUND,
                         absl::StrCat("display: frame ", req->frame_id(), " was not begun"));
   }
-  const uint64_t total = static_cast<uint64_t>(frame->fb.width()) * frame->fb.height();
+  const uint64_t total = static_cast<uint64_t>(frame->fb->width()) * frame->fb->height();
   Image image;
   {
     std::unique_lock<std::mutex> lock(frame->mu);
-    while (!frame->fb.Complete() && !frame->aborted) {
+    while (!frame->fb->Complete() && !frame->aborted) {
       frame->cv.wait_for(lock, std::chrono::milliseconds(250));
       if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "cancelled");
-      if (frame->fb.Complete() || frame->aborted) break;
+      if (frame->fb->Complete() || frame->aborted) break;
       v1::FrameProgress p;
-      p.set_pixels_done(frame->fb.complete_pixels());
+      p.set_pixels_done(frame->fb->complete_pixels());
       p.set_pixels_total(total);
       lock.unlock();
       writer->Write(p);
@@ -96,11 +110,15 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
       return grpc::Status(grpc::StatusCode::ABORTED,
                           absl::StrCat("display: frame ", req->frame_id(), " was aborted"));
     }
-    image = frame->fb.Resolve();
+    image = frame->fb->Resolve();
   }
   {
     std::lock_guard<std::mutex> lock(mu_);
     frames_.erase(req->frame_id());
+    // Workers' deposit streams hold the frame state, not the framebuffer:
+    // every deposit is in, so none will touch it again.
+    std::lock_guard<std::mutex> frame_lock(frame->mu);
+    spare_ = std::move(frame->fb);
   }
   const int rows = RowsPerChunk(image.width);
   for (int r0 = 0; r0 < image.height; r0 += rows) {

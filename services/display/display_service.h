@@ -30,10 +30,10 @@ class DisplayService final : public v1::Display::Service {
 
  private:
   struct FrameState {
-    FrameState(int w, int h) : fb(w, h) {}
+    explicit FrameState(std::unique_ptr<Framebuffer> f) : fb(std::move(f)) {}
     std::mutex mu;
     std::condition_variable cv;
-    Framebuffer fb;         // guarded by mu
+    std::unique_ptr<Framebuffer> fb;  // guarded by mu; null once the image is out
     bool aborted = false;   // guarded by mu
     uint64_t deposits = 0;  // guarded by mu
   };
@@ -42,6 +42,7 @@ class DisplayService final : public v1::Display::Service {
   const uint64_t max_frame_pixels_;
   std::mutex mu_;
   std::map<uint64_t, std::shared_ptr<FrameState>> frames_;  // guarded by mu_
+  std::unique_ptr<Framebuffer> spare_;  // guarded by mu_: a finished frame's, for reuse
 };
 
 }  // namespace transtick

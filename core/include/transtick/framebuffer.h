@@ -30,6 +30,9 @@ class Framebuffer {
 
   Framebuffer(int width, int height);
 
+  // Back to no deposits, keeping the memory.
+  void Clear();
+
   // Adds a deposit. Returns true when this deposit completed its pixel.
   bool Add(const Deposit& deposit);
 
