@@ -29,6 +29,7 @@
 // Defaults: cthead.nrrd in $TRANSTICK_DATA_DIR (else ../shared/data),
 // examples/cthead_materials.json, 400x400, azimuth 45, shadows on, 5 repeats.
 
+#include <spdlog/spdlog.h>
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -597,6 +598,8 @@ int Tables(const Options& o) {
 }  // namespace transtick
 
 int main(int argc, char** argv) {
+  // The embedded daemons' per-frame log lines would bury the tables.
+  spdlog::set_level(spdlog::level::warn);
   transtick::Options options;
   std::string error = transtick::Parse(argc, argv, &options);
   if (error == "help") {

@@ -20,5 +20,4 @@ if (($# >= 2)); then
   args=(--volume "$1" --materials "$2")
   shift 2
 fi
-# The tables go to stdout; of stderr only errors, not the daemons' log lines.
-"$build/bench/cluster_bench" tables "${args[@]}" "$@" 2> >(grep -v '^\[20' >&2)
+exec "$build/bench/cluster_bench" tables "${args[@]}" "$@"

@@ -61,7 +61,7 @@ render options:
   --rings R              rings of the embedded cluster (default 1)
   --balance off|test-rays|previous-frame   static load balancing of the slabs on a
                          cluster (default off; docs/balancing.md)
-  --balance-grid N       test rays per side of the image for test-rays (default 16)
+  --balance-grid N       test rays per side of the image for test-rays (default 32)
   --balance-rule cost|paper   how cuts follow from costs (default cost)
   --root HOST:PORT       render on a running cluster; --volume is then relative to
                          the root's data directory
@@ -432,7 +432,7 @@ int Render(int argc, char** argv) {
   job.set_name("render");
   *job.add_datasets() = dataset;
   job.set_balance(flags->Get("balance", "off"));
-  auto grid = flags->GetInt("balance-grid", 16);
+  auto grid = flags->GetInt("balance-grid", 32);
   if (!grid.ok()) return fail(grid.status());
   job.set_balance_grid(*grid);
   job.set_balance_rule(flags->Get("balance-rule", "cost"));
