@@ -44,6 +44,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "bench_util.h"
 #include "absl/strings/str_split.h"
 #include "client.h"
 #include "cluster.grpc.pb.h"
@@ -59,6 +60,11 @@
 
 namespace transtick {
 namespace {
+
+using bench::Median;
+using bench::MsSince;
+using bench::ParseInt;
+using bench::ParseSize;
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
@@ -83,30 +89,11 @@ struct Options {
   std::string balance = "off";  // for scaling
 };
 
-double MsSince(Clock::time_point t) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
-}
-
 double ProcessCpuMs() {
   rusage ru{};
   getrusage(RUSAGE_SELF, &ru);
   return (ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) * 1e3 +
          (ru.ru_utime.tv_usec + ru.ru_stime.tv_usec) / 1e3;
-}
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-bool ParseInt(const std::string& s, int lo, int hi, int* out) {
-  char* end = nullptr;
-  long v = std::strtol(s.c_str(), &end, 10);
-  if (s.empty() || *end != '\0' || v < lo || v > hi) return false;
-  *out = static_cast<int>(v);
-  return true;
 }
 
 std::string Parse(int argc, char** argv, Options* o) {
@@ -128,9 +115,7 @@ std::string Parse(int argc, char** argv, Options* o) {
     } else if (flag == "--materials") {
       o->materials = value;
     } else if (flag == "--size") {
-      size_t x = value.find('x');
-      if (x == std::string::npos || !ParseInt(value.substr(0, x), 1, 8192, &o->width) ||
-          !ParseInt(value.substr(x + 1), 1, 8192, &o->height)) {
+      if (!ParseSize(value, 8192, &o->width, &o->height)) {
         return "--size must be WxH with each in [1, 8192]";
       }
     } else if (flag == "--azimuth") {

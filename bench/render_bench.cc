@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "bench_util.h"
 #include "convert.h"
 #include "transtick/camera.h"
 #include "transtick/render.h"
@@ -36,6 +37,11 @@
 
 namespace transtick {
 namespace {
+
+using bench::Median;
+using bench::MsSince;
+using bench::ParseInt;
+using bench::ParseSize;
 
 constexpr char kUsage[] =
     "usage: render_bench [--volume FILE] [--materials FILE] [--size WxH] [--repeat N]\n"
@@ -60,14 +66,6 @@ std::string DefaultVolume() {
   return std::string(dir && *dir ? dir : TRANSTICK_BENCH_DATA_DIR) + "/cthead.nrrd";
 }
 
-bool ParseInt(const std::string& s, int lo, int hi, int* out) {
-  char* end = nullptr;
-  long v = std::strtol(s.c_str(), &end, 10);
-  if (s.empty() || *end != '\0' || v < lo || v > hi) return false;
-  *out = static_cast<int>(v);
-  return true;
-}
-
 // Returns an error message, empty on success.
 std::string Parse(int argc, char** argv, Options* o) {
   o->volume = DefaultVolume();
@@ -83,10 +81,7 @@ std::string Parse(int argc, char** argv, Options* o) {
     } else if (flag == "--materials") {
       o->materials = value;
     } else if (flag == "--size") {
-      size_t x = value.find('x');
-      if (x == std::string::npos ||
-          !ParseInt(value.substr(0, x), 1, CameraSpec::kMaxImageSize, &o->width) ||
-          !ParseInt(value.substr(x + 1), 1, CameraSpec::kMaxImageSize, &o->height)) {
+      if (!ParseSize(value, CameraSpec::kMaxImageSize, &o->width, &o->height)) {
         return "--size must be WxH with each in [1, 8192], got '" + value + "'";
       }
     } else if (flag == "--repeat") {
@@ -110,17 +105,6 @@ std::string Parse(int argc, char** argv, Options* o) {
     }
   }
   return "";
-}
-
-double MsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-      .count();
-}
-
-double Median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
 // Bit-for-bit equality of two float images (memcmp: -0 vs 0 and NaN payloads

@@ -95,6 +95,13 @@ class ClusterTest : public ::testing::Test {
     for (const auto& v : views) *d->add_views() = v;
     return job;
   }
+  absl::StatusOr<std::unique_ptr<LocalCluster>> StartCluster(int workers, int rings = 1) {
+    LocalCluster::Options o;
+    o.workers = workers;
+    o.rings = rings;
+    o.data_dir = dir_;
+    return LocalCluster::Start(o);
+  }
   v1::View View(double az, double el, bool shadows, const std::string& out) {
     v1::View v;
     v.set_azimuth(az);
@@ -114,10 +121,7 @@ TEST_F(ClusterTest, ImagesEqualTheInProcessRender) {
   std::vector<Image> want;
   for (const auto& v : views) want.push_back(Reference(dir_ + "/" + volume_, Materials(), v));
   for (int workers : {1, 2, 3, 5, 8}) {
-    LocalCluster::Options o;
-    o.workers = workers;
-    o.data_dir = dir_;
-    auto cluster = LocalCluster::Start(o);
+    auto cluster = StartCluster(workers);
     ASSERT_TRUE(cluster.ok()) << cluster.status();
     // Two frames in a row on the same cluster: slabs stay loaded.
     for (int round = 0; round < 2; ++round) {
@@ -135,10 +139,7 @@ TEST_F(ClusterTest, ImagesEqualTheInProcessRender) {
 }
 
 TEST_F(ClusterTest, BadJobsGetClearErrorsAndTheClusterGoesOn) {
-  LocalCluster::Options o;
-  o.workers = 2;
-  o.data_dir = dir_;
-  auto cluster = LocalCluster::Start(o);
+  auto cluster = StartCluster(2);
   ASSERT_TRUE(cluster.ok()) << cluster.status();
   const std::string root = (*cluster)->root_address();
   auto expect_error = [&](v1::Job job, const std::string& text) {
@@ -187,11 +188,7 @@ TEST_F(ClusterTest, BalancingAndRingsNeverChangeTheImage) {
   }
   for (int workers = 1; workers <= 8; ++workers) {
     for (int rings = 1; rings <= 3; ++rings) {
-      LocalCluster::Options o;
-      o.workers = workers;
-      o.rings = rings;
-      o.data_dir = dir_;
-      auto cluster = LocalCluster::Start(o);
+      auto cluster = StartCluster(workers, rings);
       ASSERT_TRUE(cluster.ok()) << cluster.status();
       for (const char* balance : {"off", "test-rays", "previous-frame", "test-rays"}) {
         v1::Job job = MakeJob(views);
@@ -254,10 +251,7 @@ v1::MaterialSet FaintMaterials() {
 
 TEST_F(ClusterTest, BalancingEvensOutConcentratedContent) {
   const std::string file = WriteConcentrated(dir_);
-  LocalCluster::Options o;
-  o.workers = 4;
-  o.data_dir = dir_;
-  auto cluster = LocalCluster::Start(o);
+  auto cluster = StartCluster(4);
   ASSERT_TRUE(cluster.ok()) << cluster.status();
   v1::View view = View(0, 0, true, "c.exr");
   view.set_width(160);
@@ -299,10 +293,7 @@ TEST_F(ClusterTest, BalancingEvensOutConcentratedContent) {
 
 TEST_F(ClusterTest, PreviousFrameBalancingCarriesCutsForward) {
   const std::string file = WriteConcentrated(dir_);
-  LocalCluster::Options o;
-  o.workers = 3;
-  o.data_dir = dir_;
-  auto cluster = LocalCluster::Start(o);
+  auto cluster = StartCluster(3);
   ASSERT_TRUE(cluster.ok()) << cluster.status();
   v1::View a = View(0, 0, true, "p0.exr"), b = View(10, 0, true, "p1.exr");
   v1::Job job = MakeJob({a, b});
@@ -325,10 +316,7 @@ TEST_F(ClusterTest, PreviousFrameBalancingCarriesCutsForward) {
 }
 
 TEST_F(ClusterTest, AWorkerRegisteringTwiceIsRefused) {
-  LocalCluster::Options o;
-  o.workers = 2;
-  o.data_dir = dir_;
-  auto cluster = LocalCluster::Start(o);
+  auto cluster = StartCluster(2);
   ASSERT_TRUE(cluster.ok()) << cluster.status();
   auto root = v1::Root::NewStub(MakeChannel((*cluster)->root_address()));
   v1::RegisterRequest req;
@@ -365,11 +353,7 @@ TEST_F(ClusterTest, AWorkerRegisteringTwiceIsRefused) {
 }
 
 TEST_F(ClusterTest, ConcurrentClientsAllComplete) {
-  LocalCluster::Options o;
-  o.workers = 4;
-  o.rings = 2;
-  o.data_dir = dir_;
-  auto cluster = LocalCluster::Start(o);
+  auto cluster = StartCluster(4, 2);
   ASSERT_TRUE(cluster.ok()) << cluster.status();
   constexpr int kClients = 3;
   std::vector<v1::View> views;
@@ -396,10 +380,7 @@ TEST_F(ClusterTest, ConcurrentClientsAllComplete) {
 }
 
 TEST_F(ClusterTest, CancelStopsAJobAndTheNextOneRuns) {
-  LocalCluster::Options o;
-  o.workers = 2;
-  o.data_dir = dir_;
-  auto cluster = LocalCluster::Start(o);
+  auto cluster = StartCluster(2);
   ASSERT_TRUE(cluster.ok()) << cluster.status();
   auto root = v1::Root::NewStub(MakeChannel((*cluster)->root_address()));
   std::vector<v1::View> many(200, View(10, 0, true, "many.exr"));
@@ -444,10 +425,7 @@ TEST_F(ClusterTest, CancelStopsAJobAndTheNextOneRuns) {
 
 TEST_F(ClusterTest, StressEveryRayCrossesEverySlab) {
   // Looking along Y with 8 workers: every ray crosses every slab.
-  LocalCluster::Options o;
-  o.workers = 8;
-  o.data_dir = dir_;
-  auto cluster = LocalCluster::Start(o);
+  auto cluster = StartCluster(8);
   ASSERT_TRUE(cluster.ok()) << cluster.status();
   v1::View v = View(0, 90, true, "top.exr");
   v.set_width(96);
