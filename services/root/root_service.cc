@@ -793,6 +793,41 @@ std::vector<std::vector<double>> RingCosts(const RootService::FrameResult& frame
 
 }  // namespace
 
+absl::Status RootService::Prerender(JobRecord& job, int d, int v, const v1::View& view,
+                                    const LoadedDataset& data, Layout& layout, BalanceRule rule,
+                                    BalanceReport* report) {
+  if (auto s = Distribute(data, layout); !s.ok()) return s;
+  // A grid of test rays through the same camera: a small image of the view,
+  // never more rays than the view itself has.
+  const int grid = std::min(
+      view.width(), job.job.balance_grid() > 0 ? job.job.balance_grid() : kDefaultBalanceGrid);
+  v1::View test = view;
+  test.clear_output();
+  test.set_width(grid);
+  test.set_height(std::max(
+      1, static_cast<int>(std::lround(static_cast<double>(grid) * view.height() / view.width()))));
+  auto probe = RunFrame(job, d, v, test, data, layout, /*test=*/true);
+  if (!probe.ok()) return probe.status();
+  std::vector<size_t> sizes;
+  for (const auto& ring : layout.rings) sizes.push_back(ring.workers.size());
+  const auto costs = RingCosts(*probe, sizes);
+  report->cuts_after.clear();
+  for (size_t r = 0; r < sizes.size(); ++r) {
+    report->cuts_after.push_back(BalancedCuts(layout.rings[r].cuts, costs[r], rule));
+  }
+  for (const auto& w : probe->workers) report->test_ray_ms[w.id()] = w.cpu_ms();
+  std::vector<std::string> times;
+  for (const auto& c : costs) {
+    times.push_back(absl::StrJoin(
+        c, " ", [](std::string* o, double x) { absl::StrAppend(o, absl::StrFormat("%.2f", x)); }));
+  }
+  spdlog::info("{} balance ({}x{} test rays, rule {}): test-ray CPU ms [{}]; cuts {} -> {}", job.id,
+               test.width(), test.height(), rule == BalanceRule::kPaper ? "paper" : "cost",
+               absl::StrJoin(times, " | "), FormatCuts(report->cuts_before),
+               FormatCuts(report->cuts_after));
+  return absl::OkStatus();
+}
+
 absl::Status RootService::RunView(JobRecord& job, int d, int v, LoadedDataset& data) {
   const v1::View& view = job.job.datasets(d).views(v);
   const std::string mode = view.balance().empty() ? job.job.balance() : view.balance();
@@ -829,43 +864,14 @@ absl::Status RootService::RunView(JobRecord& job, int d, int v, LoadedDataset& d
         // Start from the cuts the workers hold when they are this ring's.
         if (!data.next_cuts.empty()) layout->SetCuts(data.next_cuts, planes);
         report.cuts_before = layout->Cuts();
-        const auto t0 = Clock::now();
-        status = Distribute(data, *layout);
+        balance_start = Clock::now();
+        status = Prerender(job, d, v, view, data, *layout, rule, &report);
         if (!status.ok()) {
           if (status.code() == absl::StatusCode::kUnavailable && !job.cancel) continue;
           return status;
         }
-        // The prerender: a grid of test rays through the same camera.
-        const int grid = job.job.balance_grid() > 0 ? job.job.balance_grid() : kDefaultBalanceGrid;
-        v1::View test = view;
-        test.clear_output();
-        test.set_width(grid);
-        test.set_height(std::max(1, static_cast<int>(std::lround(
-                                        static_cast<double>(grid) * view.height() / view.width()))));
-        auto probe = RunFrame(job, d, v, test, data, *layout, /*test=*/true);
-        if (!probe.ok()) {
-          status = probe.status();
-          if (status.code() == absl::StatusCode::kUnavailable && !job.cancel) continue;
-          return status;
-        }
-        const auto costs = RingCosts(*probe, sizes);
-        std::vector<std::vector<int>> cuts;
-        for (size_t r = 0; r < sizes.size(); ++r) {
-          cuts.push_back(BalancedCuts(layout->rings[r].cuts, costs[r], rule));
-        }
-        for (const auto& w : probe->workers) report.test_ray_ms[w.id()] = w.cpu_ms();
-        layout->SetCuts(cuts, planes);
-        report.cuts_after = cuts;
-        data.view_cuts[ViewKey(view)] = cuts;
-        balance_start = t0;
-        std::vector<std::string> times;
-        for (const auto& c : costs) times.push_back(absl::StrJoin(c, " ", [](std::string* o, double x) {
-          absl::StrAppend(o, absl::StrFormat("%.2f", x));
-        }));
-        spdlog::info("{} balance ({}x{} test rays, rule {}): test-ray CPU ms [{}]; cuts {} -> {}",
-                     job.id, test.width(), test.height(),
-                     rule == BalanceRule::kPaper ? "paper" : "cost", absl::StrJoin(times, " | "),
-                     FormatCuts(report.cuts_before), FormatCuts(report.cuts_after));
+        layout->SetCuts(report.cuts_after, planes);
+        data.view_cuts[ViewKey(view)] = report.cuts_after;
       }
     } else if (mode == "previous-frame") {
       if (!data.next_cuts.empty()) layout->SetCuts(data.next_cuts, planes);

@@ -20,6 +20,7 @@
 #include "absl/status/statusor.h"
 #include "cluster.grpc.pb.h"
 #include "transtick/framebuffer.h"
+#include "transtick/partition.h"
 #include "transtick/scene.h"
 
 namespace transtick {
@@ -92,6 +93,11 @@ class RootService final : public v1::Root::Service {
   absl::Status RunJob(JobRecord& job);
   // One view: rings, balancing, slabs, the frame, and its image published.
   absl::Status RunView(JobRecord& job, int dataset_index, int view_index, LoadedDataset& data);
+  // Balancing: distributes the layout's slabs, runs a prerender of test
+  // rays on them and puts the re-cut slabs in report->cuts_after.
+  absl::Status Prerender(JobRecord& job, int dataset_index, int view_index, const v1::View& view,
+                         const LoadedDataset& data, Layout& layout, BalanceRule rule,
+                         BalanceReport* report);
   // Runs one frame of `view` on the layout (a prerender of test rays when
   // `test`: no progress events).
   absl::StatusOr<FrameResult> RunFrame(JobRecord& job, int dataset_index, int view_index,
