@@ -53,6 +53,56 @@ TEST(RayCodecTest, RoundTripsBitForBit) {
   }
 }
 
+// The byte offsets of docs/formats.md, little-endian whatever the host.
+TEST(RayCodecTest, FieldsSitAtTheDocumentedOffsets) {
+  auto u32 = [](const std::string& w, size_t at) {
+    uint32_t v = 0;
+    for (int i = 0; i < 4; ++i) v |= uint32_t{static_cast<uint8_t>(w[at + i])} << (8 * i);
+    return v;
+  };
+  auto u64 = [&](const std::string& w, size_t at) {
+    return uint64_t{u32(w, at)} | (uint64_t{u32(w, at + 4)} << 32);
+  };
+  RayDescriptor r = Sample(3);
+  r.t = 2.5;
+  r.cell = {7, -1, 9};
+  r.pixel = 0x01020304;
+  r.kind = RayKind::kShadow;
+  r.material = 5;
+  r.spawned = 0x0a0b;
+  r.transmittance = 0.25f;
+  std::string w;
+  AppendRay(r, &w);
+  ASSERT_EQ(w.size(), 104u);
+  EXPECT_EQ(u64(w, 0), std::bit_cast<uint64_t>(r.origin[0]));
+  EXPECT_EQ(u64(w, 24), std::bit_cast<uint64_t>(r.direction[0]));
+  EXPECT_EQ(u64(w, 48), std::bit_cast<uint64_t>(2.5));
+  EXPECT_EQ(u32(w, 64), 7u);
+  EXPECT_EQ(u32(w, 68), 0xffffffffu);
+  EXPECT_EQ(u32(w, 76), 0x01020304u);
+  EXPECT_EQ(w[84], 1);
+  EXPECT_EQ(w[85], 5);
+  EXPECT_EQ(u32(w, 86) & 0xffff, 0x0a0bu);
+  EXPECT_EQ(u32(w, 100), std::bit_cast<uint32_t>(0.25f));
+  std::string d;
+  AppendDeposit(Deposit{0x00ab00cd, RayKind::kPrimary, 3, {1.0f, 0.5f, 0.0f}}, &d);
+  ASSERT_EQ(d.size(), 20u);
+  EXPECT_EQ(u32(d, 0), 0x00ab00cdu);
+  EXPECT_EQ(d[4], 0);
+  EXPECT_EQ(d[5], 0);
+  EXPECT_EQ(u32(d, 6) & 0xffff, 3u);
+  EXPECT_EQ(u32(d, 8), 0x3f800000u);
+  EXPECT_EQ(u32(d, 12), 0x3f000000u);
+  std::string f;
+  const float values[2] = {1.0f, -2.0f};
+  AppendFloats(values, 2, &f);
+  EXPECT_EQ(f, std::string("\x00\x00\x80\x3f\x00\x00\x00\xc0", 8));
+  float back[2];
+  DecodeFloats(f, back);
+  EXPECT_EQ(back[0], 1.0f);
+  EXPECT_EQ(back[1], -2.0f);
+}
+
 TEST(RayCodecTest, RejectsBadBatches) {
   std::string wire;
   AppendRay(Sample(3), &wire);

@@ -10,12 +10,27 @@
 
 namespace transtick {
 
+// Writes little-endian values at dst (which must have room).
+inline char* EncodeFixed16(char* dst, uint16_t v) {
+  dst[0] = static_cast<char>(v & 0xff);
+  dst[1] = static_cast<char>(v >> 8);
+  return dst + 2;
+}
+inline char* EncodeFixed32(char* dst, uint32_t v) {
+  for (int i = 0; i < 4; ++i) dst[i] = static_cast<char>((v >> (8 * i)) & 0xff);
+  return dst + 4;
+}
+inline char* EncodeFixed64(char* dst, uint64_t v) {
+  for (int i = 0; i < 8; ++i) dst[i] = static_cast<char>((v >> (8 * i)) & 0xff);
+  return dst + 8;
+}
 inline void PutFixed16(std::string* out, uint16_t v) {
-  out->push_back(static_cast<char>(v & 0xff));
-  out->push_back(static_cast<char>(v >> 8));
+  char b[2];
+  out->append(b, EncodeFixed16(b, v) - b);
 }
 inline void PutFixed32(std::string* out, uint32_t v) {
-  for (int i = 0; i < 4; ++i) out->push_back(static_cast<char>((v >> (8 * i)) & 0xff));
+  char b[4];
+  out->append(b, EncodeFixed32(b, v) - b);
 }
 inline void PutVarint32(std::string* out, uint32_t v) {
   while (v >= 0x80) {

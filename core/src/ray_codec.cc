@@ -2,6 +2,7 @@
 
 #include <bit>
 #include <cmath>
+#include <cstring>
 
 #include "absl/strings/str_cat.h"
 #include "coding.h"
@@ -9,11 +10,6 @@
 namespace transtick {
 namespace {
 
-void PutF64(std::string* out, double v) {
-  uint64_t bits = std::bit_cast<uint64_t>(v);
-  PutFixed32(out, static_cast<uint32_t>(bits));
-  PutFixed32(out, static_cast<uint32_t>(bits >> 32));
-}
 void PutF32(std::string* out, float v) { PutFixed32(out, std::bit_cast<uint32_t>(v)); }
 
 bool GetF64(Decoder& in, double* v) {
@@ -41,26 +37,32 @@ absl::Status CheckSize(std::string_view bytes, size_t record, const char* what) 
 }  // namespace
 
 void AppendRay(const RayDescriptor& r, std::string* out) {
-  for (int a = 0; a < 3; ++a) PutF64(out, r.origin[a]);
-  for (int a = 0; a < 3; ++a) PutF64(out, r.direction[a]);
-  PutF64(out, r.t);
-  PutF64(out, r.t_start);
-  for (int a = 0; a < 3; ++a) PutFixed32(out, static_cast<uint32_t>(r.cell[a]));
-  PutFixed32(out, r.pixel);
-  PutFixed32(out, r.sample);
-  out->push_back(static_cast<char>(r.kind));
-  out->push_back(static_cast<char>(r.material));
-  PutFixed16(out, r.spawned);
-  for (int c = 0; c < 3; ++c) PutF32(out, r.color[c]);
-  PutF32(out, r.transmittance);
+  // One record built on the stack, appended at once.
+  char b[kRayRecordBytes];
+  char* p = b;
+  for (int a = 0; a < 3; ++a) p = EncodeFixed64(p, std::bit_cast<uint64_t>(r.origin[a]));
+  for (int a = 0; a < 3; ++a) p = EncodeFixed64(p, std::bit_cast<uint64_t>(r.direction[a]));
+  p = EncodeFixed64(p, std::bit_cast<uint64_t>(r.t));
+  p = EncodeFixed64(p, std::bit_cast<uint64_t>(r.t_start));
+  for (int a = 0; a < 3; ++a) p = EncodeFixed32(p, static_cast<uint32_t>(r.cell[a]));
+  p = EncodeFixed32(p, r.pixel);
+  p = EncodeFixed32(p, r.sample);
+  *p++ = static_cast<char>(r.kind);
+  *p++ = static_cast<char>(r.material);
+  p = EncodeFixed16(p, r.spawned);
+  for (int c = 0; c < 3; ++c) p = EncodeFixed32(p, std::bit_cast<uint32_t>(r.color[c]));
+  p = EncodeFixed32(p, std::bit_cast<uint32_t>(r.transmittance));
+  out->append(b, p - b);
 }
 
 void AppendDeposit(const Deposit& d, std::string* out) {
-  PutFixed32(out, d.pixel);
-  out->push_back(static_cast<char>(d.kind));
-  out->push_back(0);
-  PutFixed16(out, d.spawned);
-  for (int c = 0; c < 3; ++c) PutF32(out, d.color[c]);
+  char b[kDepositRecordBytes];
+  char* p = EncodeFixed32(b, d.pixel);
+  *p++ = static_cast<char>(d.kind);
+  *p++ = 0;
+  p = EncodeFixed16(p, d.spawned);
+  for (int c = 0; c < 3; ++c) p = EncodeFixed32(p, std::bit_cast<uint32_t>(d.color[c]));
+  out->append(b, p - b);
 }
 
 absl::StatusOr<std::vector<RayDescriptor>> DecodeRays(std::string_view bytes,
@@ -121,13 +123,21 @@ absl::StatusOr<std::vector<Deposit>> DecodeDeposits(std::string_view bytes, uint
 }
 
 void AppendFloats(const float* values, size_t n, std::string* out) {
-  out->reserve(out->size() + n * 4);
-  for (size_t i = 0; i < n; ++i) PutF32(out, values[i]);
+  if constexpr (std::endian::native == std::endian::little) {
+    out->append(reinterpret_cast<const char*>(values), n * sizeof(float));
+  } else {
+    out->reserve(out->size() + n * 4);
+    for (size_t i = 0; i < n; ++i) PutF32(out, values[i]);
+  }
 }
 
 void DecodeFloats(std::string_view bytes, float* out) {
-  Decoder in(bytes);
-  for (size_t i = 0; i < bytes.size() / 4; ++i) GetF32(in, &out[i]);
+  if constexpr (std::endian::native == std::endian::little) {
+    std::memcpy(out, bytes.data(), bytes.size() / 4 * sizeof(float));
+  } else {
+    Decoder in(bytes);
+    for (size_t i = 0; i < bytes.size() / 4; ++i) GetF32(in, &out[i]);
+  }
 }
 
 }  // namespace transtick

@@ -175,7 +175,7 @@ absl::Status Frame::Start() {
     v1::DepositBatch batch;
     batch.set_frame_id(id());
     while (deposits_.Take(&bytes)) {
-      batch.set_deposits(bytes);
+      batch.set_deposits(std::move(bytes));
       if (!display_stream_->Write(batch)) {
         spdlog::warn("frame {}: display {} closed the deposit stream", id(), spec_.display());
         break;
