@@ -1022,9 +1022,16 @@ absl::StatusOr<RootService::FrameResult> RootService::RunFrame(JobRecord& job, i
     v1::FrameProgress p;
     int rows = 0;
     auto last_event = Clock::now() - std::chrono::seconds(1);
+    // Every deposit is in once the image comes: the workers end the frame
+    // (and report) while its rows arrive here.
+    std::thread ender;
+    auto join_ender = [&] {
+      if (ender.joinable()) ender.join();
+    };
     while (reader->Read(&p)) {
       if (job.cancel) ctx.TryCancel();
       if (p.has_image()) {
+        if (!ender.joinable()) ender = std::thread([&] { end_all(/*cancel=*/false); });
         const v1::ImageChunk& c = p.image();
         if (c.width() != image.width || c.row_begin() < 0 || c.row_end() > image.height ||
             c.rgb().size() != static_cast<size_t>(c.row_end() - c.row_begin()) * c.width() * 12) {
@@ -1045,6 +1052,8 @@ absl::StatusOr<RootService::FrameResult> RootService::RunFrame(JobRecord& job, i
       }
     }
     grpc::Status st = reader->Finish();
+    const bool ended = ender.joinable();
+    join_ender();
     if (job.cancel) return abort(absl::CancelledError("cancelled"));
     if (!st.ok() || rows != image.height) {
       absl::Status why =
@@ -1054,8 +1063,8 @@ absl::StatusOr<RootService::FrameResult> RootService::RunFrame(JobRecord& job, i
               : absl::UnavailableError(absl::StrCat("display: ", st.error_message()));
       return abort(why);
     }
+    if (!ended) end_all(/*cancel=*/false);
   }
-  end_all(/*cancel=*/false);
   FrameResult result;
   result.frame_ms = MsSince(t0);
   result.frame_id = frame_id;

@@ -109,10 +109,20 @@ void Outbox::Append(const std::string& records) {
   if (was_empty || pending_.size() >= batch_records_ * record_bytes_) cv_.notify_one();
 }
 
+void Outbox::Flush() {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (pending_.empty()) return;
+  flush_ = true;
+  cv_.notify_one();
+}
+
 bool Outbox::Take(std::string* batch) {
   std::unique_lock<std::mutex> lock(mu_);
   while (true) {
-    if (pending_.size() >= batch_records_ * record_bytes_ || (closed_ && !pending_.empty())) break;
+    if (pending_.size() >= batch_records_ * record_bytes_ ||
+        ((closed_ || flush_) && !pending_.empty())) {
+      break;
+    }
     if (closed_) return false;
     if (pending_.empty()) {
       cv_.wait(lock);
@@ -125,6 +135,7 @@ bool Outbox::Take(std::string* batch) {
   size_t n = std::min(pending_.size(), batch_records_ * record_bytes_);
   batch->assign(pending_, 0, n);
   pending_.erase(0, n);
+  if (pending_.empty()) flush_ = false;
   if (!pending_.empty()) first_pending_ = Clock::now();
   return true;
 }
@@ -318,7 +329,13 @@ void Frame::TraceLoop(int thread_index) {
     for (const Deposit& d : misses) AppendDeposit(d, &deposits);
     misses.clear();
     if (!got) {
+      // Nothing to trace: what this thread produced goes out now rather
+      // than after the linger, since more may not come for a while (the
+      // end of a frame, or a neighbour waiting for these rays).
       flush();
+      left_->outbox.Flush();
+      right_->outbox.Flush();
+      deposits_.Flush();
       inbox_.Wait(kIdleWait);
       st.idle_ms += MsBetween(t0, Clock::now());
       continue;

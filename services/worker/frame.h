@@ -59,6 +59,9 @@ class Outbox {
       : record_bytes_(record_bytes), batch_records_(batch_records), linger_(linger) {}
 
   void Append(const std::string& records);
+  // Sends what is pending now, without waiting for the linger (when the
+  // producers have nothing more to add for a while).
+  void Flush();
   // Blocks for the next batch; false once closed and drained.
   bool Take(std::string* batch);
   void Close();
@@ -71,6 +74,7 @@ class Outbox {
   std::condition_variable cv_;
   std::string pending_;                                  // guarded by mu_
   std::chrono::steady_clock::time_point first_pending_;  // guarded by mu_
+  bool flush_ = false;                                   // guarded by mu_
   bool closed_ = false;                                  // guarded by mu_
 };
 
