@@ -177,6 +177,9 @@ Frame::~Frame() {
 absl::Status Frame::Start() {
   if (started_.exchange(true)) return absl::FailedPreconditionError("frame already running");
   run_start_ = Clock::now();
+  // Tracing starts at once; the outboxes hold what it produces until the
+  // streams below are open.
+  for (int i = 0; i < options_.threads; ++i) tracers_.emplace_back([this, i] { TraceLoop(i); });
   display_stub_ = v1::Display::NewStub(SharedChannel(spec_.display(), "deposits"));
   display_ctx_ = std::make_unique<grpc::ClientContext>();
   display_stream_ = display_stub_->Deposits(display_ctx_.get(), &display_ack_);
@@ -215,7 +218,6 @@ absl::Status Frame::Start() {
       while (right_stream_->Read(&b)) ReceiveBatch(b, *right_);
     });
   }
-  for (int i = 0; i < options_.threads; ++i) tracers_.emplace_back([this, i] { TraceLoop(i); });
   return absl::OkStatus();
 }
 
