@@ -101,6 +101,17 @@ std::shared_ptr<grpc::Channel> SharedChannel(const std::string& address,
   static auto* channels = new std::map<std::string, std::shared_ptr<grpc::Channel>>();
   const std::string key = purpose + "|" + address;
   std::lock_guard<std::mutex> lock(mu);
+  // Peers that went away for good (a worker replaced at a new port) would
+  // otherwise leave their channels here for the life of the process.
+  for (auto it = channels->begin(); it != channels->end();) {
+    const auto state = it->second->GetState(false);
+    if (it->first != key &&
+        (state == GRPC_CHANNEL_TRANSIENT_FAILURE || state == GRPC_CHANNEL_SHUTDOWN)) {
+      it = channels->erase(it);
+    } else {
+      ++it;
+    }
+  }
   auto& channel = (*channels)[key];
   // A peer that went away (and may be back at the same address) leaves its
   // channel failing; a fresh one connects at once instead of backing off.
