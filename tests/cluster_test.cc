@@ -351,6 +351,52 @@ TEST_F(ClusterTest, AWorkerRegisteringTwiceIsRefused) {
   EXPECT_EQ(ReadImage(v.output())->rgb, Reference(dir_ + "/" + volume_, Materials(), v).rgb);
 }
 
+TEST_F(ClusterTest, BadPlaneRequestsGetClearErrors) {
+  auto cluster = StartCluster(2);
+  ASSERT_TRUE(cluster.ok()) << cluster.status();
+  v1::View v = View(30, 10, true, "planes.exr");
+  ASSERT_TRUE(SubmitAndWatch((*cluster)->root_address(), MakeJob({v}), WatchOptions{}).ok());
+  auto root = v1::Root::NewStub(MakeChannel((*cluster)->root_address()));
+  v1::StatusReply status;
+  {
+    grpc::ClientContext ctx;
+    ASSERT_TRUE(root->Status(&ctx, v1::StatusRequest(), &status).ok());
+  }
+  ASSERT_EQ(status.workers_size(), 2);
+  auto worker = v1::Worker::NewStub(MakeChannel(status.workers(0).address()));
+  {
+    grpc::ClientContext ctx;
+    v1::PlanesRequest req;
+    req.set_dataset_key("no-such-dataset");
+    req.set_y_begin(0);
+    req.set_y_end(4);
+    auto reader = worker->FetchPlanes(&ctx, req);
+    v1::SlabChunk chunk;
+    while (reader->Read(&chunk)) {
+    }
+    grpc::Status s = reader->Finish();
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::NOT_FOUND);
+    EXPECT_NE(s.error_message().find("no-such-dataset"), std::string::npos);
+  }
+  {
+    grpc::ClientContext ctx;
+    v1::ReslabRequest req;
+    req.set_old_key("no-such-dataset");
+    req.set_new_key("x");
+    req.set_y_begin(0);
+    req.set_y_end(4);
+    v1::LoadReply reply;
+    grpc::Status s = worker->Reslab(&ctx, req, &reply);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+    EXPECT_NE(s.error_message().find("not loaded"), std::string::npos) << s.error_message();
+  }
+  // The worker goes on rendering.
+  v1::View w = View(50, 0, false, "planes2.exr");
+  auto ok = SubmitAndWatch((*cluster)->root_address(), MakeJob({w}), WatchOptions{});
+  ASSERT_TRUE(ok.ok()) << ok.status();
+  EXPECT_EQ(ReadImage(w.output())->rgb, Reference(dir_ + "/" + volume_, Materials(), w).rgb);
+}
+
 TEST_F(ClusterTest, ConcurrentClientsAllComplete) {
   auto cluster = StartCluster(4, 2);
   ASSERT_TRUE(cluster.ok()) << cluster.status();
