@@ -275,11 +275,14 @@ TEST(CameraTest, FootprintHoldsEveryPixelWhoseRayMeetsTheBox) {
         const Vec3 lo{-40, y0 - 30.0, -20}, hi{40, y1 - 30.0, 20};
         const ImageRect r = cam->Footprint(lo, hi);
         rows_left_out += 70 - (r.y1 - r.y0);
-        for (int py = 0; py < 70; ++py)
-          for (int px = 0; px < 90; ++px)
-            if (HitsBox(cam->Generate(px, py), lo, hi))
+        for (int py = 0; py < 70; ++py) {
+          for (int px = 0; px < 90; ++px) {
+            if (HitsBox(cam->Generate(px, py), lo, hi)) {
               ASSERT_TRUE(r.Contains(px, py)) << az << " " << el << " slab " << y0 << "-" << y1
                                                << " pixel " << px << "," << py;
+            }
+          }
+        }
       }
     }
   }

@@ -20,27 +20,23 @@ inline int64_t ToFixed(float c) {
 Framebuffer::Framebuffer(int width, int height)
     : width_(width),
       height_(height),
-      sum_(static_cast<size_t>(width) * height, {0, 0, 0}),
-      owed_(static_cast<size_t>(width) * height, 0),
-      primary_seen_(static_cast<size_t>(width) * height, 0) {}
+      pixels_(static_cast<size_t>(width) * height, Pixel{{0, 0, 0}, 0, 0}) {}
 
 void Framebuffer::Clear() {
-  std::fill(sum_.begin(), sum_.end(), std::array<int64_t, 3>{0, 0, 0});
-  std::fill(owed_.begin(), owed_.end(), 0);
-  std::fill(primary_seen_.begin(), primary_seen_.end(), 0);
+  std::fill(pixels_.begin(), pixels_.end(), Pixel{{0, 0, 0}, 0, 0});
   complete_.store(0, std::memory_order_relaxed);
 }
 
 bool Framebuffer::Add(const Deposit& d) {
-  auto& s = sum_[d.pixel];
-  for (int c = 0; c < 3; ++c) s[c] += ToFixed(d.color[c]);
+  Pixel& p = pixels_[d.pixel];
+  for (int c = 0; c < 3; ++c) p.sum[c] += ToFixed(d.color[c]);
   if (d.kind == RayKind::kPrimary) {
-    primary_seen_[d.pixel] = 1;
-    owed_[d.pixel] += d.spawned;
+    p.primary_seen = 1;
+    p.owed += d.spawned;
   } else {
-    owed_[d.pixel] -= 1;
+    p.owed -= 1;
   }
-  if (primary_seen_[d.pixel] && owed_[d.pixel] == 0) {
+  if (p.primary_seen && p.owed == 0) {
     complete_.fetch_add(1, std::memory_order_relaxed);
     return true;
   }
@@ -51,9 +47,9 @@ Image Framebuffer::Resolve() const {
   Image img;
   img.width = width_;
   img.height = height_;
-  img.rgb.resize(sum_.size() * 3);
-  for (size_t i = 0; i < sum_.size(); ++i) {
-    for (int c = 0; c < 3; ++c) img.rgb[i * 3 + c] = static_cast<float>(sum_[i][c] / kScale);
+  img.rgb.resize(pixels_.size() * 3);
+  for (size_t i = 0; i < pixels_.size(); ++i) {
+    for (int c = 0; c < 3; ++c) img.rgb[i * 3 + c] = static_cast<float>(pixels_[i].sum[c] / kScale);
   }
   return img;
 }

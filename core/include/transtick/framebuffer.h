@@ -45,11 +45,15 @@ class Framebuffer {
 
  private:
   int width_, height_;
-  std::vector<std::array<int64_t, 3>> sum_;
-  // Per pixel: shadow deposits still owed (primary's count minus shadows
-  // seen); primary_seen_ marks the primary's arrival.
-  std::vector<int32_t> owed_;
-  std::vector<uint8_t> primary_seen_;
+  // Everything a deposit touches, in one 32-byte record: one cache line
+  // per deposit, however the pixels of different workers interleave.
+  struct alignas(32) Pixel {
+    std::array<int64_t, 3> sum;
+    // Shadow deposits still owed: the primary's count minus shadows seen.
+    int32_t owed;
+    uint8_t primary_seen;
+  };
+  std::vector<Pixel> pixels_;
   std::atomic<uint64_t> complete_{0};
 };
 
