@@ -915,7 +915,10 @@ absl::StatusOr<RootService::FrameResult> RootService::RunFrame(JobRecord& job, i
   const uint64_t frame_id = next_frame_id_++;
   const auto t0 = Clock::now();
   auto display = v1::Display::NewStub(SharedChannel(options_.display, "control"));
-  {
+  // The display learns of the frame while the workers prepare it; both are
+  // done before any worker starts, so no deposit comes early.
+  grpc::Status begun;
+  std::thread begin([&] {
     grpc::ClientContext ctx;
     ctx.set_deadline(Deadline(10));
     v1::DisplayFrame df;
@@ -923,12 +926,8 @@ absl::StatusOr<RootService::FrameResult> RootService::RunFrame(JobRecord& job, i
     df.set_width(view.width());
     df.set_height(view.height());
     v1::FrameAck ack;
-    grpc::Status s = display->BeginFrame(&ctx, df, &ack);
-    if (!s.ok()) {
-      return absl::Status(FromGrpc(s).code(),
-                          absl::StrCat("display ", options_.display, ": ", s.error_message()));
-    }
-  }
+    begun = display->BeginFrame(&ctx, df, &ack);
+  });
   struct Member {
     std::shared_ptr<WorkerEntry> worker;
     v1::FrameSpec spec;
@@ -999,6 +998,11 @@ absl::StatusOr<RootService::FrameResult> RootService::RunFrame(JobRecord& job, i
     v1::FrameAck ack;
     return m.worker->stub->PrepareFrame(ctx, m.spec, &ack);
   });
+  begin.join();
+  if (!begun.ok()) {
+    return abort(absl::Status(FromGrpc(begun).code(), absl::StrCat("display ", options_.display,
+                                                                   ": ", begun.error_message())));
+  }
   if (!s.ok()) return abort(s);
   s = call("RunFrame", [&](Member& m, grpc::ClientContext* ctx) {
     v1::FrameRef ref;

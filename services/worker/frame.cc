@@ -132,9 +132,15 @@ bool Outbox::Take(std::string* batch) {
     if (Clock::now() >= due) break;
     cv_.wait_until(lock, due);
   }
-  size_t n = std::min(pending_.size(), batch_records_ * record_bytes_);
-  batch->assign(pending_, 0, n);
-  pending_.erase(0, n);
+  const size_t limit = batch_records_ * record_bytes_;
+  if (pending_.size() <= limit) {
+    // The usual case: everything pending is one batch, handed over whole.
+    batch->clear();
+    batch->swap(pending_);
+  } else {
+    batch->assign(pending_, 0, limit);
+    pending_.erase(0, limit);
+  }
   if (pending_.empty()) flush_ = false;
   if (!pending_.empty()) first_pending_ = Clock::now();
   return true;
