@@ -11,6 +11,7 @@
 #include "cluster.grpc.pb.h"
 #include "convert.h"
 #include "daemon.h"
+#include "display_service.h"
 #include "gtest/gtest.h"
 #include "testing.h"
 #include "transtick/image_io.h"
@@ -466,6 +467,33 @@ TEST_F(ClusterTest, CancelStopsAJobAndTheNextOneRuns) {
   auto ok = SubmitAndWatch((*cluster)->root_address(), MakeJob({v}), WatchOptions{});
   ASSERT_TRUE(ok.ok()) << ok.status();
   EXPECT_EQ(ReadImage(v.output())->rgb, Reference(dir_ + "/" + volume_, Materials(), v).rgb);
+}
+
+// Frames reuse one channel per peer; a peer that went away and came back at
+// the same address must get a fresh channel, not one stuck backing off.
+TEST(SharedChannelTest, APeerBackAtTheSameAddressIsReached) {
+  auto ping = [](const std::string& address) {
+    auto stub = v1::Display::NewStub(SharedChannel(address, "test"));
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(2));
+    v1::FrameRef ref;
+    ref.set_frame_id(1);
+    v1::FrameAck ack;
+    return stub->AbortFrame(&ctx, ref, &ack);  // harmless: no such frame
+  };
+  DisplayService service;
+  auto first = Server::Start("127.0.0.1:0", {&service});
+  ASSERT_TRUE(first.ok()) << first.status();
+  const std::string address = absl::StrCat("127.0.0.1:", (*first)->port());
+  EXPECT_TRUE(ping(address).ok());
+  EXPECT_EQ(SharedChannel(address, "test"), SharedChannel(address, "test"));
+  (*first)->Shutdown(std::chrono::milliseconds(100));
+  first->reset();
+  EXPECT_FALSE(ping(address).ok());
+  auto second = Server::Start(address, {&service});
+  ASSERT_TRUE(second.ok()) << second.status();
+  EXPECT_TRUE(ping(address).ok());
+  (*second)->Shutdown(std::chrono::milliseconds(100));
 }
 
 TEST_F(ClusterTest, StressEveryRayCrossesEverySlab) {
