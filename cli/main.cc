@@ -293,12 +293,19 @@ void PrintClusterFrame(const v1::ClusterFrameStats& fs) {
                fs.width(), fs.height(), fs.frame_ms(), fs.workers_size(), fs.rings(),
                fs.rings() == 1 ? "" : "s", fs.active_imbalance());
   if (fs.balance() != "off") {
-    std::string before, after;
-    for (int c : fs.cuts_before()) before += std::to_string(c) + " ";
-    for (int c : fs.cuts_after()) after += std::to_string(c) + " ";
-    std::fprintf(stderr, "  balance %s: cuts [%s] -> [%s], %.1f ms, %d planes moved\n",
-                 fs.balance().c_str(), before.c_str(), after.c_str(), fs.balance_ms(),
-                 fs.planes_moved());
+    // Each ring's cuts run from 0 to the number of planes: "[0 64 128] [0 70 128]".
+    auto rings = [](const google::protobuf::RepeatedField<int32_t>& cuts) {
+      std::string out;
+      for (int i = 0; i < cuts.size(); ++i) {
+        if (cuts[i] == 0) out += i ? "] [" : "[";
+        out += std::to_string(cuts[i]);
+        if (i + 1 < cuts.size() && cuts[i + 1] != 0) out += " ";
+      }
+      return cuts.empty() ? out : out + "]";
+    };
+    std::fprintf(stderr, "  balance %s: cuts %s -> %s, %.1f ms, %d planes moved\n",
+                 fs.balance().c_str(), rings(fs.cuts_before()).c_str(),
+                 rings(fs.cuts_after()).c_str(), fs.balance_ms(), fs.planes_moved());
   }
   for (const auto& w : fs.workers()) {
     std::fprintf(stderr,
