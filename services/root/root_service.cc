@@ -670,27 +670,27 @@ absl::Status RootService::Distribute(const LoadedDataset& data, Layout& layout) 
     }
   }
   if (moves.empty()) return absl::OkStatus();
-  // Sources of planes: slabs of this dataset held now, the mover's own ring
-  // first (its neighbours hold the planes a moved cut hands over).
-  auto sources_for = [&](const Move& m) {
-    std::vector<std::pair<int, v1::PlaneSource>> ranked;
-    for (auto& [id, h] : held) {
-      if (id == m.worker->id || h.data_key != data.key) continue;
-      std::shared_ptr<WorkerEntry> w;
-      for (const auto& ring : layout.rings)
-        for (const auto& x : ring.workers)
-          if (x->id == id) w = x;
-      if (!w) continue;  // no longer in the layout: it may be gone
-      v1::PlaneSource src;
-      src.set_address(w->address);
-      src.set_dataset_key(h.key);
-      src.set_y_begin(h.y0);
-      src.set_y_end(h.y1);
-      ranked.push_back({h.ring == m.ring ? 0 : 1, src});
+  // Sources of planes: slabs of this dataset held now by workers of the
+  // layout (others may be gone), the mover's own ring first (its
+  // neighbours hold the planes a moved cut hands over).
+  std::map<std::string, std::string> address_of;  // by worker id
+  for (const auto& ring : layout.rings)
+    for (const auto& w : ring.workers) address_of[w->id] = w->address;
+  auto add_sources = [&](const Move& m, v1::ReslabRequest* req) {
+    for (bool same_ring : {true, false}) {
+      for (const auto& [id, h] : held) {
+        auto address = address_of.find(id);
+        if (id == m.worker->id || h.data_key != data.key || address == address_of.end() ||
+            (h.ring == m.ring) != same_ring) {
+          continue;
+        }
+        v1::PlaneSource* src = req->add_sources();
+        src->set_address(address->second);
+        src->set_dataset_key(h.key);
+        src->set_y_begin(h.y0);
+        src->set_y_end(h.y1);
+      }
     }
-    std::stable_sort(ranked.begin(), ranked.end(),
-                     [](const auto& a, const auto& b) { return a.first < b.first; });
-    return ranked;
   };
   const auto t0 = Clock::now();
   absl::Status status = ForEachParallel(moves.size(), [&](size_t mi) -> absl::Status {
@@ -703,7 +703,7 @@ absl::Status RootService::Distribute(const LoadedDataset& data, Layout& layout) 
       req.set_new_key(m.key);
       req.set_y_begin(m.y0);
       req.set_y_end(m.y1);
-      for (auto& [rank, src] : sources_for(m)) *req.add_sources() = src;
+      add_sources(m, &req);
       v1::LoadReply reply;
       grpc::Status s = m.worker->stub->Reslab(&ctx, req, &reply);
       if (s.ok()) {

@@ -143,9 +143,7 @@ grpc::Status WorkerService::FetchPlanes(grpc::ServerContext*, const v1::PlanesRe
     return grpc::Status(grpc::StatusCode::NOT_FOUND,
                         absl::StrCat("FetchPlanes: dataset ", req->dataset_key(), " is not here"));
   }
-  const int sb = scene->scalar_y_begin();
-  const int se = sb + static_cast<int>(scene->scalars().size() /
-                                       (static_cast<size_t>(scene->dims()[0]) * scene->dims()[2]));
+  const int sb = scene->scalar_y_begin(), se = scene->scalar_y_end();
   // An empty range asks for nothing of that kind.
   const bool sticks_ok = req->y_begin() == req->y_end() ||
                          (req->y_begin() >= scene->y_begin() && req->y_end() <= scene->y_end() &&
@@ -263,9 +261,7 @@ grpc::Status WorkerService::Reslab(grpc::ServerContext*, const v1::ReslabRequest
   }
   // What this worker has already.
   const int sb = old->ScalarBegin(y0), se = old->ScalarEnd(y1);
-  const int own_sb = old->scalar_y_begin();
-  const int own_se =
-      own_sb + static_cast<int>(old->scalars().size() / (static_cast<size_t>(dims[0]) * dims[2]));
+  const int own_sb = old->scalar_y_begin(), own_se = old->scalar_y_end();
   std::vector<std::string> blocks;
   std::vector<ScalarPlanes> planes;
   const int keep0 = std::max(y0, old->y_begin()), keep1 = std::min(y1, old->y_end());
@@ -280,8 +276,10 @@ grpc::Status WorkerService::Reslab(grpc::ServerContext*, const v1::ReslabRequest
       while (lo < hi) {
         const v1::PlaneSource* from = nullptr;
         for (const auto& src : req->sources()) {
-          if (src.y_begin() <= lo && lo < src.y_end()) from = &src;
-          if (from) break;
+          if (src.y_begin() <= lo && lo < src.y_end()) {
+            from = &src;
+            break;
+          }
         }
         if (!from) {
           return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,

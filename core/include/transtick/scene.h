@@ -118,6 +118,8 @@ class Scene {
   const TransferFunction& transfer() const { return transfer_; }
   const std::vector<float>& scalars() const { return scalars_; }
   int scalar_y_begin() const { return scalar_y_begin_; }
+  // One past the last stored scalar plane.
+  int scalar_y_end() const { return scalar_y_begin_ + scalar_planes_; }
 
   // The scalar at a voxel, indices clamped to the volume.
   // REQUIRES: the clamped y lies in the stored planes.
