@@ -19,8 +19,9 @@
 //   bit for bit, else the exit status is 1.
 // forward: one real worker with a prepared frame receives ray batches on
 //   its Rays stream, as from its left neighbour, for several batch sizes;
-//   prints rays per second and MB per second from the first batch sent to
-//   the worker's count of rays received (which must equal the rays sent).
+//   prints rays per second and MB per second from the first batch sent
+//   until the worker has read the whole stream and finished it; the
+//   worker's count of rays received must then equal the rays sent.
 // tables: the paper's Table 1 (per worker elapsed and active times, 2 and 4
 //   workers, frontal and 45 degree views, without and with balancing) and
 //   Table 2 (elapsed time for 2, 4 and 8 workers and the relative
@@ -411,14 +412,15 @@ int Forward(const Options& o) {
       if (!stream->Write(msg)) return Fail(absl::UnavailableError("the worker closed the stream"));
     }
     stream->WritesDone();
-    // EndFrame returns once the worker has read the whole stream.
+    // The worker finishes the stream once it has read all of it.
+    grpc::Status st = stream->Finish();
+    const double ms = MsSince(t0);
+    if (!st.ok()) return Fail(FromGrpc(st));
     v1::FrameRef ref;
     ref.set_frame_id(frame_id);
     v1::WorkerFrameStats ws;
     grpc::ClientContext end_ctx;
-    grpc::Status st = stub->EndFrame(&end_ctx, ref, &ws);
-    const double ms = MsSince(t0);
-    stream->Finish();
+    st = stub->EndFrame(&end_ctx, ref, &ws);
     if (!st.ok()) return Fail(FromGrpc(st));
     const uint64_t sent = static_cast<uint64_t>(n_batches) * batch;
     if (ws.received_left() != sent) {

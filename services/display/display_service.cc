@@ -23,64 +23,97 @@ std::shared_ptr<DisplayService::FrameState> DisplayService::Find(uint64_t id) {
   return it == frames_.end() ? nullptr : it->second;
 }
 
-grpc::Status DisplayService::BeginFrame(grpc::ServerContext*, const v1::DisplayFrame* req,
-                                        v1::FrameAck*) {
-  if (req->width() < 1 || req->height() < 1 ||
-      static_cast<uint64_t>(req->width()) * req->height() > max_frame_pixels_) {
+grpc::ServerUnaryReactor* DisplayService::BeginFrame(grpc::CallbackServerContext* ctx,
+                                                     const v1::DisplayFrame* req, v1::FrameAck*) {
+  grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
+  reactor->Finish(Begin(*req));
+  return reactor;
+}
+
+grpc::Status DisplayService::Begin(const v1::DisplayFrame& req) {
+  if (req.width() < 1 || req.height() < 1 ||
+      static_cast<uint64_t>(req.width()) * req.height() > max_frame_pixels_) {
     return grpc::Status(
         grpc::StatusCode::INVALID_ARGUMENT,
-        absl::StrCat("display: frame size ", req->width(), "x", req->height(), " is out of range"));
+        absl::StrCat("display: frame size ", req.width(), "x", req.height(), " is out of range"));
   }
   std::lock_guard<std::mutex> lock(mu_);
-  if (frames_.count(req->frame_id())) {
+  if (frames_.count(req.frame_id())) {
     return grpc::Status(grpc::StatusCode::ALREADY_EXISTS,
-                        absl::StrCat("display: frame ", req->frame_id(), " already begun"));
+                        absl::StrCat("display: frame ", req.frame_id(), " already begun"));
   }
   // A framebuffer of a finished frame of the same size is cleared and used
   // again: faulting in fresh pages for every frame costs more.
   std::unique_ptr<Framebuffer> fb;
-  if (spare_ && spare_->width() == req->width() && spare_->height() == req->height()) {
+  if (spare_ && spare_->width() == req.width() && spare_->height() == req.height()) {
     fb = std::move(spare_);
     fb->Clear();
   } else {
-    fb = std::make_unique<Framebuffer>(req->width(), req->height());
+    fb = std::make_unique<Framebuffer>(req.width(), req.height());
   }
-  frames_[req->frame_id()] = std::make_shared<FrameState>(std::move(fb));
+  frames_[req.frame_id()] = std::make_shared<FrameState>(req.frame_id(), std::move(fb));
   return grpc::Status::OK;
 }
 
-grpc::Status DisplayService::Deposits(grpc::ServerContext*,
-                                      grpc::ServerReader<v1::DepositBatch>* reader, v1::FrameAck*) {
-  v1::DepositBatch batch;
-  std::shared_ptr<FrameState> frame;
-  uint64_t frame_id = 0;
-  while (reader->Read(&batch)) {
-    if (!frame || batch.frame_id() != frame_id) {
-      frame_id = batch.frame_id();
-      frame = Find(frame_id);
-      if (!frame) {
-        return grpc::Status(grpc::StatusCode::NOT_FOUND,
-                            absl::StrCat("display: frame ", frame_id, " was not begun"));
-      }
+// One worker's deposit stream: every batch is accumulated into its frame's
+// framebuffer as it is read. A bad batch ends the stream with an error
+// before any of its deposits is added. Deletes itself when done.
+class DisplayService::DepositStream : public grpc::ServerReadReactor<v1::DepositBatch> {
+ public:
+  explicit DepositStream(DisplayService* service) : service_(service) { StartRead(&batch_); }
+
+  void OnReadDone(bool ok) override {
+    if (!ok) {
+      Finish(grpc::Status::OK);
+      return;
     }
-    std::lock_guard<std::mutex> lock(frame->mu);
-    if (!frame->fb) {
-      return grpc::Status(
-          grpc::StatusCode::FAILED_PRECONDITION,
-          absl::StrCat("display: frame ", frame_id, " is complete; deposits after it are refused"));
+    grpc::Status s = service_->Accumulate(batch_, &frame_);
+    if (!s.ok()) {
+      Finish(s);
+      return;
     }
-    const uint32_t limit =
-        static_cast<uint32_t>(frame->fb->width()) * static_cast<uint32_t>(frame->fb->height());
-    auto deposits = DecodeDeposits(batch.deposits(), limit);
-    if (!deposits.ok()) {
-      return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                          absl::StrCat("display: ", deposits.status().message()));
-    }
-    bool completed = false;
-    for (const Deposit& d : *deposits) completed |= frame->fb->Add(d);
-    frame->deposits += deposits->size();
-    if (completed && frame->fb->Complete()) frame->cv.notify_all();
+    StartRead(&batch_);
   }
+  void OnDone() override { delete this; }
+
+ private:
+  DisplayService* const service_;
+  v1::DepositBatch batch_;
+  std::shared_ptr<FrameState> frame_;  // of the last batch
+};
+
+grpc::ServerReadReactor<v1::DepositBatch>* DisplayService::Deposits(grpc::CallbackServerContext*,
+                                                                     v1::FrameAck*) {
+  return new DepositStream(this);
+}
+
+grpc::Status DisplayService::Accumulate(const v1::DepositBatch& batch,
+                                        std::shared_ptr<FrameState>* frame_cache) {
+  std::shared_ptr<FrameState>& frame = *frame_cache;
+  if (!frame || batch.frame_id() != frame->id) {
+    frame = Find(batch.frame_id());
+    if (!frame) {
+      return grpc::Status(grpc::StatusCode::NOT_FOUND,
+                          absl::StrCat("display: frame ", batch.frame_id(), " was not begun"));
+    }
+  }
+  std::lock_guard<std::mutex> lock(frame->mu);
+  if (!frame->fb) {
+    return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                        absl::StrCat("display: frame ", frame->id,
+                                     " is complete; deposits after it are refused"));
+  }
+  const uint32_t limit =
+      static_cast<uint32_t>(frame->fb->width()) * static_cast<uint32_t>(frame->fb->height());
+  auto deposits = DecodeDeposits(batch.deposits(), limit);
+  if (!deposits.ok()) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                        absl::StrCat("display: ", deposits.status().message()));
+  }
+  bool completed = false;
+  for (const Deposit& d : *deposits) completed |= frame->fb->Add(d);
+  frame->deposits += deposits->size();
+  if (completed && frame->fb->Complete()) frame->cv.notify_all();
   return grpc::Status::OK;
 }
 
@@ -110,6 +143,15 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
       return grpc::Status(grpc::StatusCode::ABORTED,
                           absl::StrCat("display: frame ", req->frame_id(), " was aborted"));
     }
+    // Every deposit is in: the root hears it before the image is resolved,
+    // so the workers end the frame while the image is made and sent.
+    v1::FrameProgress done;
+    done.set_pixels_done(total);
+    done.set_pixels_total(total);
+    done.set_complete(true);
+    lock.unlock();
+    writer->Write(done);
+    lock.lock();
     image = frame->fb->Resolve();
   }
   {
@@ -139,20 +181,26 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
   return grpc::Status::OK;
 }
 
-grpc::Status DisplayService::AbortFrame(grpc::ServerContext*, const v1::FrameRef* req,
-                                        v1::FrameAck*) {
+grpc::ServerUnaryReactor* DisplayService::AbortFrame(grpc::CallbackServerContext* ctx,
+                                                     const v1::FrameRef* req, v1::FrameAck*) {
+  Abort(req->frame_id());
+  grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
+  reactor->Finish(grpc::Status::OK);
+  return reactor;
+}
+
+void DisplayService::Abort(uint64_t id) {
   std::shared_ptr<FrameState> frame;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    auto it = frames_.find(req->frame_id());
-    if (it == frames_.end()) return grpc::Status::OK;
+    auto it = frames_.find(id);
+    if (it == frames_.end()) return;
     frame = it->second;
     frames_.erase(it);
   }
   std::lock_guard<std::mutex> lock(frame->mu);
   frame->aborted = true;
   frame->cv.notify_all();
-  return grpc::Status::OK;
 }
 
 }  // namespace transtick

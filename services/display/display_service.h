@@ -14,23 +14,30 @@
 
 namespace transtick {
 
-class DisplayService final : public v1::Display::Service {
+// BeginFrame, AbortFrame and Deposits, the stream every worker sends its
+// finished rays on, use gRPC's callback API. AwaitFrame, which waits for a
+// frame to complete, keeps the sync API and its thread pool.
+class DisplayService final
+    : public v1::Display::WithCallbackMethod_BeginFrame<v1::Display::WithCallbackMethod_AbortFrame<
+          v1::Display::WithCallbackMethod_Deposits<v1::Display::Service>>> {
  public:
   // Frames larger than `max_frame_pixels` are refused.
   explicit DisplayService(uint64_t max_frame_pixels = uint64_t{8192} * 8192);
 
-  grpc::Status BeginFrame(grpc::ServerContext* ctx, const v1::DisplayFrame* req,
-                          v1::FrameAck* reply) override;
-  grpc::Status Deposits(grpc::ServerContext* ctx, grpc::ServerReader<v1::DepositBatch>* reader,
-                        v1::FrameAck* reply) override;
+  grpc::ServerUnaryReactor* BeginFrame(grpc::CallbackServerContext* ctx,
+                                       const v1::DisplayFrame* req, v1::FrameAck* reply) override;
+  grpc::ServerReadReactor<v1::DepositBatch>* Deposits(grpc::CallbackServerContext* ctx,
+                                                      v1::FrameAck* reply) override;
   grpc::Status AwaitFrame(grpc::ServerContext* ctx, const v1::FrameRef* req,
                           grpc::ServerWriter<v1::FrameProgress>* writer) override;
-  grpc::Status AbortFrame(grpc::ServerContext* ctx, const v1::FrameRef* req,
-                          v1::FrameAck* reply) override;
+  grpc::ServerUnaryReactor* AbortFrame(grpc::CallbackServerContext* ctx, const v1::FrameRef* req,
+                                       v1::FrameAck* reply) override;
 
  private:
+  class DepositStream;
   struct FrameState {
-    explicit FrameState(std::unique_ptr<Framebuffer> f) : fb(std::move(f)) {}
+    FrameState(uint64_t i, std::unique_ptr<Framebuffer> f) : id(i), fb(std::move(f)) {}
+    const uint64_t id;
     std::mutex mu;
     std::condition_variable cv;
     std::unique_ptr<Framebuffer> fb;  // guarded by mu; null once the image is out
@@ -38,6 +45,11 @@ class DisplayService final : public v1::Display::Service {
     uint64_t deposits = 0;  // guarded by mu
   };
   std::shared_ptr<FrameState> Find(uint64_t id);
+  grpc::Status Begin(const v1::DisplayFrame& req);
+  void Abort(uint64_t id);
+  // Adds a batch's deposits to its frame; `frame` caches the frame of the
+  // stream's last batch.
+  grpc::Status Accumulate(const v1::DepositBatch& batch, std::shared_ptr<FrameState>* frame);
 
   const uint64_t max_frame_pixels_;
   std::mutex mu_;

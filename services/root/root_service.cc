@@ -6,6 +6,8 @@
 #include <algorithm>
 #include <bit>
 #include <chrono>
+#include <condition_variable>
+#include <deque>
 #include <filesystem>
 #include <functional>
 #include <numeric>
@@ -51,6 +53,30 @@ absl::Status ForEachParallel(size_t n, const std::function<absl::Status(size_t)>
     if (!s.ok()) return s;
   }
   return absl::OkStatus();
+}
+
+// Starts one asynchronous unary call per index, all at once, and waits for
+// them all: no thread per call. `start(i, ctx, done)` starts call i on
+// `ctx`, whose deadline is set, with `done` as its completion.
+using StartCall = std::function<void(size_t, grpc::ClientContext*,
+                                     std::function<void(grpc::Status)>)>;
+std::vector<grpc::Status> CallAll(size_t n, int deadline_s, const StartCall& start) {
+  std::vector<grpc::Status> results(n);
+  std::deque<grpc::ClientContext> contexts(n);
+  std::mutex mu;
+  std::condition_variable cv;
+  size_t pending = n;
+  for (size_t i = 0; i < n; ++i) {
+    contexts[i].set_deadline(Deadline(deadline_s));
+    start(i, &contexts[i], [&, i](grpc::Status s) {
+      std::lock_guard<std::mutex> lock(mu);
+      results[i] = std::move(s);
+      if (--pending == 0) cv.notify_all();
+    });
+  }
+  std::unique_lock<std::mutex> lock(mu);
+  cv.wait(lock, [&] { return pending == 0; });
+  return results;
 }
 
 bool IsWorkerFailure(const grpc::Status& s) {
@@ -915,19 +941,6 @@ absl::StatusOr<RootService::FrameResult> RootService::RunFrame(JobRecord& job, i
   const uint64_t frame_id = next_frame_id_++;
   const auto t0 = Clock::now();
   auto display = v1::Display::NewStub(SharedChannel(options_.display, "control"));
-  // The display learns of the frame while the workers prepare it; both are
-  // done before any worker starts, so no deposit comes early.
-  grpc::Status begun;
-  std::thread begin([&] {
-    grpc::ClientContext ctx;
-    ctx.set_deadline(Deadline(10));
-    v1::DisplayFrame df;
-    df.set_frame_id(frame_id);
-    df.set_width(view.width());
-    df.set_height(view.height());
-    v1::FrameAck ack;
-    begun = display->BeginFrame(&ctx, df, &ack);
-  });
   struct Member {
     std::shared_ptr<WorkerEntry> worker;
     v1::FrameSpec spec;
@@ -955,61 +968,71 @@ absl::StatusOr<RootService::FrameResult> RootService::RunFrame(JobRecord& job, i
       members.push_back({ring.workers[i], std::move(spec), r});
     }
   }
-  auto call = [&](const char* what, auto&& rpc) {
-    return ForEachParallel(members.size(), [&](size_t i) -> absl::Status {
-      grpc::ClientContext ctx;
-      ctx.set_deadline(Deadline(30));
-      grpc::Status s = rpc(members[i], &ctx);
-      if (s.ok()) return absl::OkStatus();
+  // The first failure among the members' replies, naming the worker; a
+  // worker that cannot be reached is dropped.
+  auto check = [&](const char* what, const std::vector<grpc::Status>& results) {
+    absl::Status first;
+    for (size_t i = 0; i < results.size(); ++i) {
+      const grpc::Status& s = results[i];
+      if (s.ok()) continue;
+      absl::Status why(FromGrpc(s).code(), absl::StrCat(what, " on ", members[i].worker->address,
+                                                        ": ", s.error_message()));
       if (IsWorkerFailure(s)) {
         DropWorker(members[i].worker->id, s.error_message());
-        return absl::UnavailableError(
-            absl::StrCat(what, " on ", members[i].worker->address, ": ", s.error_message()));
+        why = absl::UnavailableError(why.message());
       }
-      return absl::Status(FromGrpc(s).code(), absl::StrCat(what, " on ", members[i].worker->address,
-                                                           ": ", s.error_message()));
-    });
+      if (first.ok()) first = why;
+    }
+    return first;
   };
+  v1::FrameRef ref;
+  ref.set_frame_id(frame_id);
+  std::vector<v1::FrameAck> acks(members.size() + 1);
   std::vector<v1::WorkerFrameStats> stats(members.size());
   auto end_all = [&](bool cancel) {
     // Statistics of workers that fail to end are simply missing.
-    (void)ForEachParallel(members.size(), [&](size_t i) -> absl::Status {
-      grpc::ClientContext ctx;
-      ctx.set_deadline(Deadline(30));
-      v1::FrameRef ref;
-      ref.set_frame_id(frame_id);
-      ref.set_cancel(cancel);
-      grpc::Status s = members[i].worker->stub->EndFrame(&ctx, ref, &stats[i]);
-      stats[i].set_ring(members[i].ring);
-      return FromGrpc(s);
+    v1::FrameRef end = ref;
+    end.set_cancel(cancel);
+    CallAll(members.size(), 30, [&](size_t i, grpc::ClientContext* ctx, auto done) {
+      members[i].worker->stub->async()->EndFrame(ctx, &end, &stats[i], std::move(done));
     });
+    for (size_t i = 0; i < members.size(); ++i) stats[i].set_ring(members[i].ring);
   };
   auto abort = [&](const absl::Status& why) {
     grpc::ClientContext ctx;
     ctx.set_deadline(Deadline(10));
-    v1::FrameRef ref;
-    ref.set_frame_id(frame_id);
     v1::FrameAck ack;
     display->AbortFrame(&ctx, ref, &ack);
     end_all(/*cancel=*/true);
     return why;
   };
-  absl::Status s = call("PrepareFrame", [&](Member& m, grpc::ClientContext* ctx) {
-    v1::FrameAck ack;
-    return m.worker->stub->PrepareFrame(ctx, m.spec, &ack);
-  });
-  begin.join();
+  // The display learns of the frame while the workers prepare it; both are
+  // done before any worker starts, so no deposit comes early.
+  v1::DisplayFrame df;
+  df.set_frame_id(frame_id);
+  df.set_width(view.width());
+  df.set_height(view.height());
+  std::vector<grpc::Status> prepared =
+      CallAll(members.size() + 1, 30, [&](size_t i, grpc::ClientContext* ctx, auto done) {
+        if (i == members.size()) {
+          display->async()->BeginFrame(ctx, &df, &acks[i], std::move(done));
+        } else {
+          members[i].worker->stub->async()->PrepareFrame(ctx, &members[i].spec, &acks[i],
+                                                         std::move(done));
+        }
+      });
+  const grpc::Status begun = prepared.back();
+  prepared.pop_back();
+  absl::Status s = check("PrepareFrame", prepared);
   if (!begun.ok()) {
     return abort(absl::Status(FromGrpc(begun).code(), absl::StrCat("display ", options_.display,
                                                                    ": ", begun.error_message())));
   }
   if (!s.ok()) return abort(s);
-  s = call("RunFrame", [&](Member& m, grpc::ClientContext* ctx) {
-    v1::FrameRef ref;
-    ref.set_frame_id(frame_id);
-    v1::FrameAck ack;
-    return m.worker->stub->RunFrame(ctx, ref, &ack);
-  });
+  s = check("RunFrame",
+            CallAll(members.size(), 30, [&](size_t i, grpc::ClientContext* ctx, auto done) {
+              members[i].worker->stub->async()->RunFrame(ctx, &ref, &acks[i], std::move(done));
+            }));
   if (!s.ok()) return abort(s);
 
   // Wait for the display, relaying progress, until the image is in.
@@ -1020,20 +1043,22 @@ absl::StatusOr<RootService::FrameResult> RootService::RunFrame(JobRecord& job, i
   {
     grpc::ClientContext ctx;
     ctx.set_deadline(Deadline(options_.frame_timeout_s));
-    v1::FrameRef ref;
-    ref.set_frame_id(frame_id);
     auto reader = display->AwaitFrame(&ctx, ref);
     v1::FrameProgress p;
     int rows = 0;
     auto last_event = Clock::now() - std::chrono::seconds(1);
-    // Every deposit is in once the image comes: the workers end the frame
-    // (and report) while its rows arrive here.
+    // Every deposit is in once the display says the frame is complete: the
+    // workers end the frame (and report) while its image is resolved and
+    // its rows arrive here.
     std::thread ender;
     auto join_ender = [&] {
       if (ender.joinable()) ender.join();
     };
     while (reader->Read(&p)) {
       if (job.cancel) ctx.TryCancel();
+      if (p.complete() && !ender.joinable()) {
+        ender = std::thread([&] { end_all(/*cancel=*/false); });
+      }
       if (p.has_image()) {
         if (!ender.joinable()) ender = std::thread([&] { end_all(/*cancel=*/false); });
         const v1::ImageChunk& c = p.image();

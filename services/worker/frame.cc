@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <grpcpp/alarm.h>
 #include <pthread.h>
 #include <time.h>
 
@@ -36,7 +37,7 @@ constexpr size_t kWorkUnit = 256;
 // How long an idle tracer sleeps before looking again (it is woken sooner
 // when rays arrive).
 constexpr auto kIdleWait = std::chrono::milliseconds(5);
-// How long End waits for a neighbour to close its side before cancelling.
+// How long a stream may stay open after End for its peer to close its side.
 constexpr auto kCloseWait = std::chrono::seconds(10);
 
 // The footprints of the ring's slabs, from the cuts.
@@ -98,64 +99,302 @@ size_t Inbox::high_water() const {
   return high_water_;
 }
 
+void Outbox::Attach(StartWrite write, std::function<void()> done, bool busy) {
+  std::unique_lock<std::mutex> lock(mu_);
+  write_ = std::move(write);
+  done_ = std::move(done);
+  in_flight_ = busy;
+  Pump(lock);
+}
+
+void Outbox::WriteDone(bool ok) {
+  std::unique_lock<std::mutex> lock(mu_);
+  in_flight_ = false;
+  if (!ok && !failed_) {
+    failed_ = true;
+    dropped_ += pending_.size() / record_bytes_;
+    pending_.clear();
+  }
+  Pump(lock);
+}
+
 void Outbox::Append(const std::string& records) {
   if (records.empty()) return;
-  std::lock_guard<std::mutex> lock(mu_);
-  const bool was_empty = pending_.empty();
-  if (was_empty) first_pending_ = Clock::now();
+  std::unique_lock<std::mutex> lock(mu_);
+  if (failed_ || closed_) {
+    dropped_ += records.size() / record_bytes_;
+    return;
+  }
+  if (pending_.empty()) first_pending_ = Clock::now();
   pending_ += records;
-  // The writer sleeps without a deadline while nothing is pending: wake it
-  // to start the linger clock, and again when a full batch is ready.
-  if (was_empty || pending_.size() >= batch_records_ * record_bytes_) cv_.notify_one();
+  Pump(lock);
 }
 
 void Outbox::Flush() {
-  std::lock_guard<std::mutex> lock(mu_);
+  std::unique_lock<std::mutex> lock(mu_);
   if (pending_.empty()) return;
   flush_ = true;
-  cv_.notify_one();
-}
-
-bool Outbox::Take(std::string* batch) {
-  std::unique_lock<std::mutex> lock(mu_);
-  while (true) {
-    if (pending_.size() >= batch_records_ * record_bytes_ ||
-        ((closed_ || flush_) && !pending_.empty())) {
-      break;
-    }
-    if (closed_) return false;
-    if (pending_.empty()) {
-      cv_.wait(lock);
-      continue;
-    }
-    auto due = first_pending_ + linger_;
-    if (Clock::now() >= due) break;
-    cv_.wait_until(lock, due);
-  }
-  const size_t limit = batch_records_ * record_bytes_;
-  if (pending_.size() <= limit) {
-    // The usual case: everything pending is one batch, handed over whole.
-    batch->clear();
-    batch->swap(pending_);
-  } else {
-    batch->assign(pending_, 0, limit);
-    pending_.erase(0, limit);
-  }
-  if (pending_.empty()) flush_ = false;
-  if (!pending_.empty()) first_pending_ = Clock::now();
-  return true;
+  Pump(lock);
 }
 
 void Outbox::Close() {
-  std::lock_guard<std::mutex> lock(mu_);
+  std::unique_lock<std::mutex> lock(mu_);
   closed_ = true;
-  cv_.notify_all();
+  Pump(lock);
+}
+
+uint64_t Outbox::dropped() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return dropped_;
+}
+
+void Outbox::Pump(std::unique_lock<std::mutex>& lock) {
+  if (!write_ || in_flight_) return;
+  const size_t limit = batch_records_ * record_bytes_;
+  const bool due = pending_.size() >= limit ||
+                   (!pending_.empty() &&
+                    (flush_ || closed_ || Clock::now() - first_pending_ >= linger_));
+  if (due) {
+    std::string batch;
+    if (pending_.size() <= limit) {
+      // The usual case: everything pending is one batch, handed over whole.
+      batch.swap(pending_);
+    } else {
+      batch.assign(pending_, 0, limit);
+      pending_.erase(0, limit);
+    }
+    if (pending_.empty()) {
+      flush_ = false;
+    } else {
+      first_pending_ = Clock::now();
+    }
+    in_flight_ = true;
+    lock.unlock();
+    write_(std::move(batch));
+    return;
+  }
+  if ((closed_ || failed_) && pending_.empty() && !done_called_) {
+    done_called_ = true;
+    lock.unlock();
+    done_();
+  }
 }
 
 struct Frame::Link {
   explicit Link(const FrameOptions& o) : outbox(kRayRecordBytes, o.batch_rays, o.linger) {}
   Outbox outbox;
   std::atomic<uint64_t> rays_sent{0}, bytes_sent{0}, rays_received{0}, bytes_received{0};
+
+  // The write of one batch on this link's stream, for Outbox::Attach.
+  void Count(const v1::RayBatch& b) {
+    rays_sent += b.rays().size() / kRayRecordBytes;
+    bytes_sent += b.ByteSizeLong();
+  }
+};
+
+// What the frame's client streams share: each keeps its frame, and itself,
+// until its OnDone (the frame may have ended by then, since a stream winds
+// down on its own), and can be cancelled now or after a wait.
+template <typename Stream>
+class Frame::ClientCall {
+ public:
+  void Cancel() { ctx_.TryCancel(); }
+  // Cancels the call if it is still open after `patience` (a peer that
+  // never closes its side).
+  static void CancelAfter(const std::shared_ptr<Stream>& stream,
+                          std::chrono::steady_clock::duration patience) {
+    std::weak_ptr<Stream> weak = stream;
+    stream->closer_.Set(std::chrono::system_clock::now() + patience, [weak](bool fired) {
+      if (auto self = weak.lock(); self && fired) self->Cancel();
+    });
+  }
+
+ protected:
+  explicit ClientCall(std::shared_ptr<Frame> frame) : frame_(std::move(frame)) {}
+
+  void Own(std::shared_ptr<Stream> self) { self_ = std::move(self); }
+  // From OnDone: logs how a call that was not cancelled ended badly, then
+  // lets go of the frame and of this stream.
+  void Done(const grpc::Status& s, const char* what, const std::string& peer) {
+    if (!s.ok() && !frame_->cancelled_) {
+      spdlog::warn("frame {}: the {} stream to {} ended with: {}", frame_->id(), what, peer,
+                   s.error_message());
+    }
+    auto frame = std::move(frame_);
+    auto self = std::move(self_);  // may delete this: nothing after
+  }
+
+  std::shared_ptr<Frame> frame_;
+  grpc::ClientContext ctx_;
+
+ private:
+  std::shared_ptr<Stream> self_;
+  grpc::Alarm closer_;
+};
+
+// The client side of the stream to the right neighbour: the right link's
+// outbox writes on it, and the neighbour's rays coming back are read into
+// the inbox.
+class Frame::RightStream : public grpc::ClientBidiReactor<v1::RayBatch, v1::RayBatch>,
+                           public Frame::ClientCall<Frame::RightStream> {
+ public:
+  explicit RightStream(std::shared_ptr<Frame> frame)
+      : ClientCall(std::move(frame)),
+        stub_(v1::Worker::NewStub(SharedChannel(frame_->spec_.right(), "rays"))) {}
+
+  // `opened` hears whether the first message went out.
+  void Begin(std::shared_ptr<RightStream> self, std::function<void(absl::Status)> opened) {
+    Own(std::move(self));
+    opened_ = std::move(opened);
+    stub_->async()->Rays(&ctx_, this);
+    AddHold();  // writes come from the outbox, outside reactions
+    out_.set_frame_id(frame_->id());  // the first message, with no rays, names the frame
+    StartWrite(&out_);
+    StartRead(&in_);
+    Link& link = *frame_->right_;
+    link.outbox.Attach(
+        [this, &link](std::string batch) {
+          out_.set_rays(std::move(batch));
+          link.Count(out_);
+          StartWrite(&out_);
+        },
+        [this] {
+          StartWritesDone();
+          RemoveHold();
+        },
+        /*busy=*/true);
+    StartCall();
+  }
+
+  void OnWriteDone(bool ok) override {
+    if (opened_) Opened(ok);  // the first write is the only one before opened_ is cleared
+    frame_->right_->outbox.WriteDone(ok);
+  }
+  void OnReadDone(bool ok) override {
+    if (!ok) return;  // the neighbour closed its side
+    frame_->ReceiveBatch(in_, *frame_->right_);
+    StartRead(&in_);
+  }
+  void OnDone(const grpc::Status& s) override {
+    if (opened_) Opened(false);
+    Done(s, "ray", frame_->spec_.right());
+  }
+
+ private:
+  const std::unique_ptr<v1::Worker::Stub> stub_;
+  v1::RayBatch out_, in_;
+  std::function<void(absl::Status)> opened_;  // until the first write completes
+
+  void Opened(bool ok) {
+    auto opened = std::move(opened_);
+    opened_ = nullptr;
+    opened(ok ? absl::OkStatus()
+              : absl::UnavailableError(absl::StrCat(
+                    "cannot open the ray stream to the right neighbour ", frame_->spec_.right())));
+  }
+};
+
+// The client side of the deposit stream to the display, written from the
+// deposit outbox.
+class Frame::DisplayStream : public grpc::ClientWriteReactor<v1::DepositBatch>,
+                             public Frame::ClientCall<Frame::DisplayStream> {
+ public:
+  explicit DisplayStream(std::shared_ptr<Frame> frame)
+      : ClientCall(std::move(frame)),
+        stub_(v1::Display::NewStub(SharedChannel(frame_->spec_.display(), "deposits"))) {}
+
+  void Begin(std::shared_ptr<DisplayStream> self) {
+    Own(std::move(self));
+    stub_->async()->Deposits(&ctx_, &ack_, this);
+    AddHold();  // writes come from the outbox, outside reactions
+    out_.set_frame_id(frame_->id());
+    frame_->deposits_.Attach(
+        [this](std::string batch) {
+          out_.set_deposits(std::move(batch));
+          StartWrite(&out_);
+        },
+        [this] {
+          StartWritesDone();
+          RemoveHold();
+        },
+        /*busy=*/false);
+    StartCall();
+  }
+
+  void OnWriteDone(bool ok) override { frame_->deposits_.WriteDone(ok); }
+  void OnDone(const grpc::Status& s) override { Done(s, "deposit", frame_->spec_.display()); }
+
+ private:
+  const std::unique_ptr<v1::Display::Stub> stub_;
+  v1::FrameAck ack_;
+  v1::DepositBatch out_;
+};
+
+// The server side of the stream from the left neighbour: its rays are read
+// into the inbox, and the left link's outbox writes on it. It finishes once
+// the neighbour has closed its side and the outbox has drained. Deletes
+// itself when done.
+class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch> {
+ public:
+  explicit LeftStream(std::function<std::shared_ptr<Frame>(uint64_t)> find)
+      : find_(std::move(find)) {
+    StartRead(&in_);
+  }
+
+  void OnReadDone(bool ok) override {
+    if (!frame_) {
+      if (!ok) {
+        Finish(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                            "Rays: the stream closed before its first batch"));
+        return;
+      }
+      frame_ = find_(in_.frame_id());
+      if (!frame_) {
+        Finish(grpc::Status(grpc::StatusCode::NOT_FOUND,
+                            absl::StrCat("Rays: frame ", in_.frame_id(), " is not prepared here")));
+        return;
+      }
+      if (!frame_->AttachLeft()) {
+        Finish(grpc::Status(grpc::StatusCode::ALREADY_EXISTS,
+                            absl::StrCat("Rays: frame ", in_.frame_id(),
+                                         " already has a stream from its left neighbour")));
+        frame_ = nullptr;
+        return;
+      }
+      out_.set_frame_id(frame_->id());
+      Link& link = *frame_->left_;
+      link.outbox.Attach(
+          [this, &link](std::string batch) {
+            out_.set_rays(std::move(batch));
+            link.Count(out_);
+            StartWrite(&out_);
+          },
+          [this] { Release(); }, /*busy=*/false);
+    }
+    if (!ok) {
+      // The neighbour closed its side (it has ended the frame) or went away:
+      // it takes no more rays, so what is pending for it goes out and the
+      // stream then finishes, without waiting for this frame's End.
+      frame_->left_->outbox.Close();
+      Release();
+      return;
+    }
+    frame_->ReceiveBatch(in_, *frame_->left_);
+    StartRead(&in_);
+  }
+  void OnWriteDone(bool ok) override { frame_->left_->outbox.WriteDone(ok); }
+  void OnDone() override { delete this; }
+
+ private:
+  // Reading and writing each release the stream once; the second finishes.
+  void Release() {
+    if (--holds_ == 0) Finish(grpc::Status::OK);
+  }
+
+  const std::function<std::shared_ptr<Frame>(uint64_t)> find_;
+  std::shared_ptr<Frame> frame_;  // set by the first read only
+  v1::RayBatch in_, out_;
+  std::atomic<int> holds_{2};
 };
 
 Frame::Frame(const v1::FrameSpec& spec, std::shared_ptr<const Scene> scene, Camera camera,
@@ -173,76 +412,40 @@ Frame::Frame(const v1::FrameSpec& spec, std::shared_ptr<const Scene> scene, Came
       footprints_(SlabFootprints(spec, *scene_, camera_)),
       left_(std::make_unique<Link>(options)),
       right_(std::make_unique<Link>(options)),
-      deposits_(kDepositRecordBytes, options.batch_rays * 2, options.linger),
+      deposits_(kDepositRecordBytes, options.deposit_batch, options.deposit_linger),
       thread_stats_(options.threads) {}
 
 Frame::~Frame() {
   if (!stop_) End(/*cancel=*/true);
 }
 
-absl::Status Frame::Start() {
-  if (started_.exchange(true)) return absl::FailedPreconditionError("frame already running");
+void Frame::Start(std::function<void(absl::Status)> started) {
+  if (started_.exchange(true)) {
+    started(absl::FailedPreconditionError("frame already running"));
+    return;
+  }
   run_start_ = Clock::now();
   // Tracing starts at once; the outboxes hold what it produces until the
   // streams below are open.
   for (int i = 0; i < options_.threads; ++i) tracers_.emplace_back([this, i] { TraceLoop(i); });
-  display_stub_ = v1::Display::NewStub(SharedChannel(spec_.display(), "deposits"));
-  display_ctx_ = std::make_unique<grpc::ClientContext>();
-  display_stream_ = display_stub_->Deposits(display_ctx_.get(), &display_ack_);
-  deposit_writer_ = std::thread([this] {
-    NameThread("tt-deposits");
-    std::string bytes;
-    v1::DepositBatch batch;
-    batch.set_frame_id(id());
-    while (deposits_.Take(&bytes)) {
-      batch.set_deposits(std::move(bytes));
-      if (!display_stream_->Write(batch)) {
-        spdlog::warn("frame {}: display {} closed the deposit stream", id(), spec_.display());
-        break;
-      }
-    }
-    display_stream_->WritesDone();
-  });
-  if (!spec_.right().empty()) {
-    right_stub_ = v1::Worker::NewStub(SharedChannel(spec_.right(), "rays"));
-    right_ctx_ = std::make_unique<grpc::ClientContext>();
-    right_stream_ = right_stub_->Rays(right_ctx_.get());
-    v1::RayBatch hello;
-    hello.set_frame_id(id());
-    if (!right_stream_->Write(hello)) {
-      return absl::UnavailableError(
-          absl::StrCat("cannot open the ray stream to the right neighbour ", spec_.right()));
-    }
-    right_writer_ = std::thread([this] {
-      NameThread("tt-ray-writer");
-      WriterLoop(*right_, [this](const v1::RayBatch& b) { return right_stream_->Write(b); });
-      right_stream_->WritesDone();
-    });
-    right_reader_ = std::thread([this] {
-      NameThread("tt-ray-reader");
-      v1::RayBatch b;
-      while (right_stream_->Read(&b)) ReceiveBatch(b, *right_);
-    });
+  auto deposits = std::make_shared<DisplayStream>(shared_from_this());
+  display_stream_ = deposits;
+  deposits->Begin(deposits);
+  if (spec_.right().empty()) {
+    started(absl::OkStatus());
+    return;
   }
-  return absl::OkStatus();
+  auto right = std::make_shared<RightStream>(shared_from_this());
+  right_stream_ = right;
+  right->Begin(right, std::move(started));
 }
 
-void Frame::WriterLoop(Link& link, std::function<bool(const v1::RayBatch&)> write) {
-  std::string bytes;
-  v1::RayBatch batch;
-  batch.set_frame_id(id());
-  while (link.outbox.Take(&bytes)) {
-    const size_t n = bytes.size() / kRayRecordBytes;
-    batch.set_rays(std::move(bytes));
-    if (!write(batch)) {
-      spdlog::warn("frame {}: a neighbour closed its ray stream with {} rays unsent", id(), n);
-      break;
-    }
-    link.rays_sent += n;
-    link.bytes_sent += batch.ByteSizeLong();
-    bytes.clear();
-  }
+grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* Frame::NewLeftStream(
+    std::function<std::shared_ptr<Frame>(uint64_t)> find) {
+  return new LeftStream(std::move(find));
 }
+
+bool Frame::AttachLeft() { return !left_attached_.exchange(true); }
 
 void Frame::ReceiveBatch(const v1::RayBatch& batch, Link& from) {
   if (batch.frame_id() != id()) {
@@ -258,23 +461,6 @@ void Frame::ReceiveBatch(const v1::RayBatch& batch, Link& from) {
   from.rays_received += rays->size();
   from.bytes_received += batch.ByteSizeLong();
   inbox_.Push(*std::move(rays));
-}
-
-grpc::Status Frame::ServeLeft(grpc::ServerReaderWriter<v1::RayBatch, v1::RayBatch>* stream) {
-  {
-    std::lock_guard<std::mutex> lock(left_mu_);
-    left_done_ = false;
-  }
-  std::thread writer([this, stream] {
-    WriterLoop(*left_, [stream](const v1::RayBatch& b) { return stream->Write(b); });
-  });
-  v1::RayBatch b;
-  while (stream->Read(&b)) ReceiveBatch(b, *left_);
-  writer.join();
-  std::lock_guard<std::mutex> lock(left_mu_);
-  left_done_ = true;
-  left_cv_.notify_all();
-  return grpc::Status::OK;
 }
 
 bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>* misses) {
@@ -372,43 +558,29 @@ v1::WorkerFrameStats Frame::End(bool cancel) {
   for (auto& t : tracers_) t.join();
   tracers_.clear();
   const auto end = Clock::now();
+  // Closing the outboxes half-closes every stream once its last batch is
+  // written (when the frame is complete, nothing is left to write). The
+  // streams then wind down on their own: the frame's statistics do not
+  // wait for the display's and the neighbours' replies.
+  if (cancel) cancelled_ = true;
   left_->outbox.Close();
   right_->outbox.Close();
   deposits_.Close();
+  auto right = right_stream_.lock();
+  auto deposits = display_stream_.lock();
   if (cancel) {
-    if (right_ctx_) right_ctx_->TryCancel();
-    if (display_ctx_) display_ctx_->TryCancel();
+    if (right) right->Cancel();
+    if (deposits) deposits->Cancel();
+  } else {
+    // Do not hold a stream open for ever for a peer that hangs.
+    if (right) RightStream::CancelAfter(right, kCloseWait);
+    if (deposits) DisplayStream::CancelAfter(deposits, kCloseWait);
   }
-  if (deposit_writer_.joinable()) {
-    deposit_writer_.join();
-    grpc::Status s = display_stream_->Finish();
-    if (!s.ok() && !cancel) {
-      spdlog::warn("frame {}: deposit stream ended with: {}", id(), s.error_message());
-    }
-  }
-  if (right_writer_.joinable()) right_writer_.join();
-  if (right_reader_.joinable()) {
-    // The right neighbour closes its side when it ends the frame too; do
-    // not wait for ever on one that died.
-    std::mutex mu;
-    std::condition_variable cv;
-    bool done = false;
-    std::thread waiter([&] {
-      right_reader_.join();
-      std::lock_guard<std::mutex> lock(mu);
-      done = true;
-      cv.notify_all();
-    });
-    {
-      std::unique_lock<std::mutex> lock(mu);
-      if (!cv.wait_for(lock, kCloseWait, [&] { return done; })) right_ctx_->TryCancel();
-    }
-    waiter.join();
-    right_stream_->Finish();
-  }
-  {
-    std::unique_lock<std::mutex> lock(left_mu_);
-    left_cv_.wait_for(lock, kCloseWait, [this] { return left_done_; });
+  const uint64_t dropped =
+      left_->outbox.dropped() + right_->outbox.dropped() + deposits_.dropped();
+  if (dropped > 0 && !cancel) {
+    spdlog::warn("frame {}: {} rays or deposits could not be sent (a stream broke)", id(),
+                 dropped);
   }
 
   v1::WorkerFrameStats stats;

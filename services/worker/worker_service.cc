@@ -315,101 +315,108 @@ grpc::Status WorkerService::Reslab(grpc::ServerContext*, const v1::ReslabRequest
   return grpc::Status::OK;
 }
 
-grpc::Status WorkerService::PrepareFrame(grpc::ServerContext*, const v1::FrameSpec* spec,
-                                         v1::FrameAck*) {
+grpc::ServerUnaryReactor* WorkerService::PrepareFrame(grpc::CallbackServerContext* ctx,
+                                                      const v1::FrameSpec* spec, v1::FrameAck*) {
+  grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
+  reactor->Finish(Prepare(*spec));
+  return reactor;
+}
+
+grpc::Status WorkerService::Prepare(const v1::FrameSpec& spec) {
   std::shared_ptr<const Scene> scene;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    auto it = datasets_.find(spec->dataset_key());
+    auto it = datasets_.find(spec.dataset_key());
     if (it == datasets_.end()) {
       return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
-                          absl::StrCat("dataset ", spec->dataset_key(), " is not loaded here"));
+                          absl::StrCat("dataset ", spec.dataset_key(), " is not loaded here"));
     }
     scene = it->second;
-    if (frames_.count(spec->frame_id())) {
+    if (frames_.count(spec.frame_id())) {
       return grpc::Status(grpc::StatusCode::ALREADY_EXISTS,
-                          absl::StrCat("frame ", spec->frame_id(), " is already prepared"));
+                          absl::StrCat("frame ", spec.frame_id(), " is already prepared"));
     }
   }
-  const int n = spec->cuts_size() - 1;
-  if (n < 1 || spec->index() < 0 || spec->index() >= n ||
-      spec->cuts(spec->index()) != scene->y_begin() ||
-      spec->cuts(spec->index() + 1) != scene->y_end()) {
-    return Invalid(absl::StrCat("frame ", spec->frame_id(), ": slab ", spec->index(),
+  const int n = spec.cuts_size() - 1;
+  if (n < 1 || spec.index() < 0 || spec.index() >= n ||
+      spec.cuts(spec.index()) != scene->y_begin() ||
+      spec.cuts(spec.index() + 1) != scene->y_end()) {
+    return Invalid(absl::StrCat("frame ", spec.frame_id(), ": slab ", spec.index(),
                                 " of the cuts does not match the loaded slab [", scene->y_begin(),
                                 ", ", scene->y_end(), ")"));
   }
-  auto cam_spec = ToCameraSpec(spec->view());
+  auto cam_spec = ToCameraSpec(spec.view());
   if (!cam_spec.ok()) return ToGrpc(cam_spec.status());
   const auto& d = scene->dims();
   const auto& sp = scene->spacing();
   auto camera = Camera::Create(*cam_spec, Vec3{d[0] * sp[0], d[1] * sp[1], d[2] * sp[2]});
   if (!camera.ok()) return ToGrpc(camera.status());
-  if (spec->row_step() < 1 || spec->row_begin() < 0 || spec->row_end() > camera->height() ||
-      spec->display().empty()) {
+  if (spec.row_step() < 1 || spec.row_begin() < 0 || spec.row_end() > camera->height() ||
+      spec.display().empty()) {
     return Invalid("frame: bad row range or no display");
   }
   FrameOptions fo;
   fo.threads = options_.threads;
-  auto frame = std::make_shared<Frame>(*spec, std::move(scene), *std::move(camera), fo);
+  auto frame = std::make_shared<Frame>(spec, std::move(scene), *std::move(camera), fo);
   std::lock_guard<std::mutex> lock(mu_);
-  frames_[spec->frame_id()] = std::move(frame);
-  frames_cv_.notify_all();
+  frames_[spec.frame_id()] = std::move(frame);
   return grpc::Status::OK;
 }
 
 std::shared_ptr<Frame> WorkerService::FindFrame(uint64_t id) {
-  std::unique_lock<std::mutex> lock(mu_);
-  // A neighbour's stream may race the root's PrepareFrame by a little.
-  frames_cv_.wait_for(lock, std::chrono::seconds(5), [&] { return frames_.count(id) > 0; });
+  // The root prepares a frame on every worker before it starts any, so a
+  // neighbour's stream never comes before its frame.
+  std::lock_guard<std::mutex> lock(mu_);
   auto it = frames_.find(id);
   return it == frames_.end() ? nullptr : it->second;
 }
 
-grpc::Status WorkerService::RunFrame(grpc::ServerContext*, const v1::FrameRef* req, v1::FrameAck*) {
-  std::shared_ptr<Frame> frame;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    auto it = frames_.find(req->frame_id());
-    if (it != frames_.end()) frame = it->second;
-  }
+grpc::ServerUnaryReactor* WorkerService::RunFrame(grpc::CallbackServerContext* ctx,
+                                                  const v1::FrameRef* req, v1::FrameAck*) {
+  grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
+  std::shared_ptr<Frame> frame = FindFrame(req->frame_id());
   if (!frame) {
-    return grpc::Status(grpc::StatusCode::NOT_FOUND,
-                        absl::StrCat("frame ", req->frame_id(), " was not prepared"));
+    reactor->Finish(grpc::Status(grpc::StatusCode::NOT_FOUND,
+                                 absl::StrCat("frame ", req->frame_id(), " was not prepared")));
+    return reactor;
   }
-  return ToGrpc(frame->Start());
+  // The reply goes once the stream to the right neighbour is open.
+  frame->Start([reactor](absl::Status s) { reactor->Finish(ToGrpc(s)); });
+  return reactor;
 }
 
-grpc::Status WorkerService::EndFrame(grpc::ServerContext*, const v1::FrameRef* req,
-                                     v1::WorkerFrameStats* reply) {
+grpc::ServerUnaryReactor* WorkerService::EndFrame(grpc::CallbackServerContext* ctx,
+                                                  const v1::FrameRef* req,
+                                                  v1::WorkerFrameStats* reply) {
+  grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
+  reactor->Finish(End(*req, reply));
+  return reactor;
+}
+
+grpc::Status WorkerService::End(const v1::FrameRef& req, v1::WorkerFrameStats* reply) {
   std::shared_ptr<Frame> frame;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    auto it = frames_.find(req->frame_id());
+    auto it = frames_.find(req.frame_id());
     if (it == frames_.end()) {
       return grpc::Status(grpc::StatusCode::NOT_FOUND,
-                          absl::StrCat("frame ", req->frame_id(), " is not running here"));
+                          absl::StrCat("frame ", req.frame_id(), " is not running here"));
     }
     frame = it->second;
     frames_.erase(it);
   }
-  *reply = frame->End(req->cancel());
+  // Quick: the tracers stop within one work unit, and the streams wind
+  // down after the reply.
+  *reply = frame->End(req.cancel());
   std::lock_guard<std::mutex> lock(mu_);
   reply->set_id(options_.id);
   reply->set_address(options_.address);
   return grpc::Status::OK;
 }
 
-grpc::Status WorkerService::Rays(grpc::ServerContext*,
-                                 grpc::ServerReaderWriter<v1::RayBatch, v1::RayBatch>* stream) {
-  v1::RayBatch first;
-  if (!stream->Read(&first)) return Invalid("Rays: the stream closed before its first batch");
-  std::shared_ptr<Frame> frame = FindFrame(first.frame_id());
-  if (!frame) {
-    return grpc::Status(grpc::StatusCode::NOT_FOUND,
-                        absl::StrCat("Rays: frame ", first.frame_id(), " is not prepared here"));
-  }
-  return frame->ServeLeft(stream);
+grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* WorkerService::Rays(
+    grpc::CallbackServerContext*) {
+  return Frame::NewLeftStream([this](uint64_t id) { return FindFrame(id); });
 }
 
 }  // namespace transtick

@@ -20,7 +20,14 @@ struct WorkerOptions {
   uint64_t max_slab_bytes = uint64_t{8} << 30;
 };
 
-class WorkerService final : public v1::Worker::Service {
+// The frame's methods (PrepareFrame, RunFrame, EndFrame and the Rays
+// stream that carries ray dataflow) use gRPC's callback API; loading and
+// moving slabs, which read and build whole slabs, keep the sync API and
+// its thread pool.
+class WorkerService final
+    : public v1::Worker::WithCallbackMethod_PrepareFrame<v1::Worker::WithCallbackMethod_RunFrame<
+          v1::Worker::WithCallbackMethod_EndFrame<
+              v1::Worker::WithCallbackMethod_Rays<v1::Worker::Service>>>> {
  public:
   explicit WorkerService(WorkerOptions options);
   ~WorkerService() override;
@@ -37,22 +44,23 @@ class WorkerService final : public v1::Worker::Service {
                       v1::LoadReply* reply) override;
   grpc::Status FetchPlanes(grpc::ServerContext* ctx, const v1::PlanesRequest* req,
                            grpc::ServerWriter<v1::SlabChunk>* writer) override;
-  grpc::Status PrepareFrame(grpc::ServerContext* ctx, const v1::FrameSpec* spec,
-                            v1::FrameAck* reply) override;
-  grpc::Status RunFrame(grpc::ServerContext* ctx, const v1::FrameRef* req,
-                        v1::FrameAck* reply) override;
-  grpc::Status EndFrame(grpc::ServerContext* ctx, const v1::FrameRef* req,
-                        v1::WorkerFrameStats* reply) override;
-  grpc::Status Rays(grpc::ServerContext* ctx,
-                    grpc::ServerReaderWriter<v1::RayBatch, v1::RayBatch>* stream) override;
+  grpc::ServerUnaryReactor* PrepareFrame(grpc::CallbackServerContext* ctx,
+                                         const v1::FrameSpec* spec, v1::FrameAck* reply) override;
+  grpc::ServerUnaryReactor* RunFrame(grpc::CallbackServerContext* ctx, const v1::FrameRef* req,
+                                     v1::FrameAck* reply) override;
+  grpc::ServerUnaryReactor* EndFrame(grpc::CallbackServerContext* ctx, const v1::FrameRef* req,
+                                     v1::WorkerFrameStats* reply) override;
+  grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* Rays(
+      grpc::CallbackServerContext* ctx) override;
 
  private:
   std::shared_ptr<Frame> FindFrame(uint64_t id);
+  grpc::Status Prepare(const v1::FrameSpec& spec);
+  grpc::Status End(const v1::FrameRef& req, v1::WorkerFrameStats* reply);
   std::shared_ptr<const Scene> FindDataset(const std::string& key);
 
   WorkerOptions options_;
   std::mutex mu_;
-  std::condition_variable frames_cv_;
   std::map<std::string, std::shared_ptr<const Scene>> datasets_;  // guarded by mu_
   std::map<uint64_t, std::shared_ptr<Frame>> frames_;             // guarded by mu_
 };
