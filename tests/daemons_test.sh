@@ -4,7 +4,8 @@
 # move between the worker processes), a malformed job file gets a clear
 # error, a worker killed with SIGKILL is dropped and the next job still
 # renders (the survivors re-cut their slabs without the dead one's planes),
-# and every daemon stops cleanly on SIGTERM.
+# a worker killed in the middle of a job does not stall it, and every daemon
+# stops cleanly on SIGTERM.
 set -u
 build=$1
 src=$2
@@ -68,6 +69,43 @@ rm -f "$dir/out/a.png"
 "$T" submit "$dir/job.json" --root 127.0.0.1:$rport --out-dir "$dir/out" >"$dir/submit2.log" 2>&1 ||
   fail "submit after a worker died: $(cat "$dir/submit2.log")"
 cmp -s "$dir/out/a.png" "$dir/ref.png" || fail "image after a worker died differs"
+
+# A worker dies in the middle of a frame: the display sees its deposit
+# stream break and aborts the frame at once (not after the root's 600 s
+# frame timeout), the root retries it on the survivors, and the job
+# completes with the right image.
+"$build/services/worker/transtick-worker" --root 127.0.0.1:$rport --listen 127.0.0.1:0 \
+  --threads 1 >"$dir/worker4.log" 2>&1 &
+pids+=($!); w4=$!
+for _ in $(seq 100); do
+  "$T" status --root 127.0.0.1:$rport 2>/dev/null | grep -q '^3 workers' && break
+  sleep 0.1
+done
+"$T" status --root 127.0.0.1:$rport | grep -q '^3 workers' || fail "a fourth worker did not register"
+{
+  printf '{"name":"long","datasets":[{"volume":"box.nrrd","materials_file":"m.json","views":['
+  for i in $(seq 80); do
+    ((i > 1)) && printf ','
+    printf '{"azimuth":35,"elevation":20,"width":320,"height":320,"output":"long.png"}'
+  done
+  printf ']}]}\n'
+} >"$dir/long.json"
+"$T" render --local 0 --volume "$dir/data/box.nrrd" --materials "$dir/m.json" --azimuth 35 \
+  --elevation 20 --size 320x320 --out "$dir/long_ref.png" 2>/dev/null
+start=$(date +%s)
+timeout 120 "$T" submit "$dir/long.json" --root 127.0.0.1:$rport --out-dir "$dir/out" \
+  >"$dir/submit3.log" 2>&1 &
+spid=$!
+sleep 1
+kill -9 "$w4"
+if wait "$spid"; then
+  cmp -s "$dir/out/long.png" "$dir/long_ref.png" || fail "image after a worker died mid-job differs"
+  grep -q "aborted: a worker's deposit stream broke" "$dir/display.log" ||
+    echo "note: the kill fell between frames (no frame was aborted)"
+else
+  fail "job with a worker killed mid-frame did not complete in 120 s: $(tail -3 "$dir/submit3.log")"
+fi
+echo "mid-job kill: job done $(($(date +%s) - start)) s after submission"
 
 # SIGTERM: every daemon exits 0 within docker's 10 s grace period.
 for p in "${wpids[0]}" "${wpids[2]}" "$rpid" "$dpid"; do

@@ -60,10 +60,19 @@ grpc::Status DisplayService::Begin(const v1::DisplayFrame& req) {
 // before any of its deposits is added. Deletes itself when done.
 class DisplayService::DepositStream : public grpc::ServerReadReactor<v1::DepositBatch> {
  public:
-  explicit DepositStream(DisplayService* service) : service_(service) { StartRead(&batch_); }
+  DepositStream(DisplayService* service, grpc::CallbackServerContext* ctx)
+      : service_(service), ctx_(ctx) {
+    StartRead(&batch_);
+  }
 
   void OnReadDone(bool ok) override {
     if (!ok) {
+      // A worker that went away (or cancelled) before closing its side
+      // leaves a frame that cannot complete: it is aborted at once rather
+      // than left to the root's frame timeout, and the root retries it.
+      if (ctx_->IsCancelled() && frame_) {
+        service_->AbortIncomplete(*frame_, "a worker's deposit stream broke");
+      }
       Finish(grpc::Status::OK);
       return;
     }
@@ -74,17 +83,19 @@ class DisplayService::DepositStream : public grpc::ServerReadReactor<v1::Deposit
     }
     StartRead(&batch_);
   }
+
   void OnDone() override { delete this; }
 
  private:
   DisplayService* const service_;
+  grpc::CallbackServerContext* const ctx_;
   v1::DepositBatch batch_;
   std::shared_ptr<FrameState> frame_;  // of the last batch
 };
 
-grpc::ServerReadReactor<v1::DepositBatch>* DisplayService::Deposits(grpc::CallbackServerContext*,
-                                                                     v1::FrameAck*) {
-  return new DepositStream(this);
+grpc::ServerReadReactor<v1::DepositBatch>* DisplayService::Deposits(
+    grpc::CallbackServerContext* ctx, v1::FrameAck*) {
+  return new DepositStream(this, ctx);
 }
 
 grpc::Status DisplayService::Accumulate(const v1::DepositBatch& batch,
@@ -92,11 +103,15 @@ grpc::Status DisplayService::Accumulate(const v1::DepositBatch& batch,
   std::shared_ptr<FrameState>& frame = *frame_cache;
   if (!frame || batch.frame_id() != frame->id) {
     frame = Find(batch.frame_id());
+    // A worker's first message names its frame and carries nothing: it
+    // may come after the other workers have completed the frame.
+    if (batch.deposits().empty()) return grpc::Status::OK;
     if (!frame) {
       return grpc::Status(grpc::StatusCode::NOT_FOUND,
                           absl::StrCat("display: frame ", batch.frame_id(), " was not begun"));
     }
   }
+  if (batch.deposits().empty()) return grpc::Status::OK;
   std::lock_guard<std::mutex> lock(frame->mu);
   if (!frame->fb) {
     return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
@@ -141,7 +156,9 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
     }
     if (frame->aborted) {
       return grpc::Status(grpc::StatusCode::ABORTED,
-                          absl::StrCat("display: frame ", req->frame_id(), " was aborted"));
+                          absl::StrCat("display: frame ", req->frame_id(), " was aborted",
+                                       frame->abort_reason.empty() ? "" : ": ",
+                                       frame->abort_reason));
     }
     // Every deposit is in: the root hears it before the image is resolved,
     // so the workers end the frame while the image is made and sent.
@@ -187,6 +204,19 @@ grpc::ServerUnaryReactor* DisplayService::AbortFrame(grpc::CallbackServerContext
   grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
   reactor->Finish(grpc::Status::OK);
   return reactor;
+}
+
+void DisplayService::AbortIncomplete(FrameState& frame, const std::string& why) {
+  {
+    std::lock_guard<std::mutex> lock(frame.mu);
+    if (!frame.fb || frame.fb->Complete() || frame.aborted) return;
+    frame.aborted = true;
+    frame.abort_reason = why;
+    frame.cv.notify_all();
+  }
+  spdlog::warn("display: frame {} aborted: {}", frame.id, why);
+  std::lock_guard<std::mutex> lock(mu_);
+  frames_.erase(frame.id);
 }
 
 void DisplayService::Abort(uint64_t id) {

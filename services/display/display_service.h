@@ -8,6 +8,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <string>
 
 #include "cluster.grpc.pb.h"
 #include "transtick/framebuffer.h"
@@ -41,12 +42,15 @@ class DisplayService final
     std::mutex mu;
     std::condition_variable cv;
     std::unique_ptr<Framebuffer> fb;  // guarded by mu; null once the image is out
-    bool aborted = false;   // guarded by mu
+    bool aborted = false;      // guarded by mu
+    std::string abort_reason;  // guarded by mu
     uint64_t deposits = 0;  // guarded by mu
   };
   std::shared_ptr<FrameState> Find(uint64_t id);
   grpc::Status Begin(const v1::DisplayFrame& req);
   void Abort(uint64_t id);
+  // Aborts `frame` unless it is complete (or aborted) already.
+  void AbortIncomplete(FrameState& frame, const std::string& why);
   // Adds a batch's deposits to its frame; `frame` caches the frame of the
   // stream's last batch.
   grpc::Status Accumulate(const v1::DepositBatch& batch, std::shared_ptr<FrameState>* frame);

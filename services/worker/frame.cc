@@ -307,7 +307,10 @@ class Frame::DisplayStream : public grpc::ClientWriteReactor<v1::DepositBatch>,
     Own(std::move(self));
     stub_->async()->Deposits(&ctx_, &ack_, this);
     AddHold();  // writes come from the outbox, outside reactions
+    // The first message, with no deposits, names the frame: should this
+    // worker die, the display knows which frame will never complete.
     out_.set_frame_id(frame_->id());
+    StartWrite(&out_);
     frame_->deposits_.Attach(
         [this](std::string batch) {
           out_.set_deposits(std::move(batch));
@@ -317,7 +320,7 @@ class Frame::DisplayStream : public grpc::ClientWriteReactor<v1::DepositBatch>,
           StartWritesDone();
           RemoveHold();
         },
-        /*busy=*/false);
+        /*busy=*/true);
     StartCall();
   }
 
