@@ -101,17 +101,14 @@ grpc::ServerReadReactor<v1::DepositBatch>* DisplayService::Deposits(
 grpc::Status DisplayService::Accumulate(const v1::DepositBatch& batch,
                                         std::shared_ptr<FrameState>* frame_cache) {
   std::shared_ptr<FrameState>& frame = *frame_cache;
-  if (!frame || batch.frame_id() != frame->id) {
-    frame = Find(batch.frame_id());
-    // A worker's first message names its frame and carries nothing: it
-    // may come after the other workers have completed the frame.
-    if (batch.deposits().empty()) return grpc::Status::OK;
-    if (!frame) {
-      return grpc::Status(grpc::StatusCode::NOT_FOUND,
-                          absl::StrCat("display: frame ", batch.frame_id(), " was not begun"));
-    }
-  }
+  if (!frame || batch.frame_id() != frame->id) frame = Find(batch.frame_id());
+  // A worker's first message names its frame and carries nothing: it may
+  // come after the other workers have completed the frame.
   if (batch.deposits().empty()) return grpc::Status::OK;
+  if (!frame) {
+    return grpc::Status(grpc::StatusCode::NOT_FOUND,
+                        absl::StrCat("display: frame ", batch.frame_id(), " was not begun"));
+  }
   std::lock_guard<std::mutex> lock(frame->mu);
   if (!frame->fb) {
     return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
