@@ -264,6 +264,7 @@ int RenderInProcess(const Flags& flags, const v1::View& view, bool dvr,
   fs.set_segments(c.segments);
   fs.set_surface_hits(c.surface_hits);
   fs.set_samples(c.samples);
+  fs.set_rays_truncated(c.truncated);
   const Sticks& sticks = scene->sticks();
   uint64_t encoded = 0;
   for (int by = 0; by < sticks.BlocksY(); ++by)

@@ -91,6 +91,9 @@ Image RenderSlabs(const Scene& whole, const std::vector<int>& cuts, const Camera
           AppendRay(ray, &wire);
           auto decoded = DecodeRays(wire, camera.width() * camera.height());
           EXPECT_TRUE(decoded.ok() && decoded->size() == 1);
+          // Every ray a tracer hands on is one its neighbour accepts.
+          EXPECT_TRUE(tracers[o].Validate(decoded->at(0)).ok())
+              << tracers[o].Validate(decoded->at(0));
           queues[o].push_back(decoded->at(0));
         }
       }

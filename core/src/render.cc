@@ -41,6 +41,11 @@ absl::StatusOr<Image> RenderLocal(const Scene& scene, const Camera& camera,
   if (scene.y_begin() != 0 || scene.y_end() != scene.dims()[1]) {
     return absl::InvalidArgumentError("RenderLocal needs a scene holding the whole volume");
   }
+  if (auto s = CheckRenderSettings(settings, scene.mode(), scene.dims(), scene.spacing(),
+                                   int64_t{camera.width()} * camera.height());
+      !s.ok()) {
+    return s;
+  }
   if (threads <= 0) threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   const auto start = std::chrono::steady_clock::now();
   const Tracer tracer(scene, settings, camera);

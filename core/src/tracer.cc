@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "absl/strings/str_cat.h"
 #include "transtick/traversal.h"
 
 namespace transtick {
@@ -21,6 +22,34 @@ Vec3 ClampToCell(Vec3 p, const std::array<int32_t, 3>& cell) {
 
 }  // namespace
 
+absl::Status CheckRenderSettings(const RenderSettings& settings, RenderMode mode,
+                                 const std::array<int, 3>& dims,
+                                 const std::array<double, 3>& spacing, int64_t pixels) {
+  if (mode != RenderMode::kDvr) return absl::OkStatus();
+  const double min_spacing = std::min({spacing[0], spacing[1], spacing[2]});
+  if (!std::isfinite(settings.step) || settings.step < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "step ", settings.step, " must be a finite positive number (or 0 for the default)"));
+  }
+  const double least = min_spacing / kMaxSamplesPerVoxel;
+  if (settings.step > 0 && settings.step < least) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("step ", settings.step, " is finer than the finest allowed, ", least, " (1/",
+                     kMaxSamplesPerVoxel, " of the smallest voxel spacing, ", min_spacing, ")"));
+  }
+  const double step = settings.step > 0 ? settings.step : 0.5 * min_spacing;
+  const double diagonal =
+      Length(Vec3{dims[0] * spacing[0], dims[1] * spacing[1], dims[2] * spacing[2]});
+  const double samples = static_cast<double>(pixels) * std::ceil(diagonal / step);
+  if (samples > kMaxFrameSamples) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("a frame of ", pixels, " pixels at step ", step, " may take ", samples,
+                     " samples, more than the limit of ", kMaxFrameSamples,
+                     "; use a coarser step or a smaller image"));
+  }
+  return absl::OkStatus();
+}
+
 Tracer::Tracer(const Scene& scene, const RenderSettings& settings, const Camera& camera)
     : scene_(scene), settings_(settings) {
   const auto& sp = scene.spacing();
@@ -31,7 +60,17 @@ Tracer::Tracer(const Scene& scene, const RenderSettings& settings, const Camera&
   if (Length(light_world_) == 0) light_world_ = -camera.forward();
   light_index_ = light_world_ * inv_spacing_;
   shadow_bias_ = 1.5 / Length(light_index_);
-  step_ = settings.step > 0 ? settings.step : 0.5 * std::min({sp[0], sp[1], sp[2]});
+  const double min_spacing = std::min({sp[0], sp[1], sp[2]});
+  // A step below the bound (CheckRenderSettings refuses it) is raised to it
+  // here too, so that no caller can make a ray take unbounded samples.
+  step_ = settings.step > 0 && std::isfinite(settings.step) ? settings.step : 0.5 * min_spacing;
+  step_ = std::max(step_, min_spacing / kMaxSamplesPerVoxel);
+  const auto& d = scene.dims();
+  diagonal_ = Length(Vec3{d[0] * sp[0], d[1] * sp[1], d[2] * sp[2]});
+  max_segments_ = Traversal::MaxSegments(d) + 1;
+  // Sample positions from the ray's entry to its exit, plus the one past
+  // the end that each segment looks at.
+  max_samples_ = static_cast<int64_t>(std::ceil(diagonal_ / step_)) + 2 + max_segments_;
   if (scene.mode() == RenderMode::kDvr) {
     const TransferFunction& tf = scene.transfer();
     const float lo = scene.value_range()[0], hi = scene.value_range()[1];
@@ -66,6 +105,55 @@ bool Tracer::MakePrimary(const WorldRay& world, uint32_t pixel, RayDescriptor* r
   return true;
 }
 
+absl::Status Tracer::Validate(const RayDescriptor& r) const {
+  auto bad = [](auto&&... what) { return absl::InvalidArgumentError(absl::StrCat(what...)); };
+  bool finite = std::isfinite(r.t) && std::isfinite(r.t_start) && std::isfinite(r.transmittance);
+  for (int a = 0; a < 3; ++a) {
+    finite = finite && std::isfinite(r.origin[a]) && std::isfinite(r.direction[a]) &&
+             std::isfinite(r.color[a]);
+  }
+  if (!finite) return bad("non-finite origin, direction, t, colour or transmittance");
+  if (r.kind != RayKind::kPrimary && r.kind != RayKind::kShadow) {
+    return bad("unknown kind ", static_cast<int>(r.kind));
+  }
+  // The world direction, direction * spacing, is a unit vector.
+  const auto& sp = scene_.spacing();
+  const double length =
+      Length(Vec3{r.direction.x * sp[0], r.direction.y * sp[1], r.direction.z * sp[2]});
+  if (!(std::abs(length - 1) <= 1e-6)) {
+    return bad("world direction of length ", length, ", not 1");
+  }
+  const auto& dims = scene_.dims();
+  if (!Traversal::Inside(r.cell, dims)) {
+    return bad("cell (", r.cell[0], ", ", r.cell[1], ", ", r.cell[2], ") outside the ", dims[0],
+               "x", dims[1], "x", dims[2], " volume");
+  }
+  // The cell and the point at t agree, give or take a cell for rounding at
+  // faces (traversal clamps a coordinate to its box and never moves it back).
+  const Vec3 p = r.origin + r.direction * r.t;
+  for (int a = 0; a < 3; ++a) {
+    if (!(p[a] >= r.cell[a] - 1.0 && p[a] <= r.cell[a] + 2.0)) {
+      return bad("cell (", r.cell[0], ", ", r.cell[1], ", ", r.cell[2],
+                 ") is not where the ray is at t = ", r.t, " (", p.x, ", ", p.y, ", ", p.z, ")");
+    }
+  }
+  if (!(r.t >= 0 && r.t_start <= r.t && r.t - r.t_start <= diagonal_ * (1 + 1e-9) + 1e-6)) {
+    return bad("t = ", r.t, " and t_start = ", r.t_start,
+               " do not lie on one pass through the volume");
+  }
+  if (scene_.mode() == RenderMode::kDvr && !(r.sample <= (r.t - r.t_start) / step_ + 2)) {
+    return bad("sample index ", r.sample, " is past the ray's position");
+  }
+  const size_t materials = scene_.classification().materials.size();
+  if (scene_.mode() == RenderMode::kSurfaces && r.material > materials) {
+    return bad("material ", int{r.material}, " of ", materials);
+  }
+  if (!(r.transmittance >= 0 && r.transmittance <= 1)) {
+    return bad("transmittance ", r.transmittance, " outside [0, 1]");
+  }
+  return absl::OkStatus();
+}
+
 Deposit Tracer::MissDeposit(uint32_t pixel) const {
   return Deposit{pixel, RayKind::kPrimary, 0, settings_.background};
 }
@@ -95,26 +183,38 @@ Tracer::Outcome Tracer::Trace(RayDescriptor& ray, std::vector<RayDescriptor>& sp
   return outcome;
 }
 
-// The loop shared by every kind of ray: stop when the ray leaves the volume
-// (finished) or the slab (handed on), else take the next segment.
-#define TRANSTICK_STEP_OR_RETURN(ray, trav, seg_cell, seg)                      \
-  if (!Traversal::Inside(ray.cell, dims)) return Outcome::kFinished;            \
-  if (ray.cell[1] < y_begin || ray.cell[1] >= y_end) return Outcome::kLeftSlab; \
-  seg_cell = ray.cell;                                                          \
-  seg = *trav.Next(ray.cell, ray.t);                                            \
-  ++counters.segments
+std::optional<Tracer::Step> Tracer::Walk(RayDescriptor& ray, const Traversal& trav,
+                                         int64_t& steps_left, Outcome* outcome,
+                                         TraceCounters& counters) const {
+  if (!Traversal::Inside(ray.cell, scene_.dims())) {
+    *outcome = Outcome::kFinished;
+    return std::nullopt;
+  }
+  if (ray.cell[1] < scene_.y_begin() || ray.cell[1] >= scene_.y_end()) {
+    *outcome = Outcome::kLeftSlab;
+    return std::nullopt;
+  }
+  const std::array<int32_t, 3> cell = ray.cell;
+  std::optional<Segment> seg;
+  if (--steps_left < 0 || !(seg = trav.Next(ray.cell, ray.t))) {
+    ++counters.truncated;
+    *outcome = Outcome::kFinished;
+    return std::nullopt;
+  }
+  ++counters.segments;
+  return Step{*seg, cell};
+}
 
 Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescriptor>& spawned,
                                       TraceCounters& counters) const {
-  const auto& dims = scene_.dims();
-  const int y_begin = scene_.y_begin(), y_end = scene_.y_end();
   const auto& materials = scene_.classification().materials;
   const Traversal trav(scene_, ray.origin, ray.direction);
   const Vec3 view = Normalize(-(ray.direction / inv_spacing_));
-  std::array<int32_t, 3> cell;
-  Segment seg;
-  while (true) {
-    TRANSTICK_STEP_OR_RETURN(ray, trav, cell, seg);
+  int64_t steps_left = max_segments_;
+  Outcome outcome;
+  while (auto step = Walk(ray, trav, steps_left, &outcome, counters)) {
+    const Segment& seg = step->seg;
+    const std::array<int32_t, 3>& cell = step->cell;
     const uint8_t m = seg.material;
     if (m != 0 && m != ray.material) {
       ++counters.surface_hits;
@@ -161,18 +261,16 @@ Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescrip
     }
     ray.material = m;
   }
+  return outcome;
 }
 
 Tracer::Outcome Tracer::TraceShadow(RayDescriptor& ray, TraceCounters& counters) const {
-  const auto& dims = scene_.dims();
-  const int y_begin = scene_.y_begin(), y_end = scene_.y_end();
   const auto& materials = scene_.classification().materials;
   const Traversal trav(scene_, ray.origin, ray.direction);
-  std::array<int32_t, 3> cell;
-  Segment seg;
-  while (true) {
-    TRANSTICK_STEP_OR_RETURN(ray, trav, cell, seg);
-    const uint8_t m = seg.material;
+  int64_t steps_left = max_segments_;
+  Outcome outcome;
+  while (auto step = Walk(ray, trav, steps_left, &outcome, counters)) {
+    const uint8_t m = step->seg.material;
     if (m != 0 && m != ray.material) {
       ray.transmittance *= 1.0f - materials[m - 1].opacity;
       if (ray.transmittance < settings_.min_transmittance) {
@@ -183,22 +281,29 @@ Tracer::Outcome Tracer::TraceShadow(RayDescriptor& ray, TraceCounters& counters)
     }
     ray.material = m;
   }
+  return outcome;
 }
 
 Tracer::Outcome Tracer::TraceDvr(RayDescriptor& ray, TraceCounters& counters) const {
-  const auto& dims = scene_.dims();
-  const int y_begin = scene_.y_begin(), y_end = scene_.y_end();
   const TransferFunction& tf = scene_.transfer();
   const Traversal trav(scene_, ray.origin, ray.direction);
   const Vec3 view = Normalize(-(ray.direction / inv_spacing_));
-  std::array<int32_t, 3> cell;
-  Segment seg;
-  while (true) {
-    TRANSTICK_STEP_OR_RETURN(ray, trav, cell, seg);
+  int64_t steps_left = max_segments_;
+  int64_t samples_left = max_samples_;
+  Outcome outcome;
+  while (auto step = Walk(ray, trav, steps_left, &outcome, counters)) {
+    const Segment& seg = step->seg;
+    const std::array<int32_t, 3>& cell = step->cell;
     if (seg.material == 0) continue;
-    double k0 = std::floor((seg.t0 - ray.t_start) / step_);
+    // k counts from the ray's entry; Validate keeps it, and t - t_start,
+    // within the volume's diagonal, so these conversions are in range.
+    const double k0 = std::floor((seg.t0 - ray.t_start) / step_);
     uint32_t k = std::max<uint32_t>(ray.sample, k0 > 0 ? static_cast<uint32_t>(k0) : 0);
     for (;; ++k) {
+      if (--samples_left < 0) {
+        ++counters.truncated;
+        return Outcome::kFinished;
+      }
       const double tk = ray.t_start + k * step_;
       if (tk >= seg.t1) break;
       if (tk < seg.t0) continue;
@@ -226,9 +331,8 @@ Tracer::Outcome Tracer::TraceDvr(RayDescriptor& ray, TraceCounters& counters) co
     }
     ray.sample = k;
   }
+  return outcome;
 }
-
-#undef TRANSTICK_STEP_OR_RETURN
 
 float Tracer::Sample(const Vec3& p) const {
   const double qx = p.x - 0.5, qy = p.y - 0.5, qz = p.z - 0.5;

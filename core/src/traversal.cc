@@ -7,7 +7,7 @@ std::optional<std::array<double, 2>> IntersectBox(const Vec3& origin, const Vec3
   double t0 = -std::numeric_limits<double>::infinity();
   double t1 = std::numeric_limits<double>::infinity();
   for (int a = 0; a < 3; ++a) {
-    if (direction[a] == 0) {
+    if (!MovesAlong(direction[a])) {
       if (origin[a] < 0 || origin[a] > dims[a]) return std::nullopt;
       continue;
     }
@@ -26,9 +26,7 @@ std::array<int32_t, 3> CellAt(const Vec3& origin, const Vec3& direction, double 
                               const std::array<int, 3>& dims) {
   std::array<int32_t, 3> cell;
   for (int a = 0; a < 3; ++a) {
-    double p = origin[a] + direction[a] * t;
-    int c = static_cast<int>(std::floor(p));
-    cell[a] = std::clamp(c, 0, dims[a] - 1);
+    cell[a] = FloorClamped(origin[a] + direction[a] * t, 0, dims[a] - 1);
   }
   return cell;
 }

@@ -111,9 +111,9 @@ grpc::Status DisplayService::Accumulate(const v1::DepositBatch& batch,
   }
   std::lock_guard<std::mutex> lock(frame->mu);
   if (!frame->fb) {
-    return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
-                        absl::StrCat("display: frame ", frame->id,
-                                     " is complete; deposits after it are refused"));
+    return grpc::Status(
+        grpc::StatusCode::FAILED_PRECONDITION,
+        absl::StrCat("display: frame ", frame->id, " is complete; deposits after it are refused"));
   }
   const uint32_t limit =
       static_cast<uint32_t>(frame->fb->width()) * static_cast<uint32_t>(frame->fb->height());
@@ -133,6 +133,12 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
                                         grpc::ServerWriter<v1::FrameProgress>* writer) {
   std::shared_ptr<FrameState> frame = Find(req->frame_id());
   if (!frame) {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (auto it = aborted_.find(req->frame_id()); it != aborted_.end()) {
+      return grpc::Status(grpc::StatusCode::ABORTED,
+                          absl::StrCat("display: frame ", req->frame_id(), " was aborted",
+                                       it->second.empty() ? "" : ": ", it->second));
+    }
     return grpc::Status(grpc::StatusCode::NOT_FOUND,
                         absl::StrCat("display: frame ", req->frame_id(), " was not begun"));
   }
@@ -152,10 +158,10 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
       lock.lock();
     }
     if (frame->aborted) {
-      return grpc::Status(grpc::StatusCode::ABORTED,
-                          absl::StrCat("display: frame ", req->frame_id(), " was aborted",
-                                       frame->abort_reason.empty() ? "" : ": ",
-                                       frame->abort_reason));
+      return grpc::Status(
+          grpc::StatusCode::ABORTED,
+          absl::StrCat("display: frame ", req->frame_id(), " was aborted",
+                       frame->abort_reason.empty() ? "" : ": ", frame->abort_reason));
     }
     // Every deposit is in: the root hears it before the image is resolved,
     // so the workers end the frame while the image is made and sent.
@@ -197,7 +203,7 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
 
 grpc::ServerUnaryReactor* DisplayService::AbortFrame(grpc::CallbackServerContext* ctx,
                                                      const v1::FrameRef* req, v1::FrameAck*) {
-  Abort(req->frame_id());
+  Abort(req->frame_id(), req->reason());
   grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
   reactor->Finish(grpc::Status::OK);
   return reactor;
@@ -214,9 +220,15 @@ void DisplayService::AbortIncomplete(FrameState& frame, const std::string& why) 
   spdlog::warn("display: frame {} aborted: {}", frame.id, why);
   std::lock_guard<std::mutex> lock(mu_);
   frames_.erase(frame.id);
+  RememberAbort(frame.id, why);
 }
 
-void DisplayService::Abort(uint64_t id) {
+void DisplayService::RememberAbort(uint64_t id, const std::string& reason) {
+  aborted_[id] = reason;
+  while (aborted_.size() > kMaxAborted) aborted_.erase(aborted_.begin());
+}
+
+void DisplayService::Abort(uint64_t id, const std::string& reason) {
   std::shared_ptr<FrameState> frame;
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -224,9 +236,12 @@ void DisplayService::Abort(uint64_t id) {
     if (it == frames_.end()) return;
     frame = it->second;
     frames_.erase(it);
+    RememberAbort(id, reason);
   }
+  if (!reason.empty()) spdlog::warn("display: frame {} aborted: {}", id, reason);
   std::lock_guard<std::mutex> lock(frame->mu);
   frame->aborted = true;
+  frame->abort_reason = reason;
   frame->cv.notify_all();
 }
 

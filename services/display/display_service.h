@@ -42,13 +42,13 @@ class DisplayService final
     std::mutex mu;
     std::condition_variable cv;
     std::unique_ptr<Framebuffer> fb;  // guarded by mu; null once the image is out
-    bool aborted = false;      // guarded by mu
-    std::string abort_reason;  // guarded by mu
-    uint64_t deposits = 0;  // guarded by mu
+    bool aborted = false;             // guarded by mu
+    std::string abort_reason;         // guarded by mu
+    uint64_t deposits = 0;            // guarded by mu
   };
   std::shared_ptr<FrameState> Find(uint64_t id);
   grpc::Status Begin(const v1::DisplayFrame& req);
-  void Abort(uint64_t id);
+  void Abort(uint64_t id, const std::string& reason);
   // Aborts `frame` unless it is complete (or aborted) already.
   void AbortIncomplete(FrameState& frame, const std::string& why);
   // Adds a batch's deposits to its frame; `frame` caches the frame of the
@@ -59,6 +59,11 @@ class DisplayService final
   std::mutex mu_;
   std::map<uint64_t, std::shared_ptr<FrameState>> frames_;  // guarded by mu_
   std::unique_ptr<Framebuffer> spare_;  // guarded by mu_: a finished frame's, for reuse
+  // Why recently aborted frames were aborted, for an AwaitFrame that comes
+  // after the abort; the newest kMaxAborted only.
+  static constexpr size_t kMaxAborted = 256;
+  std::map<uint64_t, std::string> aborted_;                    // guarded by mu_
+  void RememberAbort(uint64_t id, const std::string& reason);  // REQUIRES: mu_ held
 };
 
 }  // namespace transtick

@@ -58,8 +58,8 @@ absl::Status ForEachParallel(size_t n, const std::function<absl::Status(size_t)>
 // Starts one asynchronous unary call per index, all at once, and waits for
 // them all: no thread per call. `start(i, ctx, done)` starts call i on
 // `ctx`, whose deadline is set, with `done` as its completion.
-using StartCall = std::function<void(size_t, grpc::ClientContext*,
-                                     std::function<void(grpc::Status)>)>;
+using StartCall =
+    std::function<void(size_t, grpc::ClientContext*, std::function<void(grpc::Status)>)>;
 std::vector<grpc::Status> CallAll(size_t n, int deadline_s, const StartCall& start) {
   std::vector<grpc::Status> results(n);
   std::deque<grpc::ClientContext> contexts(n);
@@ -647,8 +647,7 @@ absl::Status RootService::LoadSlab(const LoadedDataset& data, WorkerEntry& worke
   }
   const size_t row = static_cast<size_t>(dims[0]) * (se - sb);
   for (int z = 0; ok && z < dims[2]; ++z) {
-    const float* plane =
-        scene.scalars().data() + (static_cast<size_t>(z) * dims[1] + sb) * dims[0];
+    const float* plane = scene.scalars().data() + (static_cast<size_t>(z) * dims[1] + sb) * dims[0];
     AppendFloats(plane, row, chunk.mutable_scalars());
     pending += row * 4;
     if (pending >= kChunkBytes) ok = send();
@@ -658,9 +657,8 @@ absl::Status RootService::LoadSlab(const LoadedDataset& data, WorkerEntry& worke
   grpc::Status s = writer->Finish();
   if (!s.ok()) {
     if (IsWorkerFailure(s)) DropWorker(worker.id, s.error_message());
-    return absl::Status(FromGrpc(s).code(),
-                        absl::StrCat("loading slab [", y0, ", ", y1, ") on ", worker.address, ": ",
-                                     s.error_message()));
+    return absl::Status(FromGrpc(s).code(), absl::StrCat("loading slab [", y0, ", ", y1, ") on ",
+                                                         worker.address, ": ", s.error_message()));
   }
   return absl::OkStatus();
 }
@@ -691,8 +689,8 @@ absl::Status RootService::Distribute(const LoadedDataset& data, Layout& layout) 
       auto it = held.find(ring.workers[i]->id);
       HeldSlab old = it == held.end() ? HeldSlab{} : it->second;
       if (old.key == key) continue;
-      moves.push_back({ring.workers[i], static_cast<int>(r), ring.cuts[i], ring.cuts[i + 1], key,
-                       old});
+      moves.push_back(
+          {ring.workers[i], static_cast<int>(r), ring.cuts[i], ring.cuts[i + 1], key, old});
     }
   }
   if (moves.empty()) return absl::OkStatus();
@@ -859,6 +857,12 @@ absl::Status RootService::RunView(JobRecord& job, int d, int v, LoadedDataset& d
   const std::string mode = view.balance().empty() ? job.job.balance() : view.balance();
   const BalanceRule rule = *ParseBalanceRule(job.job.balance_rule());
   const int planes = data.scene.dims()[1];
+  if (absl::Status s =
+          CheckRenderSettings(ToRenderSettings(view), data.scene.mode(), data.scene.dims(),
+                              data.scene.spacing(), int64_t{view.width()} * view.height());
+      !s.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("dataset ", d, " view ", v, ": ", s.message()));
+  }
   // A worker that dies is dropped and the frame runs again on the others.
   constexpr int kAttempts = 3;
   absl::Status status;
@@ -1152,8 +1156,8 @@ void RootService::PublishFrame(JobRecord& job, int d, int v, const v1::View& vie
   spdlog::info(
       "frame {} ({} {}/{}): {}x{} in {:.1f} ms on {} workers in {} ring(s); {} rays traced; "
       "max/mean active {:.2f}; balance {}",
-      frame.frame_id, job.id, d, v, image.width, image.height, frame.frame_ms,
-      frame.workers.size(), layout.rings.size(), rays, fs.active_imbalance(), balance.mode);
+      frame.frame_id, job.id, d, v, image.width, image.height, frame.frame_ms, frame.workers.size(),
+      layout.rings.size(), rays, fs.active_imbalance(), balance.mode);
 
   // The image to watchers, in chunks of rows; statistics with the last.
   const int chunk_rows = std::max(1, (1 << 20) / (image.width * 12));

@@ -1,9 +1,8 @@
 #include "frame.h"
 
-#include <spdlog/spdlog.h>
-
 #include <grpcpp/alarm.h>
 #include <pthread.h>
+#include <spdlog/spdlog.h>
 #include <time.h>
 
 #include <algorithm>
@@ -151,9 +150,9 @@ uint64_t Outbox::dropped() const {
 void Outbox::Pump(std::unique_lock<std::mutex>& lock) {
   if (!write_ || in_flight_) return;
   const size_t limit = batch_records_ * record_bytes_;
-  const bool due = pending_.size() >= limit ||
-                   (!pending_.empty() &&
-                    (flush_ || closed_ || Clock::now() - first_pending_ >= linger_));
+  const bool due =
+      pending_.size() >= limit ||
+      (!pending_.empty() && (flush_ || closed_ || Clock::now() - first_pending_ >= linger_));
   if (due) {
     std::string batch;
     if (pending_.size() <= limit) {
@@ -247,7 +246,7 @@ class Frame::RightStream : public grpc::ClientBidiReactor<v1::RayBatch, v1::RayB
     Own(std::move(self));
     opened_ = std::move(opened);
     stub_->async()->Rays(&ctx_, this);
-    AddHold();  // writes come from the outbox, outside reactions
+    AddHold();                        // writes come from the outbox, outside reactions
     out_.set_frame_id(frame_->id());  // the first message, with no rays, names the frame
     StartWrite(&out_);
     StartRead(&in_);
@@ -455,15 +454,71 @@ void Frame::ReceiveBatch(const v1::RayBatch& batch, Link& from) {
     spdlog::warn("frame {}: dropped a batch of frame {}", id(), batch.frame_id());
     return;
   }
+  const char* side = &from == left_.get() ? "left" : "right";
   auto rays = DecodeRays(batch.rays(), pixel_limit_);
+  size_t rejected = 0;
+  std::string first_error;
   if (!rays.ok()) {
-    spdlog::error("frame {}: bad ray batch from a neighbour: {}", id(),
-                  std::string(rays.status().message()));
-    return;
+    if (batch.rays().size() % kRayRecordBytes != 0) {
+      Reject(batch.rays().size() / kRayRecordBytes + 1, side, std::string(rays.status().message()));
+      return;
+    }
+    // Some record is damaged: the others are kept, record by record.
+    rays = std::vector<RayDescriptor>();
+    for (size_t at = 0; at < batch.rays().size(); at += kRayRecordBytes) {
+      auto one =
+          DecodeRays(std::string_view(batch.rays()).substr(at, kRayRecordBytes), pixel_limit_);
+      if (one.ok()) {
+        rays->push_back(one->front());
+      } else if (rejected++ == 0) {
+        first_error = absl::StrCat("record ", at / kRayRecordBytes, ": ", one.status().message());
+      }
+    }
   }
+  // Every ray must be one this frame's tracer could have made: a record
+  // that is not (a neighbour's defect, or a hostile peer) is dropped here,
+  // before a tracer sees it.
+  size_t kept = 0;
+  for (size_t i = 0; i < rays->size(); ++i) {
+    if (absl::Status s = tracer_.Validate((*rays)[i]); !s.ok()) {
+      if (rejected++ == 0) first_error = absl::StrCat("record ", i, ": ", s.message());
+      continue;
+    }
+    (*rays)[kept++] = (*rays)[i];
+  }
+  rays->resize(kept);
+  if (rejected > 0) Reject(rejected, side, first_error);
   from.rays_received += rays->size();
   from.bytes_received += batch.ByteSizeLong();
   inbox_.Push(*std::move(rays));
+}
+
+void Frame::Reject(uint64_t count, const char* side, const std::string& why) {
+  rejected_ += count;
+  if (reject_reported_.exchange(true)) return;
+  const std::string reason =
+      absl::StrCat("worker ", spec_.index(), " of the ring dropped ", count,
+                   " invalid ray record(s) from its ", side, " neighbour (", why, ")");
+  spdlog::error("frame {}: {}", id(), reason);
+  // The pixels of dropped rays can never complete: the frame is aborted at
+  // the display now, so the root retries or fails it at once instead of
+  // waiting for its timeout. The call is asynchronous: this runs in a
+  // stream's reaction.
+  struct Call {
+    std::unique_ptr<v1::Display::Stub> stub;
+    grpc::ClientContext ctx;
+    v1::FrameRef ref;
+    v1::FrameAck ack;
+  };
+  auto call = std::make_shared<Call>();
+  call->stub = v1::Display::NewStub(SharedChannel(spec_.display(), "control"));
+  call->ctx.set_deadline(Deadline(10));
+  call->ref.set_frame_id(id());
+  call->ref.set_reason(reason);
+  call->stub->async()->AbortFrame(&call->ctx, &call->ref, &call->ack, [call](grpc::Status s) {
+    if (!s.ok())
+      spdlog::warn("frame {}: AbortFrame failed: {}", call->ref.frame_id(), s.error_message());
+  });
 }
 
 bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>* misses) {
@@ -538,7 +593,9 @@ void Frame::TraceLoop(int thread_index) {
       continue;
     }
     Deposit deposit;
-    while (!work.empty()) {
+    // Every Trace call is bounded (Tracer::max_segments), so a frame that
+    // ends stops its tracers within one ray.
+    while (!work.empty() && !stop_.load(std::memory_order_relaxed)) {
       RayDescriptor ray = work.back();
       work.pop_back();
       (ray.kind == RayKind::kPrimary ? st.primary : st.shadow) += 1;
@@ -579,11 +636,9 @@ v1::WorkerFrameStats Frame::End(bool cancel) {
     if (right) RightStream::CancelAfter(right, kCloseWait);
     if (deposits) DisplayStream::CancelAfter(deposits, kCloseWait);
   }
-  const uint64_t dropped =
-      left_->outbox.dropped() + right_->outbox.dropped() + deposits_.dropped();
+  const uint64_t dropped = left_->outbox.dropped() + right_->outbox.dropped() + deposits_.dropped();
   if (dropped > 0 && !cancel) {
-    spdlog::warn("frame {}: {} rays or deposits could not be sent (a stream broke)", id(),
-                 dropped);
+    spdlog::warn("frame {}: {} rays or deposits could not be sent (a stream broke)", id(), dropped);
   }
 
   v1::WorkerFrameStats stats;
@@ -591,13 +646,20 @@ v1::WorkerFrameStats Frame::End(bool cancel) {
   stats.add_slab(scene_->y_end());
   const double elapsed = started_ ? MsBetween(run_start_, end) : 0;
   double idle = 0, cpu = 0;
-  uint64_t primary = 0, shadow = 0;
+  uint64_t primary = 0, shadow = 0, truncated = 0;
   for (const ThreadStats& t : thread_stats_) {
     idle += t.idle_ms;
     cpu += t.cpu_ms;
     primary += t.primary;
     shadow += t.shadow;
+    truncated += t.counters.truncated;
   }
+  if (truncated > 0) {
+    spdlog::error("frame {}: {} rays reached the tracer's bound and were ended early", id(),
+                  truncated);
+  }
+  stats.set_rays_truncated(truncated);
+  stats.set_rays_rejected(rejected_);
   stats.set_elapsed_ms(elapsed);
   stats.set_active_ms(std::max(0.0, elapsed - idle / std::max<size_t>(1, thread_stats_.size())));
   stats.set_cpu_ms(cpu);

@@ -160,6 +160,9 @@ class Frame : public std::enable_shared_from_this<Frame> {
   // every pixel has been generated.
   bool NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>* misses);
   void ReceiveBatch(const v1::RayBatch& batch, Link& from);
+  // Counts `count` invalid records from the `side` neighbour; the first
+  // time, logs why and aborts the frame at the display.
+  void Reject(uint64_t count, const char* side, const std::string& why);
   // Claims the left link for a neighbour's stream: false when this frame
   // already has one.
   bool AttachLeft();
@@ -184,6 +187,8 @@ class Frame : public std::enable_shared_from_this<Frame> {
   std::atomic<bool> started_{false};
 
   std::atomic<bool> cancelled_{false};
+  std::atomic<uint64_t> rejected_{0};
+  std::atomic<bool> reject_reported_{false};
   std::atomic<bool> left_attached_{false};
 
   // Streams this worker opened. Each owns itself until its OnDone.

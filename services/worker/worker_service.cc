@@ -152,11 +152,10 @@ grpc::Status WorkerService::FetchPlanes(grpc::ServerContext*, const v1::PlanesRe
                           (req->scalar_begin() >= sb && req->scalar_end() <= se &&
                            req->scalar_begin() < req->scalar_end());
   if (!sticks_ok || !scalars_ok) {
-    return Invalid(absl::StrCat("FetchPlanes: asked for sticks [", req->y_begin(), ", ",
-                                req->y_end(), ") and scalars [", req->scalar_begin(), ", ",
-                                req->scalar_end(), "); this worker holds sticks [",
-                                scene->y_begin(), ", ", scene->y_end(), ") and scalars [", sb,
-                                ", ", se, ")"));
+    return Invalid(absl::StrCat(
+        "FetchPlanes: asked for sticks [", req->y_begin(), ", ", req->y_end(), ") and scalars [",
+        req->scalar_begin(), ", ", req->scalar_end(), "); this worker holds sticks [",
+        scene->y_begin(), ", ", scene->y_end(), ") and scalars [", sb, ", ", se, ")"));
   }
   constexpr size_t kChunkBytes = 1 << 20;
   v1::SlabChunk chunk;
@@ -237,8 +236,7 @@ void RunFetch(Fetch& f, const std::array<int, 3>& dims) {
       static_cast<size_t>(f.scalar_end - f.scalar_begin) * dims[0] * dims[2] * sizeof(float);
   if (bytes.size() != want) {
     f.status = absl::AbortedError(absl::StrCat("planes from ", f.source->address(), ": ",
-                                                bytes.size(), " bytes of scalars, expected ",
-                                                want));
+                                               bytes.size(), " bytes of scalars, expected ", want));
     return;
   }
   f.scalars.values.resize(want / sizeof(float));
@@ -351,6 +349,11 @@ grpc::Status WorkerService::Prepare(const v1::FrameSpec& spec) {
   const auto& sp = scene->spacing();
   auto camera = Camera::Create(*cam_spec, Vec3{d[0] * sp[0], d[1] * sp[1], d[2] * sp[2]});
   if (!camera.ok()) return ToGrpc(camera.status());
+  if (absl::Status s = CheckRenderSettings(ToRenderSettings(spec.view()), scene->mode(), d, sp,
+                                           int64_t{camera->width()} * camera->height());
+      !s.ok()) {
+    return ToGrpc(s);
+  }
   if (spec.row_step() < 1 || spec.row_begin() < 0 || spec.row_end() > camera->height() ||
       spec.display().empty()) {
     return Invalid("frame: bad row range or no display");

@@ -6,11 +6,14 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
+#include "absl/status/status.h"
 #include "transtick/camera.h"
 #include "transtick/ray.h"
 #include "transtick/scene.h"
+#include "transtick/traversal.h"
 
 namespace transtick {
 
@@ -32,14 +35,36 @@ struct TraceCounters {
   uint64_t segments = 0;      // traversal steps taken
   uint64_t surface_hits = 0;  // shaded surface points (surfaces mode)
   uint64_t samples = 0;       // shaded samples (dvr)
+  // Rays finished early at the hard per-call bound on steps or samples
+  // (Tracer::Trace). The termination argument says this never happens; a
+  // non-zero count is a defect, reported in the frame's statistics.
+  uint64_t truncated = 0;
   void Add(const TraceCounters& o) {
     primary += o.primary;
     shadow += o.shadow;
     segments += o.segments;
     surface_hits += o.surface_hits;
     samples += o.samples;
+    truncated += o.truncated;
   }
 };
+
+// Limits that keep every frame finite (docs/design.md, "Why every ray ends").
+// The finest dvr step: this many samples per voxel along the smallest
+// spacing.
+inline constexpr double kMaxSamplesPerVoxel = 32;
+// The most dvr samples a frame may take, estimated as pixels times the
+// samples of the longest ray through the volume (2^36: about 10 minutes on
+// two cores).
+inline constexpr double kMaxFrameSamples = 68719476736.0;
+
+// Checks settings against the volume they will render, before any ray is
+// traced: the dvr step (finite, not below 1/kMaxSamplesPerVoxel of the
+// smallest spacing) and the frame's estimated samples (at most
+// kMaxFrameSamples). Errors say what to change.
+absl::Status CheckRenderSettings(const RenderSettings& settings, RenderMode mode,
+                                 const std::array<int, 3>& dims,
+                                 const std::array<double, 3>& spacing, int64_t pixels);
 
 // Immutable after construction, thread-safe: many threads call Trace at once
 // with their own descriptors, outputs and counters.
@@ -55,20 +80,44 @@ class Tracer {
 
   enum class Outcome { kFinished, kLeftSlab };
 
+  // Whether a descriptor that came from elsewhere (a neighbour's stream) is
+  // one this tracer could have made: finite numbers, a unit world
+  // direction, a cell inside the volume near the point at t, t after
+  // t_start and within the volume's diagonal of it, a sample index and
+  // material in range, transmittance in [0, 1]. A ray that passes finishes
+  // within the bounds below; one that fails is named by the error.
+  absl::Status Validate(const RayDescriptor& ray) const;
+
   // Advances `ray` while its cell lies in the scene's slab. On kFinished,
   // `deposit` holds what the ray leaves in its pixel; on kLeftSlab the
   // descriptor is ready to resume on the node owning ray.cell[1]. Shadow rays
   // spawned are appended to `spawned` (they start in this slab).
+  // Each call takes at most max_segments() traversal steps and, in dvr,
+  // max_samples() sample positions; a ray that reaches either bound is
+  // finished and counted in counters.truncated, never looped.
   Outcome Trace(RayDescriptor& ray, std::vector<RayDescriptor>& spawned, Deposit& deposit,
                 TraceCounters& counters) const;
 
   double step() const { return step_; }
+  int64_t max_segments() const { return max_segments_; }
+  int64_t max_samples() const { return max_samples_; }
 
  private:
   struct TableEntry {
     std::array<float, 3> color;
     float alpha;
   };
+
+  // A segment of the walk and the cell it lies in.
+  struct Step {
+    Segment seg;
+    std::array<int32_t, 3> cell;
+  };
+  // The step every kind of ray takes next: the next segment, or nullopt
+  // with *outcome set, finished (the ray left the volume, or reached the
+  // bound `steps_left` counts down) or left the slab.
+  std::optional<Step> Walk(RayDescriptor& ray, const Traversal& trav, int64_t& steps_left,
+                           Outcome* outcome, TraceCounters& counters) const;
 
   Outcome TraceSurfaces(RayDescriptor& ray, std::vector<RayDescriptor>& spawned,
                         TraceCounters& counters) const;
@@ -91,6 +140,9 @@ class Tracer {
   double shadow_bias_ = 0;  // t at which shadow rays start: 1.5 voxels out
   Vec3 inv_spacing_;
   double step_ = 1;
+  double diagonal_ = 0;  // world length of the volume's diagonal
+  int64_t max_segments_ = 0;
+  int64_t max_samples_ = 0;
   // dvr: colour and step-corrected opacity for values across value_range.
   static constexpr int kTableSize = 4096;
   std::vector<TableEntry> table_;

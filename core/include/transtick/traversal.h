@@ -15,6 +15,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <optional>
 
@@ -34,6 +35,21 @@ struct Segment {
 std::optional<std::array<double, 2>> IntersectBox(const Vec3& origin, const Vec3& direction,
                                                   const std::array<int, 3>& dims);
 
+// Whether a ray moves along an axis with direction component d: d is
+// non-zero and 1/d is finite. A denormal component (1/d overflows) is taken
+// as parallel to the axis: across the whole volume it moves the ray by less
+// than 1e-300 voxels. IntersectBox and Traversal agree on this.
+inline bool MovesAlong(double d) { return d != 0 && std::isfinite(1.0 / d); }
+
+// floor(p) clamped to [lo, hi], computed in double so that a huge or NaN p
+// (NaN gives lo) never reaches an undefined float-to-int conversion.
+inline int FloorClamped(double p, int lo, int hi) {
+  const double f = std::floor(p);
+  if (f >= hi) return hi;
+  if (f > lo) return static_cast<int>(f);
+  return lo;
+}
+
 // The cell containing the point at `t`, clamped to the volume.
 std::array<int32_t, 3> CellAt(const Vec3& origin, const Vec3& direction, double t,
                               const std::array<int, 3>& dims);
@@ -41,13 +57,15 @@ std::array<int32_t, 3> CellAt(const Vec3& origin, const Vec3& direction, double 
 // A value type, cheap to make per ray; no allocation.
 class Traversal {
  public:
+  // Components for which !MovesAlong(d) are taken as parallel.
   Traversal(const Scene& scene, const Vec3& origin, const Vec3& direction)
       : scene_(scene), origin_(origin) {
     for (int a = 0; a < 3; ++a) {
-      double d = direction[a];
-      step_[a] = d > 0 ? 1 : (d < 0 ? -1 : 0);
-      inv_[a] = d != 0 ? 1.0 / d : 0.0;
-      dir_[a] = d;
+      const double d = direction[a];
+      const bool moves = MovesAlong(d);
+      step_[a] = moves ? (d > 0 ? 1 : -1) : 0;
+      inv_[a] = moves ? 1.0 / d : 0.0;
+      dir_[a] = moves ? d : 0.0;
     }
   }
 
@@ -57,7 +75,16 @@ class Traversal {
   }
 
   // Returns the segment that starts at (cell, t) and moves (cell, t) to the
-  // start of the next one; nullopt once the cell has left the volume.
+  // start of the next one; nullopt once the cell has left the volume, or
+  // when the ray cannot leave its box (no axis it moves along: a hostile
+  // descriptor), which the caller treats as finished.
+  //
+  // Termination (docs/design.md, "Why every ray ends"): each returned
+  // segment moves the cell at least one cell along an axis the ray moves on,
+  // in the ray's direction, and no coordinate ever moves against it. So the
+  // potential sum_a step_a * cell_a rises by at least 1 per segment and a
+  // ray takes at most MaxSegments(dims) segments in all, on however many
+  // nodes, whatever state it starts from.
   // REQUIRES: cell inside the volume implies its track lies in the scene's
   // slab when its brick is occupied (callers stop at the slab's planes).
   std::optional<Segment> Next(std::array<int32_t, 3>& cell, double& t) const {
@@ -78,6 +105,11 @@ class Traversal {
     return Leave(cell, t, lo, hi, span.material);
   }
 
+  // The most segments a ray can take through a volume of `dims`.
+  static int64_t MaxSegments(const std::array<int, 3>& dims) {
+    return int64_t{dims[0]} + dims[1] + dims[2];
+  }
+
  private:
   double PlaneTime(int axis, int lo, int hi) const {
     if (step_[axis] == 0) return std::numeric_limits<double>::infinity();
@@ -87,8 +119,9 @@ class Traversal {
 
   // Moves from the box [lo, hi) of constant material to the cell beyond its
   // exit face.
-  Segment Leave(std::array<int32_t, 3>& cell, double& t, const std::array<int, 3>& lo,
-                const std::array<int, 3>& hi, uint8_t material) const {
+  std::optional<Segment> Leave(std::array<int32_t, 3>& cell, double& t,
+                               const std::array<int, 3>& lo, const std::array<int, 3>& hi,
+                               uint8_t material) const {
     double tx = PlaneTime(0, lo[0], hi[0]);
     double ty = PlaneTime(1, lo[1], hi[1]);
     double tz = PlaneTime(2, lo[2], hi[2]);
@@ -96,17 +129,25 @@ class Traversal {
     double t1 = tx;
     if (ty < t1) axis = 1, t1 = ty;
     if (tz < t1) axis = 2, t1 = tz;
+    // No face ahead (every axis parallel, or times that overflowed): the ray
+    // would never leave this box.
+    if (!(t1 <= std::numeric_limits<double>::max())) return std::nullopt;
     // Guard against a plane behind the current position (rounding at a start
     // point lying on the plane): never move backwards.
     if (t1 < t) t1 = t;
     Segment seg{t, t1, material};
     for (int a = 0; a < 3; ++a) {
       if (a == axis) {
+        // Strictly forward: the box holds the cell, so hi > cell >= lo.
         cell[a] = step_[a] > 0 ? hi[a] : lo[a] - 1;
-      } else {
-        double p = origin_[a] + dir_[a] * t1;
-        int c = static_cast<int>(std::floor(p));
-        cell[a] = std::clamp(c, lo[a], hi[a] - 1);
+      } else if (step_[a] != 0) {
+        // From the point, clamped to the box, and never back against the
+        // ray's direction: at a point on an edge or a corner, rounding could
+        // otherwise move a coordinate back and forth between two cells for
+        // ever (seen on cthead at azimuth 90).
+        const double p = origin_[a] + dir_[a] * t1;
+        const int c = FloorClamped(p, lo[a], hi[a] - 1);
+        cell[a] = step_[a] > 0 ? std::max(cell[a], c) : std::min(cell[a], c);
       }
     }
     t = t1;
