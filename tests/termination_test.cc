@@ -378,7 +378,15 @@ TEST(TerminationTest, ValidateRefusesHostileDescriptors) {
     refused([](RayDescriptor& r) { r.cell = {3, 3, 45}; }, "outside");
     refused([](RayDescriptor& r) { r.cell[0] = r.cell[0] > 10 ? 0 : 39; }, "not where the ray is");
     refused([](RayDescriptor& r) { r.t_start = r.t + 1; }, "one pass");
-    refused([](RayDescriptor& r) { r.t_start = -1e300; }, "one pass");
+    refused([](RayDescriptor& r) { r.t_start = -1e300; }, "further than");
+    refused([](RayDescriptor& r) { r.t_start = r.t - 1e6; }, "one pass");
+    refused(
+        [](RayDescriptor& r) {
+          r.origin = r.origin + r.direction * -1e12;
+          r.t += 1e12;
+          r.t_start += 1e12;
+        },
+        "further than");
     refused([](RayDescriptor& r) { r.transmittance = 2; }, "transmittance");
     refused([](RayDescriptor& r) { r.kind = static_cast<RayKind>(9); }, "kind");
     if (dvr) {

@@ -113,6 +113,13 @@ absl::Status Tracer::Validate(const RayDescriptor& r) const {
              std::isfinite(r.color[a]);
   }
   if (!finite) return bad("non-finite origin, direction, t, colour or transmittance");
+  // Far-away numbers would lose the cell in rounding (and overflow the
+  // traversal's integer cells).
+  constexpr double kFar = 1e9;
+  if (!(std::abs(r.t) <= kFar && std::abs(r.t_start) <= kFar && std::abs(r.origin.x) <= kFar &&
+        std::abs(r.origin.y) <= kFar && std::abs(r.origin.z) <= kFar)) {
+    return bad("origin or t further than ", kFar, " from the volume");
+  }
   if (r.kind != RayKind::kPrimary && r.kind != RayKind::kShadow) {
     return bad("unknown kind ", static_cast<int>(r.kind));
   }
@@ -183,20 +190,20 @@ Tracer::Outcome Tracer::Trace(RayDescriptor& ray, std::vector<RayDescriptor>& sp
   return outcome;
 }
 
-std::optional<Tracer::Step> Tracer::Walk(RayDescriptor& ray, const Traversal& trav,
-                                         int64_t& steps_left, Outcome* outcome,
-                                         TraceCounters& counters) const {
-  if (!Traversal::Inside(ray.cell, scene_.dims())) {
+TRANSTICK_INLINE std::optional<Tracer::Step> Tracer::Walk(RayDescriptor& ray, Walker& w,
+                                                          Outcome* outcome,
+                                                          TraceCounters& counters) {
+  if (!Traversal::Inside(ray.cell, w.dims)) {
     *outcome = Outcome::kFinished;
     return std::nullopt;
   }
-  if (ray.cell[1] < scene_.y_begin() || ray.cell[1] >= scene_.y_end()) {
+  if (ray.cell[1] < w.y_begin || ray.cell[1] >= w.y_end) {
     *outcome = Outcome::kLeftSlab;
     return std::nullopt;
   }
   const std::array<int32_t, 3> cell = ray.cell;
   std::optional<Segment> seg;
-  if (--steps_left < 0 || !(seg = trav.Next(ray.cell, ray.t))) {
+  if (--w.steps_left < 0 || !(seg = w.trav.Next(ray.cell, ray.t))) {
     ++counters.truncated;
     *outcome = Outcome::kFinished;
     return std::nullopt;
@@ -208,11 +215,10 @@ std::optional<Tracer::Step> Tracer::Walk(RayDescriptor& ray, const Traversal& tr
 Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescriptor>& spawned,
                                       TraceCounters& counters) const {
   const auto& materials = scene_.classification().materials;
-  const Traversal trav(scene_, ray.origin, ray.direction);
+  Walker walker = MakeWalker(ray);
   const Vec3 view = Normalize(-(ray.direction / inv_spacing_));
-  int64_t steps_left = max_segments_;
   Outcome outcome;
-  while (auto step = Walk(ray, trav, steps_left, &outcome, counters)) {
+  while (auto step = Walk(ray, walker, &outcome, counters)) {
     const Segment& seg = step->seg;
     const std::array<int32_t, 3>& cell = step->cell;
     const uint8_t m = seg.material;
@@ -266,10 +272,9 @@ Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescrip
 
 Tracer::Outcome Tracer::TraceShadow(RayDescriptor& ray, TraceCounters& counters) const {
   const auto& materials = scene_.classification().materials;
-  const Traversal trav(scene_, ray.origin, ray.direction);
-  int64_t steps_left = max_segments_;
+  Walker walker = MakeWalker(ray);
   Outcome outcome;
-  while (auto step = Walk(ray, trav, steps_left, &outcome, counters)) {
+  while (auto step = Walk(ray, walker, &outcome, counters)) {
     const uint8_t m = step->seg.material;
     if (m != 0 && m != ray.material) {
       ray.transmittance *= 1.0f - materials[m - 1].opacity;
@@ -286,12 +291,11 @@ Tracer::Outcome Tracer::TraceShadow(RayDescriptor& ray, TraceCounters& counters)
 
 Tracer::Outcome Tracer::TraceDvr(RayDescriptor& ray, TraceCounters& counters) const {
   const TransferFunction& tf = scene_.transfer();
-  const Traversal trav(scene_, ray.origin, ray.direction);
+  Walker walker = MakeWalker(ray);
   const Vec3 view = Normalize(-(ray.direction / inv_spacing_));
-  int64_t steps_left = max_segments_;
   int64_t samples_left = max_samples_;
   Outcome outcome;
-  while (auto step = Walk(ray, trav, steps_left, &outcome, counters)) {
+  while (auto step = Walk(ray, walker, &outcome, counters)) {
     const Segment& seg = step->seg;
     const std::array<int32_t, 3>& cell = step->cell;
     if (seg.material == 0) continue;
