@@ -172,7 +172,8 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
     lock.unlock();
     writer->Write(done);
     lock.lock();
-    image = frame->fb->Resolve();
+    // A balancing prerender wants to know the frame is done, not its image.
+    if (!req->no_image()) image = frame->fb->Resolve();
   }
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -182,6 +183,7 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
     std::lock_guard<std::mutex> frame_lock(frame->mu);
     spare_ = std::move(frame->fb);
   }
+  if (req->no_image()) return grpc::Status::OK;
   const int rows = RowsPerChunk(image.width);
   for (int r0 = 0; r0 < image.height; r0 += rows) {
     const int r1 = std::min(image.height, r0 + rows);

@@ -1,0 +1,63 @@
+// Datasets on the root: validating a job's datasets against the data
+// directory, loading a volume, classifying it and encoding its sticks, and
+// keeping the last one loaded for the next job. Not thread-safe: the runner
+// thread alone uses a Datasets (Validate is const and may run anywhere).
+#ifndef TRANSTICK_SERVICES_ROOT_DATASETS_H_
+#define TRANSTICK_SERVICES_ROOT_DATASETS_H_
+
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "cluster.pb.h"
+#include "transtick/scene.h"
+
+namespace transtick {
+
+// What balancing remembers of a dataset between frames (balancer.h).
+struct BalanceMemory {
+  // The ring members the cuts below belong to (Layout::Members).
+  std::string members;
+  // Cuts the next frame starts from: the last frame's, or their re-cut from
+  // its costs ("previous-frame").
+  std::vector<std::vector<int>> next_cuts;
+  // "test-rays" cuts by view (ViewKey), reused without a new prerender.
+  std::map<std::string, std::vector<std::vector<int>>> view_cuts;
+};
+
+// A dataset ready to be cut into slabs.
+struct LoadedDataset {
+  std::string key;   // content: file identity + classification
+  std::string mode;  // "surfaces" or "dvr", as in the slab header
+  v1::Dataset spec;  // without its views
+  Scene scene;
+  double load_ms = 0;
+  BalanceMemory balance;
+};
+
+class Datasets {
+ public:
+  Datasets(std::string data_dir, uint64_t max_volume_bytes)
+      : data_dir_(std::move(data_dir)), max_volume_bytes_(max_volume_bytes) {}
+
+  // Checks a job against the data directory and its own consistency:
+  // relative volume paths that stay inside the data directory and exist,
+  // materials or a transfer function that convert, views that convert,
+  // balance modes, outputs. Errors name the dataset and view.
+  absl::Status Validate(const v1::Job& job) const;
+
+  // The dataset, loaded and classified, or the cached one when the file
+  // and its classification are unchanged.
+  absl::StatusOr<std::shared_ptr<LoadedDataset>> Load(const v1::Dataset& dataset);
+
+ private:
+  const std::string data_dir_;
+  const uint64_t max_volume_bytes_;
+  std::shared_ptr<LoadedDataset> cache_;
+};
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_SERVICES_ROOT_DATASETS_H_

@@ -1,0 +1,212 @@
+#include "frame_driver.h"
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <thread>
+
+#include "absl/strings/str_cat.h"
+#include "daemon.h"
+#include "fanout.h"
+
+namespace transtick {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double MsSince(Clock::time_point t) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+// Deadlines of the frame's unary calls, in seconds.
+constexpr double kCallDeadline = 30;
+constexpr double kAbortDeadline = 10;
+
+}  // namespace
+
+FrameDriver::FrameDriver(Registry& registry, std::string display, double frame_timeout_s)
+    : registry_(registry), display_(std::move(display)), frame_timeout_s_(frame_timeout_s) {
+  // Frame ids unique across root restarts, so a worker never mistakes a
+  // stale frame for a new one.
+  next_frame_id_ =
+      static_cast<uint64_t>(std::chrono::system_clock::now().time_since_epoch().count() / 1000)
+      << 8;
+}
+
+absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedDataset& data,
+                                             const Layout& layout,
+                                             const std::function<bool()>& cancelled,
+                                             const ProgressFn& on_progress,
+                                             const ChunkFn& on_chunk) {
+  const uint64_t frame_id = next_frame_id_++;
+  const auto t0 = Clock::now();
+  auto display = v1::Display::NewStub(SharedChannel(display_, "control"));
+  struct Member {
+    std::shared_ptr<WorkerEntry> worker;
+    v1::FrameSpec spec;
+    int ring;
+  };
+  std::vector<Member> members;
+  const int rings = static_cast<int>(layout.rings.size());
+  for (int r = 0; r < rings; ++r) {
+    const auto& ring = layout.rings[r];
+    for (size_t i = 0; i < ring.workers.size(); ++i) {
+      v1::FrameSpec spec;
+      spec.set_frame_id(frame_id);
+      spec.set_dataset_key(layout.SlabKey(data.key, ring, i));
+      *spec.mutable_view() = view;
+      for (int c : ring.cuts) spec.add_cuts(c);
+      spec.set_index(static_cast<int>(i));
+      if (i > 0) spec.set_left(ring.workers[i - 1]->address);
+      if (i + 1 < ring.workers.size()) spec.set_right(ring.workers[i + 1]->address);
+      spec.set_display(display_);
+      // Rows are interleaved across rings so each ring gets an even share of
+      // every part of the image.
+      spec.set_row_begin(std::min(r, view.height()));
+      spec.set_row_end(view.height());
+      spec.set_row_step(rings);
+      members.push_back({ring.workers[i], std::move(spec), r});
+    }
+  }
+  // The first failure among the members' replies, naming the worker; a
+  // worker that cannot be reached is dropped.
+  auto check = [&](const char* what, const std::vector<grpc::Status>& results) {
+    absl::Status first;
+    for (size_t i = 0; i < results.size(); ++i) {
+      const grpc::Status& s = results[i];
+      if (s.ok()) continue;
+      absl::Status why(FromGrpc(s).code(), absl::StrCat(what, " on ", members[i].worker->address,
+                                                        ": ", s.error_message()));
+      if (IsWorkerFailure(s)) {
+        registry_.Drop(members[i].worker->id, s.error_message());
+        why = absl::UnavailableError(why.message());
+      }
+      if (first.ok()) first = why;
+    }
+    return first;
+  };
+  v1::FrameRef ref;
+  ref.set_frame_id(frame_id);
+  std::vector<v1::FrameAck> acks(members.size() + 1);
+  std::vector<v1::WorkerFrameStats> stats(members.size());
+  auto end_all = [&](bool cancel) {
+    // Statistics of workers that fail to end are simply missing.
+    v1::FrameRef end = ref;
+    end.set_cancel(cancel);
+    CallAll(members.size(), kCallDeadline, [&](size_t i, grpc::ClientContext* ctx, auto done) {
+      members[i].worker->stub->async()->EndFrame(ctx, &end, &stats[i], std::move(done));
+    });
+    for (size_t i = 0; i < members.size(); ++i) stats[i].set_ring(members[i].ring);
+  };
+  auto abort = [&](const absl::Status& why) {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(kAbortDeadline));
+    v1::FrameAck ack;
+    v1::FrameRef aborted = ref;
+    aborted.set_reason(std::string(why.message()));
+    display->AbortFrame(&ctx, aborted, &ack);
+    end_all(/*cancel=*/true);
+    return why;
+  };
+  // The display learns of the frame while the workers prepare it; both are
+  // done before any worker starts, so no deposit comes early.
+  v1::DisplayFrame df;
+  df.set_frame_id(frame_id);
+  df.set_width(view.width());
+  df.set_height(view.height());
+  std::vector<grpc::Status> prepared = CallAll(
+      members.size() + 1, kCallDeadline, [&](size_t i, grpc::ClientContext* ctx, auto done) {
+        if (i == members.size()) {
+          display->async()->BeginFrame(ctx, &df, &acks[i], std::move(done));
+        } else {
+          members[i].worker->stub->async()->PrepareFrame(ctx, &members[i].spec, &acks[i],
+                                                         std::move(done));
+        }
+      });
+  const grpc::Status begun = prepared.back();
+  prepared.pop_back();
+  absl::Status s = check("PrepareFrame", prepared);
+  if (!begun.ok()) {
+    return abort(absl::Status(FromGrpc(begun).code(),
+                              absl::StrCat("display ", display_, ": ", begun.error_message())));
+  }
+  if (!s.ok()) return abort(s);
+  s = check(
+      "RunFrame",
+      CallAll(members.size(), kCallDeadline, [&](size_t i, grpc::ClientContext* ctx, auto done) {
+        members[i].worker->stub->async()->RunFrame(ctx, &ref, &acks[i], std::move(done));
+      }));
+  if (!s.ok()) return abort(s);
+
+  // Wait for the display, relaying progress and the image's chunks as they
+  // come, until the image is through.
+  {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(frame_timeout_s_));
+    v1::FrameRef await = ref;
+    await.set_no_image(!on_chunk);
+    auto reader = display->AwaitFrame(&ctx, await);
+    v1::FrameProgress p;
+    int rows = 0;
+    auto last_progress = Clock::now() - std::chrono::seconds(1);
+    absl::Status relay;
+    // Every deposit is in once the display says the frame is complete: the
+    // workers end the frame (and report) while its image is resolved and
+    // its rows pass through here.
+    std::thread ender;
+    bool complete = false;
+    while (reader->Read(&p)) {
+      if (cancelled()) ctx.TryCancel();
+      if (p.complete() && !ender.joinable()) {
+        complete = true;
+        ender = std::thread([&] { end_all(/*cancel=*/false); });
+      }
+      if (p.has_image()) {
+        v1::ImageChunk* c = p.mutable_image();
+        if (!on_chunk || c->width() != view.width() || c->row_begin() != rows ||
+            c->row_end() > view.height() || c->row_end() <= c->row_begin() ||
+            c->rgb().size() !=
+                static_cast<size_t>(c->row_end() - c->row_begin()) * c->width() * 12) {
+          relay = absl::DataLossError(
+              absl::StrCat("display: malformed image chunk of frame ", frame_id));
+          ctx.TryCancel();
+          break;
+        }
+        rows = c->row_end();
+        relay = on_chunk(std::move(*c));
+        if (!relay.ok()) {
+          ctx.TryCancel();
+          break;
+        }
+      } else if (on_progress && Clock::now() - last_progress > std::chrono::milliseconds(200)) {
+        last_progress = Clock::now();
+        on_progress(p.pixels_done(), p.pixels_total());
+      }
+    }
+    grpc::Status st = reader->Finish();
+    if (ender.joinable()) ender.join();
+    if (cancelled()) return abort(absl::CancelledError("cancelled"));
+    if (!relay.ok()) return abort(relay);
+    const bool through = on_chunk ? rows == view.height() : complete;
+    if (!st.ok() || !through) {
+      absl::Status why =
+          st.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED
+              ? absl::DeadlineExceededError(
+                    absl::StrCat("frame not complete within ", frame_timeout_s_, " s"))
+              : absl::UnavailableError(absl::StrCat("display: ", st.error_message()));
+      return abort(why);
+    }
+    if (!complete) end_all(/*cancel=*/false);
+  }
+  FrameResult result;
+  result.frame_ms = MsSince(t0);
+  result.frame_id = frame_id;
+  for (size_t i = 0; i < stats.size(); ++i) {
+    if (stats[i].id().empty()) stats[i].set_id(members[i].worker->id);
+    if (stats[i].address().empty()) stats[i].set_address(members[i].worker->address);
+  }
+  result.workers = std::move(stats);
+  return result;
+}
+
+}  // namespace transtick

@@ -1,0 +1,60 @@
+// One frame on the cluster, driven from the root: every worker of the
+// layout prepares it while the display begins it, then the workers run it,
+// the display reports progress and completion and streams the image, and
+// the workers end it and report their statistics. Each call has its
+// deadline; a failure aborts the frame everywhere. Thread-safe (frames may
+// run concurrently).
+#ifndef TRANSTICK_SERVICES_ROOT_FRAME_DRIVER_H_
+#define TRANSTICK_SERVICES_ROOT_FRAME_DRIVER_H_
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "cluster.grpc.pb.h"
+#include "datasets.h"
+#include "registry.h"
+#include "slabs.h"
+
+namespace transtick {
+
+// What one frame gave: the workers' statistics, in ring order.
+struct FrameResult {
+  uint64_t frame_id = 0;
+  double frame_ms = 0;
+  std::vector<v1::WorkerFrameStats> workers;
+};
+
+class FrameDriver {
+ public:
+  // Called with (pixels done, pixels total) while the frame runs.
+  using ProgressFn = std::function<void(uint64_t, uint64_t)>;
+  // Called with each chunk of the image as it arrives from the display, in
+  // order; the bytes are the display's, passed on without decoding. A
+  // non-OK return aborts the frame with that status.
+  using ChunkFn = std::function<absl::Status(v1::ImageChunk chunk)>;
+
+  // REQUIRES: `registry` outlives this.
+  FrameDriver(Registry& registry, std::string display, double frame_timeout_s);
+
+  // Runs one frame of `view`. Without `on_chunk` (a balancing prerender)
+  // the display sends no image, only completion. Fails UNAVAILABLE when a
+  // worker or the display failed (a failed worker is dropped from the
+  // registry), CANCELLED when `cancelled()` turned true.
+  absl::StatusOr<FrameResult> Run(const v1::View& view, const LoadedDataset& data,
+                                  const Layout& layout, const std::function<bool()>& cancelled,
+                                  const ProgressFn& on_progress, const ChunkFn& on_chunk);
+
+ private:
+  Registry& registry_;
+  const std::string display_;
+  const double frame_timeout_s_;
+  std::atomic<uint64_t> next_frame_id_;
+};
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_SERVICES_ROOT_FRAME_DRIVER_H_

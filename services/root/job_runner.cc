@@ -1,0 +1,226 @@
+#include "job_runner.h"
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <optional>
+
+#include "absl/strings/str_cat.h"
+#include "convert.h"
+#include "transtick/tracer.h"
+
+namespace transtick {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double MsSince(Clock::time_point t) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+// A worker that dies is dropped and the frame runs again on the others.
+constexpr int kAttempts = 3;
+
+}  // namespace
+
+JobRunner::JobRunner(const RunnerOptions& options, JobQueue& queue, Registry& registry)
+    : options_(options),
+      queue_(queue),
+      registry_(registry),
+      datasets_(options.data_dir, options.max_volume_bytes),
+      slabs_(registry),
+      driver_(registry, options.display, options.frame_timeout_s) {
+  thread_ = std::thread([this] { Loop(); });
+}
+
+JobRunner::~JobRunner() { Stop(); }
+
+void JobRunner::Stop() {
+  queue_.Stop();
+  if (thread_.joinable()) thread_.join();
+}
+
+void JobRunner::Loop() {
+  while (std::shared_ptr<Job> job = queue_.Next()) {
+    absl::Status status = absl::CancelledError("cancelled before it started");
+    if (!job->cancelled()) {
+      job->SetState(v1::RUNNING);
+      job->Publish(v1::JobEvent());
+      spdlog::info("{} running", job->id());
+      status = RunJob(*job);
+    }
+    const v1::JobState state =
+        job->cancelled() ? v1::CANCELLED : (status.ok() ? v1::DONE : v1::FAILED);
+    job->SetState(state, status.ok() ? "" : std::string(status.message()));
+    job->Publish(v1::JobEvent());
+    job->Finish();
+    if (status.ok()) {
+      spdlog::info("{} done", job->id());
+    } else {
+      spdlog::warn("{} ended: {}", job->id(), std::string(status.message()));
+    }
+  }
+}
+
+absl::Status JobRunner::RunJob(Job& job) {
+  for (int d = 0; d < job.spec().datasets_size(); ++d) {
+    auto data = datasets_.Load(job.spec().datasets(d));
+    if (!data.ok()) return data.status();
+    for (int v = 0; v < job.spec().datasets(d).views_size(); ++v) {
+      if (job.cancelled()) return absl::CancelledError("cancelled");
+      if (auto s = RunView(job, d, v, **data); !s.ok()) return s;
+      job.FrameDone();
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status JobRunner::RunView(Job& job, int d, int v, LoadedDataset& data) {
+  const v1::View& view = job.spec().datasets(d).views(v);
+  const std::string mode = view.balance().empty() ? job.spec().balance() : view.balance();
+  const BalanceRule rule = *ParseBalanceRule(job.spec().balance_rule());
+  auto balancer = MakeBalancer(mode, rule, job.spec().balance_grid());
+  if (!balancer.ok()) return balancer.status();
+  const int planes = data.scene.dims()[1];
+  if (absl::Status s =
+          CheckRenderSettings(ToRenderSettings(view), data.scene.mode(), data.scene.dims(),
+                              data.scene.spacing(), int64_t{view.width()} * view.height());
+      !s.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("dataset ", d, " view ", v, ": ", s.message()));
+  }
+  auto cancelled = [&] { return job.cancelled() || queue_.stopping(); };
+  absl::Status status;
+  for (int attempt = 0; attempt < kAttempts; ++attempt) {
+    auto workers = registry_.Workers(
+        std::chrono::milliseconds(static_cast<int64_t>(options_.worker_wait_s * 1000)), cancelled);
+    if (!workers.ok()) {
+      status = workers.status();
+      if (status.code() != absl::StatusCode::kUnavailable) return status;
+      continue;
+    }
+    Layout layout = Slabs::FormRings(*workers, options_.rings, planes);
+    // Cuts computed for other ring members mean nothing to these.
+    if (const std::string members = layout.Members(); members != data.balance.members) {
+      data.balance = BalanceMemory{members, {}, {}};
+    }
+    BalanceReport report;
+    report.job_id = job.id();
+    const auto balance_start = Clock::now();
+    bool prerendered = false;
+    status = (*balancer)->Plan(
+        view, data.balance, layout,
+        [&](const v1::View& test, Layout& probe) -> absl::StatusOr<FrameResult> {
+          prerendered = true;
+          if (absl::Status s = slabs_.Distribute(data, probe); !s.ok()) return s;
+          return driver_.Run(test, data, probe, cancelled, nullptr, nullptr);
+        },
+        &report);
+    if (!status.ok()) {
+      if (status.code() == absl::StatusCode::kUnavailable && !job.cancelled()) continue;
+      return status;
+    }
+    status = slabs_.Distribute(data, layout);
+    if (!status.ok()) {
+      if (status.code() == absl::StatusCode::kUnavailable && !job.cancelled()) continue;
+      return status;
+    }
+    // The prerender and the plane moves it caused.
+    if (prerendered) report.balance_ms = MsSince(balance_start);
+
+    // The image passes through as the display sends it, chunk by chunk; the
+    // last chunk waits for the frame's statistics, which go with it.
+    std::optional<v1::JobEvent> held;
+    const uint64_t pixels = static_cast<uint64_t>(view.width()) * view.height();
+    const auto& queue_options = queue_.options();
+    auto on_chunk = [&](v1::ImageChunk chunk) -> absl::Status {
+      if (held) {
+        absl::Status s = job.PublishImage(*std::move(held), queue_options.max_pending_image_bytes,
+                                          queue_options.image_wait);
+        held.reset();
+        if (!s.ok()) return s;
+      }
+      v1::JobEvent e;
+      e.set_dataset(d);
+      e.set_view(v);
+      e.set_pixels_done(pixels);
+      e.set_pixels_total(pixels);
+      chunk.set_output(view.output());
+      *e.mutable_image() = std::move(chunk);
+      held = std::move(e);
+      return absl::OkStatus();
+    };
+    auto on_progress = [&](uint64_t done, uint64_t total) {
+      v1::JobEvent e;
+      e.set_dataset(d);
+      e.set_view(v);
+      e.set_pixels_done(done);
+      e.set_pixels_total(total);
+      job.Publish(std::move(e));
+    };
+    auto frame = driver_.Run(view, data, layout, cancelled, on_progress, on_chunk);
+    if (!frame.ok()) {
+      status = frame.status();
+      if (status.code() != absl::StatusCode::kUnavailable || job.cancelled()) return status;
+      spdlog::warn("{}: frame failed ({}); retrying", job.id(), std::string(status.message()));
+      continue;
+    }
+    (*balancer)->Learn(*frame, layout, data.balance, &report);
+    if (!held) return absl::InternalError("frame ended without its image");
+    return PublishStats(job, d, v, layout, *frame, report, *std::move(held));
+  }
+  return status;
+}
+
+absl::Status JobRunner::PublishStats(Job& job, int d, int v, const Layout& layout,
+                                     const FrameResult& frame, const BalanceReport& balance,
+                                     v1::JobEvent last_chunk) {
+  const v1::View& view = job.spec().datasets(d).views(v);
+  v1::ClusterFrameStats& fs = *last_chunk.mutable_stats();
+  fs.set_job_id(job.id());
+  fs.set_dataset(d);
+  fs.set_view(v);
+  fs.set_frame_ms(frame.frame_ms);
+  fs.set_width(view.width());
+  fs.set_height(view.height());
+  fs.set_rings(static_cast<int>(layout.rings.size()));
+  fs.set_load_ms(layout.load_ms);
+  fs.set_planes_moved(layout.planes_moved);
+  fs.set_balance(balance.mode);
+  fs.set_balance_ms(balance.balance_ms);
+  for (const auto& ring : balance.cuts_before)
+    for (int c : ring) fs.add_cuts_before(c);
+  for (const auto& ring : balance.cuts_after)
+    for (int c : ring) fs.add_cuts_after(c);
+  double active_sum = 0, active_max = 0;
+  uint64_t rays = 0;
+  for (const v1::WorkerFrameStats& stats : frame.workers) {
+    v1::WorkerFrameStats* w = fs.add_workers();
+    *w = stats;
+    if (auto t = balance.test_ray_ms.find(w->id()); t != balance.test_ray_ms.end()) {
+      w->set_test_ray_ms(t->second);
+    }
+    active_sum += w->active_ms();
+    active_max = std::max(active_max, w->active_ms());
+    rays += w->rays_traced();
+    spdlog::info(
+        "frame {} ring {} worker {} slab [{}, {}): elapsed {:.1f} ms, active {:.1f} ms, CPU {:.1f} "
+        "ms, traced {} ({} primary, {} shadow), sent L {} R {}, received L {} R {} ({:.2f} MB out, "
+        "{:.2f} MB in), buffer max {}",
+        frame.frame_id, w->ring(), w->address(), w->slab_size() > 0 ? w->slab(0) : -1,
+        w->slab_size() > 1 ? w->slab(1) : -1, w->elapsed_ms(), w->active_ms(), w->cpu_ms(),
+        w->rays_traced(), w->primary_traced(), w->shadow_traced(), w->sent_left(), w->sent_right(),
+        w->received_left(), w->received_right(), w->bytes_sent() / 1e6, w->bytes_received() / 1e6,
+        w->buffer_high_water());
+  }
+  const double mean_active = frame.workers.empty() ? 0 : active_sum / frame.workers.size();
+  fs.set_active_imbalance(mean_active > 0 ? active_max / mean_active : 0.0);
+  spdlog::info(
+      "frame {} ({} {}/{}): {}x{} in {:.1f} ms on {} workers in {} ring(s); {} rays traced; "
+      "max/mean active {:.2f}; balance {}",
+      frame.frame_id, job.id(), d, v, view.width(), view.height(), frame.frame_ms,
+      frame.workers.size(), layout.rings.size(), rays, fs.active_imbalance(), balance.mode);
+  const auto& o = queue_.options();
+  return job.PublishImage(std::move(last_chunk), o.max_pending_image_bytes, o.image_wait);
+}
+
+}  // namespace transtick

@@ -1,0 +1,131 @@
+#include "registry.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+
+#include "absl/strings/str_cat.h"
+#include "daemon.h"
+
+namespace transtick {
+
+bool IsWorkerFailure(const grpc::Status& s) {
+  return s.error_code() == grpc::StatusCode::UNAVAILABLE ||
+         s.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED ||
+         s.error_code() == grpc::StatusCode::CANCELLED;
+}
+
+absl::Status Registry::Register(const v1::RegisterRequest& req) {
+  if (req.id().empty() || req.address().empty()) {
+    return absl::InvalidArgumentError("Register: a worker needs an id and an address");
+  }
+  if (req.threads() < 0 || req.threads() > 4096) {
+    return absl::InvalidArgumentError("Register: absurd thread count");
+  }
+  std::lock_guard<std::mutex> lock(mu_);
+  if (auto it = workers_.find(req.id()); it != workers_.end()) {
+    return absl::AlreadyExistsError(
+        absl::StrCat("worker ", req.id(), " is already registered (at ", it->second->address, ")"));
+  }
+  // A worker restarted at the same address replaces its old entry.
+  for (auto it = workers_.begin(); it != workers_.end();) {
+    if (it->second->address == req.address()) {
+      spdlog::info("worker {} at {} replaces {}", req.id(), req.address(), it->first);
+      held_.erase(it->first);
+      it = workers_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  auto w = std::make_shared<WorkerEntry>();
+  w->id = req.id();
+  w->address = req.address();
+  w->threads = std::max(1, req.threads());
+  w->order = next_order_++;
+  w->stub = v1::Worker::NewStub(MakeChannel(w->address));
+  workers_[w->id] = w;
+  spdlog::info("worker {} registered at {} ({} threads); {} workers", w->id, w->address, w->threads,
+               workers_.size());
+  cv_.notify_all();
+  return absl::OkStatus();
+}
+
+absl::Status Registry::Unregister(const std::string& id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  held_.erase(id);
+  if (workers_.erase(id) == 0) {
+    return absl::NotFoundError(absl::StrCat("worker ", id, " is not registered"));
+  }
+  spdlog::info("worker {} unregistered; {} workers", id, workers_.size());
+  return absl::OkStatus();
+}
+
+void Registry::Drop(const std::string& id, const std::string& why) {
+  std::lock_guard<std::mutex> lock(mu_);
+  held_.erase(id);
+  if (workers_.erase(id)) {
+    spdlog::warn("dropping worker {}: {}; {} workers left", id, why, workers_.size());
+  }
+}
+
+absl::StatusOr<std::vector<std::shared_ptr<WorkerEntry>>> Registry::Workers(
+    std::chrono::milliseconds wait, const std::function<bool()>& cancelled) {
+  std::vector<std::shared_ptr<WorkerEntry>> out;
+  {
+    std::unique_lock<std::mutex> lock(mu_);
+    const auto until = std::chrono::steady_clock::now() + wait;
+    while (workers_.empty()) {
+      if (cancelled()) return absl::CancelledError("cancelled");
+      if (std::chrono::steady_clock::now() >= until) {
+        return absl::UnavailableError(absl::StrCat(
+            "no worker registered within ", std::chrono::duration<double>(wait).count(), " s"));
+      }
+      cv_.wait_for(lock, std::chrono::milliseconds(100));
+    }
+    if (cancelled()) return absl::CancelledError("cancelled");
+    for (auto& [id, w] : workers_) out.push_back(w);
+  }
+  std::sort(out.begin(), out.end(), [](auto& a, auto& b) { return a->order < b->order; });
+  return out;
+}
+
+int Registry::size() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return static_cast<int>(workers_.size());
+}
+
+std::map<std::string, HeldSlab> Registry::Held() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return held_;
+}
+
+void Registry::SetHeld(const std::string& id, const HeldSlab& slab) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (workers_.count(id)) held_[id] = slab;
+}
+
+void Registry::ClearHeld(const std::string& id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  held_.erase(id);
+}
+
+void Registry::Describe(v1::StatusReply* reply) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  std::vector<std::shared_ptr<WorkerEntry>> ws;
+  for (auto& [id, w] : workers_) ws.push_back(w);
+  std::sort(ws.begin(), ws.end(), [](auto& a, auto& b) { return a->order < b->order; });
+  for (auto& w : ws) {
+    v1::WorkerInfo* info = reply->add_workers();
+    info->set_id(w->id);
+    info->set_address(w->address);
+    info->set_threads(w->threads);
+    auto held = held_.find(w->id);
+    info->set_ring(held == held_.end() ? -1 : held->second.ring);
+    if (held != held_.end()) {
+      info->set_slab_begin(held->second.y0);
+      info->set_slab_end(held->second.y1);
+    }
+  }
+}
+
+}  // namespace transtick

@@ -1,0 +1,75 @@
+// The workers registered with the root, and which slab each holds. Thread-safe.
+//
+// What a worker holds is the root's belief, set when a load or re-slab
+// succeeds and dropped when the worker fails, re-registers or is replaced.
+#ifndef TRANSTICK_SERVICES_ROOT_REGISTRY_H_
+#define TRANSTICK_SERVICES_ROOT_REGISTRY_H_
+
+#include <chrono>
+#include <condition_variable>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "cluster.grpc.pb.h"
+
+namespace transtick {
+
+// One registered worker. Immutable after registration; shared by the
+// registry and the frames that use it.
+struct WorkerEntry {
+  std::string id, address;
+  int threads = 1;
+  uint64_t order = 0;  // registration order: rings are formed in it
+  std::unique_ptr<v1::Worker::Stub> stub;
+};
+
+// A slab a worker holds.
+struct HeldSlab {
+  std::string key;       // the slab's key: dataset key @ bounds
+  std::string data_key;  // the dataset's key
+  int y0 = 0, y1 = 0;
+  int ring = -1;
+};
+
+class Registry {
+ public:
+  absl::Status Register(const v1::RegisterRequest& req);
+  absl::Status Unregister(const std::string& id);
+  // A worker that failed a call: forgotten with what it held.
+  void Drop(const std::string& id, const std::string& why);
+
+  // The registered workers in registration order. Waits up to `wait` for
+  // at least one; fails UNAVAILABLE when none came, CANCELLED when
+  // `cancelled()` turns true (checked at least every 100 ms).
+  absl::StatusOr<std::vector<std::shared_ptr<WorkerEntry>>> Workers(
+      std::chrono::milliseconds wait, const std::function<bool()>& cancelled);
+  int size() const;
+
+  std::map<std::string, HeldSlab> Held() const;  // by worker id
+  void SetHeld(const std::string& id, const HeldSlab& slab);
+  void ClearHeld(const std::string& id);
+
+  // For Status: every worker with its slab, in registration order.
+  void Describe(v1::StatusReply* reply) const;
+
+ private:
+  mutable std::mutex mu_;
+  std::condition_variable cv_;
+  // State below is protected by mu_.
+  uint64_t next_order_ = 0;
+  std::map<std::string, std::shared_ptr<WorkerEntry>> workers_;  // by id
+  std::map<std::string, HeldSlab> held_;                         // by worker id
+};
+
+// Whether a failed call means the worker itself is gone (rather than a
+// refusal it sent).
+bool IsWorkerFailure(const grpc::Status& s);
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_SERVICES_ROOT_REGISTRY_H_
