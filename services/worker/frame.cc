@@ -6,6 +6,7 @@
 #include <time.h>
 
 #include <algorithm>
+#include <future>
 
 #include "absl/strings/str_cat.h"
 #include "convert.h"
@@ -418,7 +419,8 @@ Frame::Frame(const v1::FrameSpec& spec, std::shared_ptr<const Scene> scene, Came
       thread_stats_(options.threads) {}
 
 Frame::~Frame() {
-  if (!stop_) End(/*cancel=*/true);
+  // Tracer threads hold the frame, so none runs now: this ends at once.
+  if (!end_requested_) End(/*cancel=*/true);
 }
 
 void Frame::Start(std::function<void(absl::Status)> started) {
@@ -426,10 +428,25 @@ void Frame::Start(std::function<void(absl::Status)> started) {
     started(absl::FailedPreconditionError("frame already running"));
     return;
   }
+  {
+    std::lock_guard<std::mutex> lock(end_mu_);
+    if (end_requested_) {
+      started(absl::FailedPreconditionError("frame already ended"));
+      return;
+    }
+    running_tracers_ = options_.threads;
+  }
   run_start_ = Clock::now();
   // Tracing starts at once; the outboxes hold what it produces until the
-  // streams below are open.
-  for (int i = 0; i < options_.threads; ++i) tracers_.emplace_back([this, i] { TraceLoop(i); });
+  // streams below are open. Each tracer holds the frame until it stops, and
+  // the last one to stop ends the frame (EndAsync): nothing ever joins a
+  // tracer, so no gRPC reaction waits for one.
+  for (int i = 0; i < options_.threads; ++i) {
+    std::thread([self = shared_from_this(), i] {
+      self->TraceLoop(i);
+      self->TracerStopped();
+    }).detach();
+  }
   auto deposits = std::make_shared<DisplayStream>(shared_from_this());
   display_stream_ = deposits;
   deposits->Begin(deposits);
@@ -612,11 +629,43 @@ void Frame::TraceLoop(int thread_index) {
   flush();
 }
 
-v1::WorkerFrameStats Frame::End(bool cancel) {
+void Frame::EndAsync(bool cancel, std::function<void(v1::WorkerFrameStats)> done) {
   stop_ = true;
   inbox_.Wake();
-  for (auto& t : tracers_) t.join();
-  tracers_.clear();
+  {
+    std::lock_guard<std::mutex> lock(end_mu_);
+    if (end_requested_) return;  // REQUIRES says once; a second call is ignored
+    end_requested_ = true;
+    end_cancel_ = cancel;
+    if (running_tracers_ > 0) {
+      end_done_ = std::move(done);  // the last tracer to stop calls it
+      return;
+    }
+  }
+  done(Finish(cancel));
+}
+
+void Frame::TracerStopped() {
+  std::function<void(v1::WorkerFrameStats)> done;
+  bool cancel;
+  {
+    std::lock_guard<std::mutex> lock(end_mu_);
+    if (--running_tracers_ > 0 || !end_done_) return;
+    done = std::move(end_done_);
+    end_done_ = nullptr;
+    cancel = end_cancel_;
+  }
+  done(Finish(cancel));
+}
+
+v1::WorkerFrameStats Frame::End(bool cancel) {
+  std::promise<v1::WorkerFrameStats> stats;
+  auto got = stats.get_future();
+  EndAsync(cancel, [&stats](v1::WorkerFrameStats s) { stats.set_value(std::move(s)); });
+  return got.get();
+}
+
+v1::WorkerFrameStats Frame::Finish(bool cancel) {
   const auto end = Clock::now();
   // Closing the outboxes half-closes every stream once its last batch is
   // written (when the frame is complete, nothing is left to write). The

@@ -143,8 +143,13 @@ class Frame : public std::enable_shared_from_this<Frame> {
   static grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* NewLeftStream(
       std::function<std::shared_ptr<Frame>(uint64_t)> find);
 
-  // Stops tracing, closes the streams and returns this frame's statistics.
-  // With `cancel`, rays still in flight are dropped and streams cancelled.
+  // Stops tracing, closes the streams and calls `done` with this frame's
+  // statistics: at once when no tracer runs, else from the last tracer
+  // thread to stop, within one ray (every ray is bounded). Never blocks, so
+  // a gRPC reaction may call it. With `cancel`, rays still in flight are
+  // dropped and streams cancelled. REQUIRES: called once, End included.
+  void EndAsync(bool cancel, std::function<void(v1::WorkerFrameStats)> done);
+  // EndAsync, waiting for the statistics. Not from a gRPC reaction.
   v1::WorkerFrameStats End(bool cancel);
 
  private:
@@ -156,6 +161,11 @@ class Frame : public std::enable_shared_from_this<Frame> {
   class DisplayStream;
 
   void TraceLoop(int thread_index);
+  // A tracer thread has left TraceLoop; the last one ends a frame whose end
+  // was asked for.
+  void TracerStopped();
+  // Closes the streams and gathers the statistics. REQUIRES: no tracer runs.
+  v1::WorkerFrameStats Finish(bool cancel);
   // Fills `out` with the next primary rays entering this slab; false when
   // every pixel has been generated.
   bool NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>* misses);
@@ -195,7 +205,12 @@ class Frame : public std::enable_shared_from_this<Frame> {
   std::weak_ptr<RightStream> right_stream_;
   std::weak_ptr<DisplayStream> display_stream_;
 
-  std::vector<std::thread> tracers_;
+  std::mutex end_mu_;
+  // State below is protected by end_mu_.
+  int running_tracers_ = 0;
+  bool end_requested_ = false;
+  bool end_cancel_ = false;
+  std::function<void(v1::WorkerFrameStats)> end_done_;
 
   std::chrono::steady_clock::time_point run_start_;
   // Per tracer thread, written by that thread only until joined.

@@ -392,29 +392,30 @@ grpc::ServerUnaryReactor* WorkerService::EndFrame(grpc::CallbackServerContext* c
                                                   const v1::FrameRef* req,
                                                   v1::WorkerFrameStats* reply) {
   grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
-  reactor->Finish(End(*req, reply));
-  return reactor;
-}
-
-grpc::Status WorkerService::End(const v1::FrameRef& req, v1::WorkerFrameStats* reply) {
   std::shared_ptr<Frame> frame;
+  std::string id, address;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    auto it = frames_.find(req.frame_id());
+    auto it = frames_.find(req->frame_id());
     if (it == frames_.end()) {
-      return grpc::Status(grpc::StatusCode::NOT_FOUND,
-                          absl::StrCat("frame ", req.frame_id(), " is not running here"));
+      reactor->Finish(ToGrpc(
+          absl::NotFoundError(absl::StrCat("frame ", req->frame_id(), " is not running here"))));
+      return reactor;
     }
     frame = it->second;
     frames_.erase(it);
+    id = options_.id;
+    address = options_.address;
   }
-  // Quick: the tracers stop within one work unit, and the streams wind
-  // down after the reply.
-  *reply = frame->End(req.cancel());
-  std::lock_guard<std::mutex> lock(mu_);
-  reply->set_id(options_.id);
-  reply->set_address(options_.address);
-  return grpc::Status::OK;
+  // The reply goes when the tracers have stopped (within one ray), from
+  // the last of them; the streams wind down after it.
+  frame->EndAsync(req->cancel(), [reactor, reply, id, address](v1::WorkerFrameStats stats) {
+    *reply = std::move(stats);
+    reply->set_id(id);
+    reply->set_address(address);
+    reactor->Finish(grpc::Status::OK);
+  });
+  return reactor;
 }
 
 grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* WorkerService::Rays(

@@ -25,8 +25,8 @@ struct WorkerOptions {
 // moving slabs, which read and build whole slabs, keep the sync API and
 // its thread pool.
 class WorkerService final
-    : public v1::Worker::WithCallbackMethod_PrepareFrame<v1::Worker::WithCallbackMethod_RunFrame<
-          v1::Worker::WithCallbackMethod_EndFrame<
+    : public v1::Worker::WithCallbackMethod_PrepareFrame<
+          v1::Worker::WithCallbackMethod_RunFrame<v1::Worker::WithCallbackMethod_EndFrame<
               v1::Worker::WithCallbackMethod_Rays<v1::Worker::Service>>>> {
  public:
   explicit WorkerService(WorkerOptions options);
@@ -56,7 +56,6 @@ class WorkerService final
  private:
   std::shared_ptr<Frame> FindFrame(uint64_t id);
   grpc::Status Prepare(const v1::FrameSpec& spec);
-  grpc::Status End(const v1::FrameRef& req, v1::WorkerFrameStats* reply);
   std::shared_ptr<const Scene> FindDataset(const std::string& key);
 
   WorkerOptions options_;
