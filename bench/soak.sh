@@ -39,7 +39,10 @@ done
 sed "s/\"width\": 400, \"height\": 400/\"width\": $size, \"height\": $size/g" \
   "$src/examples/cthead_job.json" >"$dir/job.json"
 cp "$src/examples/cthead_materials.json" "$dir/"
-submit() { "$T" submit "$dir/job.json" --root 127.0.0.1:$rport --out-dir "$dir/out" >/dev/null 2>&1; }
+submit() {
+  "$T" submit "$dir/job.json" --root 127.0.0.1:$rport --out-dir "$dir/out" >"$dir/submit.log" 2>&1 ||
+    { cat "$dir/submit.log" >&2; tail -20 "$dir/root.log" >&2; return 1; }
+}
 submit
 declare -A before
 for p in $rpid $dpid "${wpids[@]}"; do before[$p]=$(rss "$p"); done

@@ -110,6 +110,25 @@ tt_pick_clients() {
   esac
 }
 
+# The Debian mirror this machine's apt uses (the URI of its first source
+# that is not the security archive), from deb822 .sources files or the
+# one-line format; empty when none is configured, and the tools' defaults
+# apply.
+tt_apt_mirror() {
+  local f uri
+  for f in /etc/apt/sources.list.d/*.sources; do
+    [[ -f $f ]] || continue
+    uri=$(awk '/^URIs:/ { for (i = 2; i <= NF; i++) if ($i !~ /security/) { print $i; exit } }' "$f")
+    [[ -n $uri ]] && { echo "$uri"; return 0; }
+  done
+  for f in /etc/apt/sources.list /etc/apt/sources.list.d/*.list; do
+    [[ -f $f ]] || continue
+    uri=$(awk '$1 == "deb" && $0 !~ /security/ { for (i = 2; i <= NF; i++) if ($i ~ /:\/\//) { print $i; exit } }' "$f")
+    [[ -n $uri ]] && { echo "$uri"; return 0; }
+  done
+  return 0
+}
+
 # Docker Compose v2 as a CLI plugin: the one on this machine, else Debian's
 # own package of it (docker-compose 2.x, from the next release, trixie),
 # fetched with apt into .cache/ without installing it or touching the
@@ -123,7 +142,13 @@ tt_compose_v2() {
   if [[ ! -x $cache/cli-plugins/docker-compose ]]; then
     tt_log "fetching Debian's docker-compose v2 package into $cache"
     mkdir -p "$cache/apt/lists/partial" "$cache/apt/archives/partial" "$cache/cli-plugins"
-    echo "deb http://deb.debian.org/debian trixie main" >"$cache/apt/sources.list"
+    local mirror
+    mirror=$(tt_apt_mirror)
+    if [[ -z $mirror ]]; then
+      tt_log "no Debian mirror in this machine's apt sources: cannot fetch docker-compose v2"
+      return 1
+    fi
+    echo "deb $mirror trixie main" >"$cache/apt/sources.list"
     local apt=(-o "Dir::Etc::SourceList=$cache/apt/sources.list" -o Dir::Etc::SourceParts=/dev/null
       -o "Dir::State::Lists=$cache/apt/lists" -o "Dir::Cache::pkgcache=$cache/apt/pkgcache.bin"
       -o "Dir::Cache::srcpkgcache=$cache/apt/srcpkgcache.bin" -o APT::Sandbox::User=root)
@@ -157,7 +182,10 @@ tt_ensure_base_image() {
   local dir start=$SECONDS
   dir=$(mktemp -d /tmp/transtick-bookworm.XXXXXX)
   # A trap would outlive this function; clean up on both paths by hand.
-  if ! $TT_SUDO debootstrap --variant=minbase bookworm "$dir" http://deb.debian.org/debian \
+  # The machine's own mirror, or debootstrap's default when it has none.
+  local mirror
+  mirror=$(tt_apt_mirror)
+  if ! $TT_SUDO debootstrap --variant=minbase bookworm "$dir" ${mirror:+"$mirror"} \
     >"$dir.log" 2>&1; then
     tt_log "debootstrap failed; last lines of $dir.log:"
     tail -20 "$dir.log" >&2
@@ -181,20 +209,14 @@ APT::Update::Post-Invoke { "rm -f /var/cache/apt/archives/*.deb /var/cache/apt/a
 Dir::Cache::pkgcache "";
 Dir::Cache::srcpkgcache "";
 EOF
-  $TT_SUDO rm -f "$dir/etc/apt/sources.list"
-  $TT_SUDO tee "$dir/etc/apt/sources.list.d/debian.sources" >/dev/null <<'EOF'
-Types: deb
-URIs: http://deb.debian.org/debian
-Suites: bookworm bookworm-updates
-Components: main
-Signed-By: /usr/share/keyrings/debian-archive-keyring.gpg
-
-Types: deb
-URIs: http://deb.debian.org/debian-security
-Suites: bookworm-security
-Components: main
-Signed-By: /usr/share/keyrings/debian-archive-keyring.gpg
-EOF
+  # The image's apt sources are this machine's (the same mirror and suites),
+  # or, without any, what debootstrap wrote.
+  if compgen -G "/etc/apt/sources.list.d/*.sources" >/dev/null || [[ -s /etc/apt/sources.list ]]; then
+    $TT_SUDO rm -f "$dir/etc/apt/sources.list"
+    for f in /etc/apt/sources.list /etc/apt/sources.list.d/*.sources /etc/apt/sources.list.d/*.list; do
+      [[ -s $f ]] && $TT_SUDO cp "$f" "$dir$f"
+    done
+  fi
   $TT_SUDO sh -c "cd '$dir' && rm -rf var/lib/apt/lists/* var/cache/apt/*.bin var/cache/apt/archives/*.deb \
     usr/share/doc/*/[!c]* usr/share/man/* usr/share/info/* usr/share/locale/* var/log/*.log var/log/apt/*"
   $TT_SUDO tar --numeric-owner -C "$dir" -c . |
