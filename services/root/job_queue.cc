@@ -21,9 +21,8 @@ bool IsDroppable(const v1::JobEvent& e) {
 }  // namespace
 
 void Job::RequestCancel() {
+  absl::MutexLock lock(&mu_);  // wakes waits on cancel_ (they re-check on unlock)
   cancel_ = true;
-  std::lock_guard<std::mutex> lock(mu_);
-  cv_.notify_all();
 }
 
 void Job::Append(v1::JobEvent event) {
@@ -40,20 +39,20 @@ void Job::Append(v1::JobEvent event) {
     events_.pop_front();
     ++first_seq_;
   }
-  cv_.notify_all();
 }
 
 void Job::Publish(v1::JobEvent event) {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   Append(std::move(event));
 }
 
 absl::Status Job::PublishImage(v1::JobEvent event, uint64_t budget, std::chrono::seconds wait) {
-  std::unique_lock<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   const uint64_t bytes = ImageBytes(event);
-  const bool drained = cv_.wait_for(lock, wait, [&] {
+  auto room = [&]() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
     return cancel_ || pending_image_bytes_ == 0 || pending_image_bytes_ + bytes <= budget;
-  });
+  };
+  const bool drained = mu_.AwaitWithTimeout(absl::Condition(&room), absl::FromChrono(wait));
   if (cancel_) return absl::CancelledError("cancelled");
   if (!drained) {
     return absl::DeadlineExceededError(
@@ -65,29 +64,28 @@ absl::Status Job::PublishImage(v1::JobEvent event, uint64_t budget, std::chrono:
 }
 
 void Job::SetState(v1::JobState state, const std::string& error) {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   state_ = state;
   if (!error.empty()) error_ = error;
 }
 
 void Job::FrameDone() {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   ++frames_done_;
 }
 
 void Job::Finish() {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   finished_ = true;
-  cv_.notify_all();
 }
 
 bool Job::finished() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   return finished_;
 }
 
 v1::JobSummary Job::Summary() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   v1::JobSummary s;
   s.set_job_id(id_);
   s.set_name(spec_.name());
@@ -106,9 +104,11 @@ bool Job::Stream(const std::function<bool(const v1::JobEvent&)>& write,
     v1::JobEvent event;
     bool have = false, finished;
     {
-      std::unique_lock<std::mutex> lock(mu_);
-      cv_.wait_for(lock, std::chrono::milliseconds(500),
-                   [&] { return first_seq_ + events_.size() > next || finished_; });
+      absl::MutexLock lock(&mu_);
+      auto ready = [&]() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+        return first_seq_ + events_.size() > next || finished_;
+      };
+      mu_.AwaitWithTimeout(absl::Condition(&ready), absl::Milliseconds(500));
       next = std::max(next, first_seq_);
       finished = finished_;
       while (!have && next < first_seq_ + events_.size()) {
@@ -122,7 +122,7 @@ bool Job::Stream(const std::function<bool(const v1::JobEvent&)>& write,
           e = v1::JobEvent();
           e.set_job_id(id_);
           e.mutable_image()->set_row_begin(event.image().row_begin());
-          cv_.notify_all();  // a publisher may wait for room
+          // A publisher waiting for room re-checks when the lock is released.
         } else {
           event = e;
         }
@@ -143,7 +143,7 @@ absl::StatusOr<std::shared_ptr<Job>> JobQueue::Submit(const v1::Job& spec, int* 
   for (const auto& d : spec.datasets()) frames += d.views_size();
   const double now =
       std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   if (stopping_) return absl::UnavailableError("root is shutting down");
   if (static_cast<int>(queue_.size()) >= options_.max_queued) {
     return absl::ResourceExhaustedError(
@@ -159,13 +159,13 @@ absl::StatusOr<std::shared_ptr<Job>> JobQueue::Submit(const v1::Job& spec, int* 
     if (it == jobs_.end()) break;
     jobs_.erase(it);
   }
-  cv_.notify_all();
   return job;
 }
 
 std::shared_ptr<Job> JobQueue::Next() {
-  std::unique_lock<std::mutex> lock(mu_);
-  cv_.wait(lock, [this] { return stopping_ || !queue_.empty(); });
+  absl::MutexLock lock(&mu_);
+  auto ready = [this]() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) { return stopping_ || !queue_.empty(); };
+  mu_.Await(absl::Condition(&ready));
   if (stopping_) return nullptr;
   auto job = queue_.front();
   queue_.pop_front();
@@ -173,7 +173,7 @@ std::shared_ptr<Job> JobQueue::Next() {
 }
 
 std::shared_ptr<Job> JobQueue::Find(const std::string& id) const {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   for (const auto& j : jobs_) {
     if (j->id() == id) return j;
   }
@@ -183,7 +183,7 @@ std::shared_ptr<Job> JobQueue::Find(const std::string& id) const {
 std::vector<v1::JobSummary> JobQueue::Summaries() const {
   std::vector<std::shared_ptr<Job>> jobs;
   {
-    std::lock_guard<std::mutex> lock(mu_);
+    absl::MutexLock lock(&mu_);
     jobs = jobs_;
   }
   std::vector<v1::JobSummary> out;
@@ -194,16 +194,15 @@ std::vector<v1::JobSummary> JobQueue::Summaries() const {
 void JobQueue::Stop() {
   std::vector<std::shared_ptr<Job>> jobs;
   {
-    std::lock_guard<std::mutex> lock(mu_);
+    absl::MutexLock lock(&mu_);
     stopping_ = true;
     jobs = jobs_;
-    cv_.notify_all();
   }
   for (auto& j : jobs) j->RequestCancel();
 }
 
 bool JobQueue::stopping() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   return stopping_;
 }
 

@@ -12,16 +12,16 @@
 
 #include <atomic>
 #include <chrono>
-#include <condition_variable>
 #include <cstdint>
 #include <deque>
 #include <functional>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <vector>
 
+#include "absl/base/thread_annotations.h"
 #include "absl/status/statusor.h"
+#include "absl/synchronization/mutex.h"
 #include "cluster.pb.h"
 
 namespace transtick {
@@ -76,7 +76,7 @@ class Job {
               const std::function<bool()>& watcher_gone);
 
  private:
-  void Append(v1::JobEvent event);  // REQUIRES: mu_ held
+  void Append(v1::JobEvent event) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
 
   const std::string id_;
   const v1::Job spec_;
@@ -84,16 +84,14 @@ class Job {
   const double submitted_unix_;
   std::atomic<bool> cancel_{false};
 
-  mutable std::mutex mu_;
-  std::condition_variable cv_;
-  // State below is protected by mu_.
-  std::deque<v1::JobEvent> events_;
-  uint64_t first_seq_ = 0;  // sequence number of events_.front()
-  uint64_t pending_image_bytes_ = 0;
-  v1::JobState state_ = v1::QUEUED;
-  int frames_done_ = 0;
-  std::string error_;
-  bool finished_ = false;
+  mutable absl::Mutex mu_;
+  std::deque<v1::JobEvent> events_ ABSL_GUARDED_BY(mu_);
+  uint64_t first_seq_ ABSL_GUARDED_BY(mu_) = 0;  // sequence number of events_.front()
+  uint64_t pending_image_bytes_ ABSL_GUARDED_BY(mu_) = 0;
+  v1::JobState state_ ABSL_GUARDED_BY(mu_) = v1::QUEUED;
+  int frames_done_ ABSL_GUARDED_BY(mu_) = 0;
+  std::string error_ ABSL_GUARDED_BY(mu_);
+  bool finished_ ABSL_GUARDED_BY(mu_) = false;
 };
 
 class JobQueue {
@@ -116,13 +114,11 @@ class JobQueue {
 
  private:
   const JobQueueOptions options_;
-  mutable std::mutex mu_;
-  std::condition_variable cv_;
-  // State below is protected by mu_.
-  bool stopping_ = false;
-  uint64_t next_job_ = 1;
-  std::deque<std::shared_ptr<Job>> queue_;
-  std::vector<std::shared_ptr<Job>> jobs_;  // newest last
+  mutable absl::Mutex mu_;
+  bool stopping_ ABSL_GUARDED_BY(mu_) = false;
+  uint64_t next_job_ ABSL_GUARDED_BY(mu_) = 1;
+  std::deque<std::shared_ptr<Job>> queue_ ABSL_GUARDED_BY(mu_);
+  std::vector<std::shared_ptr<Job>> jobs_ ABSL_GUARDED_BY(mu_);  // newest last
 };
 
 }  // namespace transtick

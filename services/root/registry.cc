@@ -22,7 +22,7 @@ absl::Status Registry::Register(const v1::RegisterRequest& req) {
   if (req.threads() < 0 || req.threads() > 4096) {
     return absl::InvalidArgumentError("Register: absurd thread count");
   }
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   if (auto it = workers_.find(req.id()); it != workers_.end()) {
     return absl::AlreadyExistsError(
         absl::StrCat("worker ", req.id(), " is already registered (at ", it->second->address, ")"));
@@ -46,12 +46,11 @@ absl::Status Registry::Register(const v1::RegisterRequest& req) {
   workers_[w->id] = w;
   spdlog::info("worker {} registered at {} ({} threads); {} workers", w->id, w->address, w->threads,
                workers_.size());
-  cv_.notify_all();
   return absl::OkStatus();
 }
 
 absl::Status Registry::Unregister(const std::string& id) {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   held_.erase(id);
   if (workers_.erase(id) == 0) {
     return absl::NotFoundError(absl::StrCat("worker ", id, " is not registered"));
@@ -61,7 +60,7 @@ absl::Status Registry::Unregister(const std::string& id) {
 }
 
 void Registry::Drop(const std::string& id, const std::string& why) {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   held_.erase(id);
   if (workers_.erase(id)) {
     spdlog::warn("dropping worker {}: {}; {} workers left", id, why, workers_.size());
@@ -72,7 +71,7 @@ absl::StatusOr<std::vector<std::shared_ptr<WorkerEntry>>> Registry::Workers(
     std::chrono::milliseconds wait, const std::function<bool()>& cancelled) {
   std::vector<std::shared_ptr<WorkerEntry>> out;
   {
-    std::unique_lock<std::mutex> lock(mu_);
+    absl::MutexLock lock(&mu_);
     const auto until = std::chrono::steady_clock::now() + wait;
     while (workers_.empty()) {
       if (cancelled()) return absl::CancelledError("cancelled");
@@ -80,7 +79,8 @@ absl::StatusOr<std::vector<std::shared_ptr<WorkerEntry>>> Registry::Workers(
         return absl::UnavailableError(absl::StrCat(
             "no worker registered within ", std::chrono::duration<double>(wait).count(), " s"));
       }
-      cv_.wait_for(lock, std::chrono::milliseconds(100));
+      auto registered = [this]() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) { return !workers_.empty(); };
+      mu_.AwaitWithTimeout(absl::Condition(&registered), absl::Milliseconds(100));
     }
     if (cancelled()) return absl::CancelledError("cancelled");
     for (auto& [id, w] : workers_) out.push_back(w);
@@ -90,27 +90,27 @@ absl::StatusOr<std::vector<std::shared_ptr<WorkerEntry>>> Registry::Workers(
 }
 
 int Registry::size() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   return static_cast<int>(workers_.size());
 }
 
 std::map<std::string, HeldSlab> Registry::Held() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   return held_;
 }
 
 void Registry::SetHeld(const std::string& id, const HeldSlab& slab) {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   if (workers_.count(id)) held_[id] = slab;
 }
 
 void Registry::ClearHeld(const std::string& id) {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   held_.erase(id);
 }
 
 void Registry::Describe(v1::StatusReply* reply) const {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   std::vector<std::shared_ptr<WorkerEntry>> ws;
   for (auto& [id, w] : workers_) ws.push_back(w);
   std::sort(ws.begin(), ws.end(), [](auto& a, auto& b) { return a->order < b->order; });

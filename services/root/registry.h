@@ -6,15 +6,15 @@
 #define TRANSTICK_SERVICES_ROOT_REGISTRY_H_
 
 #include <chrono>
-#include <condition_variable>
 #include <functional>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <vector>
 
+#include "absl/base/thread_annotations.h"
 #include "absl/status/statusor.h"
+#include "absl/synchronization/mutex.h"
 #include "cluster.grpc.pb.h"
 
 namespace transtick {
@@ -58,12 +58,10 @@ class Registry {
   void Describe(v1::StatusReply* reply) const;
 
  private:
-  mutable std::mutex mu_;
-  std::condition_variable cv_;
-  // State below is protected by mu_.
-  uint64_t next_order_ = 0;
-  std::map<std::string, std::shared_ptr<WorkerEntry>> workers_;  // by id
-  std::map<std::string, HeldSlab> held_;                         // by worker id
+  mutable absl::Mutex mu_;
+  uint64_t next_order_ ABSL_GUARDED_BY(mu_) = 0;
+  std::map<std::string, std::shared_ptr<WorkerEntry>> workers_ ABSL_GUARDED_BY(mu_);  // by id
+  std::map<std::string, HeldSlab> held_ ABSL_GUARDED_BY(mu_);  // by worker id
 };
 
 // Whether a failed call means the worker itself is gone (rather than a
