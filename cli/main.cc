@@ -21,8 +21,9 @@
 #include "client.h"
 #include "cluster.grpc.pb.h"
 #include "convert.h"
-#include "daemon.h"
 #include "flags.h"
+#include "rpc_channel.h"
+#include "rpc_status.h"
 #include "transtick/camera.h"
 #include "transtick/image_io.h"
 #include "transtick/render.h"
@@ -322,10 +323,10 @@ void PrintClusterFrame(const v1::ClusterFrameStats& fs) {
 int Render(int argc, char** argv) {
   std::set<std::string> known = kRawFlags;
   for (const char* f :
-       {"materials", "transfer", "mode",   "azimuth", "elevation", "zoom",    "projection",
-        "fov",       "eye",      "target", "up",      "size",      "shadows", "background",
-        "step",      "threads",  "out",    "stats",   "local",     "root",    "rings",
-        "balance",   "balance-grid", "balance-rule"}) {
+       {"materials",  "transfer",   "mode",  "azimuth", "elevation",    "zoom",
+        "projection", "fov",        "eye",   "target",  "up",           "size",
+        "shadows",    "background", "step",  "threads", "out",          "stats",
+        "local",      "root",       "rings", "balance", "balance-grid", "balance-rule"}) {
     known.insert(f);
   }
   auto fail = [](const absl::Status& s) { return Fail("render", s); };
