@@ -22,6 +22,7 @@
 #include "cluster.grpc.pb.h"
 #include "convert.h"
 #include "flags.h"
+#include "local_cluster.h"
 #include "rpc_channel.h"
 #include "rpc_status.h"
 #include "transtick/camera.h"

@@ -13,6 +13,7 @@
 #include "daemon.h"
 #include "display_service.h"
 #include "gtest/gtest.h"
+#include "local_cluster.h"
 #include "testing.h"
 #include "transtick/image_io.h"
 #include "transtick/render.h"
@@ -213,8 +214,9 @@ TEST_F(ClusterTest, BalancingAndRingsNeverChangeTheImage) {
         for (size_t i = 0; i < dvr_views.size(); ++i) {
           auto got = ReadImage(dvr_views[i].output());
           ASSERT_TRUE(got.ok()) << got.status();
-          ASSERT_EQ(got->rgb, dvr_want[i].rgb) << workers << " workers, " << rings
-                                               << " rings, balance " << balance << ", dvr view " << i;
+          ASSERT_EQ(got->rgb, dvr_want[i].rgb)
+              << workers << " workers, " << rings << " rings, balance " << balance << ", dvr view "
+              << i;
         }
       }
     }
