@@ -69,7 +69,7 @@ render options:
                          the root's data directory
   --threads N            tracing threads of --local 0, and of each worker of --local N
                          (default: one per core)
-  --out FILE             .png (8-bit), .tif/.exr (float) (default transtick.png)
+  --out FILE             .png/.jpg (8-bit), .tif/.exr/.hdr (float) (default transtick.png)
   --stats FILE.json      write frame statistics as JSON
   --max-volume-mb N      refuse volumes larger than N MiB in memory (default 8192)
 raw volumes (any other extension, or --raw-dims given):
@@ -199,6 +199,11 @@ absl::StatusOr<v1::View> ViewFromFlags(const Flags& flags) {
     for (double c : *bg) v.add_background(static_cast<float>(c));
   }
   v.set_output(flags.Get("out", "transtick.png"));
+  if (!IsSupportedImagePath(v.output())) {
+    return absl::InvalidArgumentError(absl::StrCat("--out: '", v.output(),
+                                                   "' is not an image format transtick writes (",
+                                                   SupportedImageList(), ")"));
+  }
   // Checks ranges (image size, zoom, projection, background) up front.
   if (auto c = ToCameraSpec(v); !c.ok()) return c.status();
   return v;
