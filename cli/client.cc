@@ -10,6 +10,7 @@
 #include "absl/strings/str_cat.h"
 #include "cluster.grpc.pb.h"
 #include "convert.h"
+#include "grpc/health/v1/health.grpc.pb.h"
 #include "rpc_channel.h"
 #include "rpc_status.h"
 #include "transtick/image_io.h"
@@ -133,6 +134,18 @@ absl::StatusOr<v1::Job> LoadJobFile(const std::string& path) {
     }
   }
   return job;
+}
+
+absl::StatusOr<grpc::health::v1::HealthCheckResponse::ServingStatus> CheckHealth(
+    const std::string& address, double timeout_s) {
+  auto stub = grpc::health::v1::Health::NewStub(MakeChannel(address));
+  grpc::ClientContext ctx;
+  ctx.set_deadline(Deadline(timeout_s));
+  grpc::health::v1::HealthCheckRequest request;  // service "": the whole server
+  grpc::health::v1::HealthCheckResponse response;
+  grpc::Status s = stub->Check(&ctx, request, &response);
+  if (!s.ok()) return FromGrpc(s);
+  return response.status();
 }
 
 }  // namespace transtick

@@ -9,6 +9,7 @@
 
 #include "absl/status/statusor.h"
 #include "cluster.pb.h"
+#include "grpc/health/v1/health.pb.h"
 
 namespace transtick {
 
@@ -29,6 +30,13 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::str
 // "materials_file" or "transfer_file" relative to the job file; they are
 // read here and sent inline.
 absl::StatusOr<v1::Job> LoadJobFile(const std::string& path);
+
+// What the standard health service of the daemon at `address` reports for
+// the whole server, decoded from its HealthCheckResponse; or the call's
+// error (UNAVAILABLE when nothing answers there, DEADLINE_EXCEEDED after
+// `timeout_s` seconds).
+absl::StatusOr<grpc::health::v1::HealthCheckResponse::ServingStatus> CheckHealth(
+    const std::string& address, double timeout_s);
 
 }  // namespace transtick
 

@@ -77,6 +77,8 @@ expect 1 "short.nrrd" -- render --volume "$dir/short.nrrd" --materials "$dir/m.j
 printf '{"materials":[{"name":"x","min":5,"max":1,"color":[1,1,1]}]}' >"$dir/bad.json"
 expect 2 "bad.json" -- render --volume "$dir/cube.nrrd" --materials "$dir/bad.json"
 expect 2 "unknown command" -- frobnicate
+expect 1 "127.0.0.1:1: no daemon answers" -- health --addr 127.0.0.1:1 --timeout 2
+expect 2 "empty address" -- health --addr 127.0.0.1:1,
 
 echo "cli_test: $fails failed"
 [[ $fails == 0 ]]
