@@ -27,14 +27,12 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::str
   {
     grpc::ClientContext ctx;
     ctx.set_deadline(Deadline(30));
-    grpc::Status s = stub->Submit(&ctx, job, &submitted);
-    if (!s.ok()) {
-      if (s.error_code() == grpc::StatusCode::UNAVAILABLE) {
-        return absl::UnavailableError(
-            absl::StrCat("cannot reach the root at ", root, ": ", s.error_message()));
-      }
-      return FromGrpc(s);
+    absl::Status s = FromGrpc(stub->Submit(&ctx, job, &submitted));
+    if (absl::IsUnavailable(s)) {
+      return absl::UnavailableError(
+          absl::StrCat("cannot reach the root at ", root, ": ", s.message()));
     }
+    if (!s.ok()) return s;
   }
   if (options.progress) {
     std::fprintf(stderr, "%s: %d frames, %d jobs ahead\n", submitted.job_id().c_str(),
