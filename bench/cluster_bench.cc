@@ -45,12 +45,13 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
-#include "bench_util.h"
 #include "absl/strings/str_split.h"
+#include "bench_util.h"
 #include "client.h"
 #include "cluster.grpc.pb.h"
 #include "convert.h"
 #include "daemon.h"
+#include "local_cluster.h"
 #include "transtick/camera.h"
 #include "transtick/image_io.h"
 #include "transtick/ray_codec.h"
@@ -85,8 +86,8 @@ struct Options {
   int repeat = 5;
   std::vector<int> workers = {1, 2, 4};
   int rays = 1 << 20;
-  int grid = 0;  // test rays per side for balancing, 0 = the root's default
-  int threads = 0;  // tracer threads per worker; 0 = one per core, as transtick render
+  int grid = 0;                 // test rays per side for balancing, 0 = the root's default
+  int threads = 0;              // tracer threads per worker; 0 = one per core, as transtick render
   std::string balance = "off";  // for scaling
 };
 
@@ -291,14 +292,15 @@ int Scaling(const Options& o) {
               Median(local_cpu), "-", "1");
   for (const Run& run : runs) {
     std::printf("%-22s %9.1f %12.1f %13.1f %11llu %14.2f\n",
-                absl::StrCat(run.workers, " worker", run.workers > 1 ? "s" : "", " x ",
-                             run.threads, " thread", run.threads > 1 ? "s" : "")
+                absl::StrCat(run.workers, " worker", run.workers > 1 ? "s" : "", " x ", run.threads,
+                             " thread", run.threads > 1 ? "s" : "")
                     .c_str(),
                 Median(run.ms), Median(run.cpu), Median(run.proc),
                 static_cast<unsigned long long>(run.crossings), Median(run.ratio));
   }
-  std::printf("\n(frame ratio: the median over rounds of the cluster frame over the in-process "
-              "frame of the same round)\n");
+  std::printf(
+      "\n(frame ratio: the median over rounds of the cluster frame over the in-process "
+      "frame of the same round)\n");
   const Run* one = nullptr;
   for (const Run& run : runs) {
     if (run.workers == 1) one = &run;
@@ -505,9 +507,10 @@ int Tables(const Options& o) {
     if (!image.ok()) return Fail(image.status());
     v.want = *std::move(image);
   }
-  std::printf("volume %s, %dx%d, shadows on, %d cores; each figure: mean of %d frames after a "
-              "warm-up frame (slab loads, prerender)\n",
-              o.volume.c_str(), o.width, o.height, cores, o.repeat);
+  std::printf(
+      "volume %s, %dx%d, shadows on, %d cores; each figure: mean of %d frames after a "
+      "warm-up frame (slab loads, prerender)\n",
+      o.volume.c_str(), o.width, o.height, cores, o.repeat);
   bool identical = true;
   // (workers, view, balance) -> series
   std::map<std::tuple<int, int, std::string>, Series> results;
@@ -534,9 +537,8 @@ int Tables(const Options& o) {
   }
 
   std::printf("\nTable 1: per worker, elapsed / active / tracer CPU in ms\n");
-  std::printf("%-8s %-8s %-10s %-7s %-11s %9s %9s %9s %12s %12s\n", "workers", "view",
-              "balance", "worker", "slab", "elapsed", "active", "CPU", "max/mean act",
-              "max/mean CPU");
+  std::printf("%-8s %-8s %-10s %-7s %-11s %9s %9s %9s %12s %12s\n", "workers", "view", "balance",
+              "worker", "slab", "elapsed", "active", "CPU", "max/mean act", "max/mean CPU");
   for (int n : {2, 4}) {
     for (size_t vi = 0; vi < views.size(); ++vi) {
       for (const std::string balance : {"off", "test-rays"}) {
@@ -571,13 +573,14 @@ int Tables(const Options& o) {
         const double t = s.FrameMs();
         std::printf("%-8s %-10s %-8d %9.1f %10.2f %11.1f %12.2f %12.1f %12.2f\n", views[vi].name,
                     balance.c_str(), n, t, t > 0 ? t2 / ((n / 2.0) * t) : 0.0,
-                    active.empty() ? 0.0 : Sum(active) / active.size(), Imbalance(active),
-                    Sum(cpu), Imbalance(cpu));
+                    active.empty() ? 0.0 : Sum(active) / active.size(), Imbalance(active), Sum(cpu),
+                    Imbalance(cpu));
       }
     }
   }
-  std::printf("\n%s\n", identical ? "OK: every cluster image equals the in-process image bit for bit"
-                                   : "FAIL: a cluster image differs (see stderr)");
+  std::printf("\n%s\n", identical
+                            ? "OK: every cluster image equals the in-process image bit for bit"
+                            : "FAIL: a cluster image differs (see stderr)");
   return identical ? 0 : 1;
 }
 

@@ -6,17 +6,15 @@
 #include <cstdio>
 #include <filesystem>
 #include <map>
-#include <thread>
 
 #include "absl/strings/str_cat.h"
 #include "cluster.grpc.pb.h"
 #include "convert.h"
-#include "daemon.h"
-#include "display_service.h"
-#include "root_node.h"
+#include "grpc/health/v1/health.grpc.pb.h"
+#include "rpc_channel.h"
+#include "rpc_status.h"
 #include "transtick/image_io.h"
 #include "transtick/ray_codec.h"
-#include "worker_node.h"
 
 namespace transtick {
 namespace fs = std::filesystem;
@@ -29,14 +27,12 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::str
   {
     grpc::ClientContext ctx;
     ctx.set_deadline(Deadline(30));
-    grpc::Status s = stub->Submit(&ctx, job, &submitted);
-    if (!s.ok()) {
-      if (s.error_code() == grpc::StatusCode::UNAVAILABLE) {
-        return absl::UnavailableError(
-            absl::StrCat("cannot reach the root at ", root, ": ", s.error_message()));
-      }
-      return FromGrpc(s);
+    absl::Status s = FromGrpc(stub->Submit(&ctx, job, &submitted));
+    if (absl::IsUnavailable(s)) {
+      return absl::UnavailableError(
+          absl::StrCat("cannot reach the root at ", root, ": ", s.message()));
     }
+    if (!s.ok()) return s;
   }
   if (options.progress) {
     std::fprintf(stderr, "%s: %d frames, %d jobs ahead\n", submitted.job_id().c_str(),
@@ -138,44 +134,16 @@ absl::StatusOr<v1::Job> LoadJobFile(const std::string& path) {
   return job;
 }
 
-absl::StatusOr<std::unique_ptr<LocalCluster>> LocalCluster::Start(const Options& options) {
-  auto c = std::unique_ptr<LocalCluster>(new LocalCluster());
-  c->display_service_ = std::make_unique<DisplayService>();
-  auto display = Server::Start("127.0.0.1:0", {c->display_service_.get()});
-  if (!display.ok()) return display.status();
-  c->display_server_ = *std::move(display);
-  RootOptions ro;
-  ro.data_dir = options.data_dir;
-  ro.display = absl::StrCat("127.0.0.1:", c->display_server_->port());
-  ro.rings = options.rings;
-  ro.worker_wait_s = 30;
-  auto root = RootNode::Start("127.0.0.1:0", ro);
-  if (!root.ok()) return root.status();
-  c->root_ = *std::move(root);
-  for (int i = 0; i < options.workers; ++i) {
-    WorkerNodeOptions wo;
-    wo.listen = "127.0.0.1:0";
-    wo.root = c->root_address();
-    wo.threads = options.threads_per_worker;
-    // The advertised address is fixed once the port is known.
-    auto w = WorkerNode::Start(wo);
-    if (!w.ok()) return w.status();
-    c->workers_.push_back(*std::move(w));
-  }
-  // Ready once every worker has registered.
-  for (int tries = 0; c->root_->service().WorkerCount() < options.workers; ++tries) {
-    if (tries > 1000) return absl::DeadlineExceededError("workers did not register");
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
-  return c;
+absl::StatusOr<grpc::health::v1::HealthCheckResponse::ServingStatus> CheckHealth(
+    const std::string& address, double timeout_s) {
+  auto stub = grpc::health::v1::Health::NewStub(MakeChannel(address));
+  grpc::ClientContext ctx;
+  ctx.set_deadline(Deadline(timeout_s));
+  grpc::health::v1::HealthCheckRequest request;  // service "": the whole server
+  grpc::health::v1::HealthCheckResponse response;
+  grpc::Status s = stub->Check(&ctx, request, &response);
+  if (!s.ok()) return FromGrpc(s);
+  return response.status();
 }
-
-LocalCluster::~LocalCluster() {
-  for (auto& w : workers_) w->Stop(std::chrono::milliseconds(1000));
-  if (root_) root_->Stop(std::chrono::milliseconds(1000));
-  if (display_server_) display_server_->Shutdown(std::chrono::milliseconds(1000));
-}
-
-std::string LocalCluster::root_address() const { return absl::StrCat("127.0.0.1:", root_->port()); }
 
 }  // namespace transtick

@@ -1,21 +1,17 @@
 // The client side of the cluster: submitting jobs and watching them, saving
-// images, and an embedded cluster for `transtick render --local N`.
+// images. The embedded cluster of `transtick render --local N` is
+// services/local/local_cluster.h.
 #ifndef TRANSTICK_CLI_CLIENT_H_
 #define TRANSTICK_CLI_CLIENT_H_
 
-#include <memory>
 #include <string>
 #include <vector>
 
 #include "absl/status/statusor.h"
 #include "cluster.pb.h"
+#include "grpc/health/v1/health.pb.h"
 
 namespace transtick {
-
-class DisplayService;
-class RootNode;
-class Server;
-class WorkerNode;
 
 struct WatchOptions {
   std::string out_dir;    // where images with relative output paths go
@@ -35,28 +31,12 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::str
 // read here and sent inline.
 absl::StatusOr<v1::Job> LoadJobFile(const std::string& path);
 
-// A root, a display and N workers in this process, each a real gRPC server
-// on 127.0.0.1. Stops everything on destruction.
-class LocalCluster {
- public:
-  struct Options {
-    int workers = 1;
-    int rings = 1;
-    int threads_per_worker = 1;
-    std::string data_dir;
-  };
-  static absl::StatusOr<std::unique_ptr<LocalCluster>> Start(const Options& options);
-  ~LocalCluster();
-
-  std::string root_address() const;
-
- private:
-  LocalCluster() = default;
-  std::unique_ptr<DisplayService> display_service_;
-  std::unique_ptr<Server> display_server_;
-  std::unique_ptr<RootNode> root_;
-  std::vector<std::unique_ptr<WorkerNode>> workers_;
-};
+// What the standard health service of the daemon at `address` reports for
+// the whole server, decoded from its HealthCheckResponse; or the call's
+// error (UNAVAILABLE when nothing answers there, DEADLINE_EXCEEDED after
+// `timeout_s` seconds).
+absl::StatusOr<grpc::health::v1::HealthCheckResponse::ServingStatus> CheckHealth(
+    const std::string& address, double timeout_s);
 
 }  // namespace transtick
 

@@ -5,7 +5,6 @@
 //
 // Run `transtick help` for every flag.
 
-#include <grpcpp/generic/generic_stub.h>
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
@@ -18,11 +17,14 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
 #include "client.h"
 #include "cluster.grpc.pb.h"
 #include "convert.h"
-#include "daemon.h"
 #include "flags.h"
+#include "local_cluster.h"
+#include "rpc_channel.h"
+#include "rpc_status.h"
 #include "transtick/camera.h"
 #include "transtick/image_io.h"
 #include "transtick/render.h"
@@ -39,7 +41,7 @@ usage:
   transtick submit JOB.json --root HOST:PORT [--out-dir DIR] [--stats FILE.json]
   transtick status --root HOST:PORT            jobs and workers of a running cluster
   transtick cancel JOB_ID --root HOST:PORT
-  transtick health --addr HOST:PORT            exit 0 when a daemon reports SERVING
+  transtick health --addr HOST:PORT[,...]      exit 0 when every daemon reports SERVING
   transtick info --volume FILE [raw options]   describe a volume
 
 render options:
@@ -67,7 +69,7 @@ render options:
                          the root's data directory
   --threads N            tracing threads of --local 0, and of each worker of --local N
                          (default: one per core)
-  --out FILE             .png (8-bit), .tif/.exr (float) (default transtick.png)
+  --out FILE             .png/.jpg (8-bit), .tif/.exr/.hdr (float) (default transtick.png)
   --stats FILE.json      write frame statistics as JSON
   --max-volume-mb N      refuse volumes larger than N MiB in memory (default 8192)
 raw volumes (any other extension, or --raw-dims given):
@@ -197,6 +199,11 @@ absl::StatusOr<v1::View> ViewFromFlags(const Flags& flags) {
     for (double c : *bg) v.add_background(static_cast<float>(c));
   }
   v.set_output(flags.Get("out", "transtick.png"));
+  if (!IsSupportedImagePath(v.output())) {
+    return absl::InvalidArgumentError(absl::StrCat("--out: '", v.output(),
+                                                   "' is not an image format transtick writes (",
+                                                   SupportedImageList(), ")"));
+  }
   // Checks ranges (image size, zoom, projection, background) up front.
   if (auto c = ToCameraSpec(v); !c.ok()) return c.status();
   return v;
@@ -322,10 +329,10 @@ void PrintClusterFrame(const v1::ClusterFrameStats& fs) {
 int Render(int argc, char** argv) {
   std::set<std::string> known = kRawFlags;
   for (const char* f :
-       {"materials", "transfer", "mode",   "azimuth", "elevation", "zoom",    "projection",
-        "fov",       "eye",      "target", "up",      "size",      "shadows", "background",
-        "step",      "threads",  "out",    "stats",   "local",     "root",    "rings",
-        "balance",   "balance-grid", "balance-rule"}) {
+       {"materials",  "transfer",   "mode",  "azimuth", "elevation",    "zoom",
+        "projection", "fov",        "eye",   "target",  "up",           "size",
+        "shadows",    "background", "step",  "threads", "out",          "stats",
+        "local",      "root",       "rings", "balance", "balance-grid", "balance-rule"}) {
     known.insert(f);
   }
   auto fail = [](const absl::Status& s) { return Fail("render", s); };
@@ -532,44 +539,47 @@ int CancelCommand(int argc, char** argv) {
   return 0;
 }
 
-// Exit 0 when the server at --addr reports SERVING (container probes).
+// Exit 0 when every daemon at --addr reports SERVING (container probes), with
+// one line per daemon: its state on stdout, or why it could not be asked on
+// stderr.
 int Health(int argc, char** argv) {
+  using grpc::health::v1::HealthCheckResponse;
   auto flags = Flags::Parse(argc, argv, 2, {"addr", "timeout"});
   if (!flags.ok()) return Fail("health", flags.status());
   auto timeout = flags->GetDouble("timeout", 3);
   if (!timeout.ok()) return Fail("health", timeout.status());
-  auto channel = MakeChannel(flags->Get("addr", "127.0.0.1:7000"));
-  grpc::ClientContext ctx;
-  ctx.set_deadline(Deadline(*timeout));
-  // An empty HealthCheckRequest serialises to zero bytes, but the buffer
-  // must still hold a (zero-length) slice to be a message.
-  grpc::Slice empty("", 0);
-  grpc::ByteBuffer request(&empty, 1), response;
-  // grpc.health.v1.HealthCheckRequest{service: ""} is the empty message.
-  grpc::GenericStub generic(channel);
-  grpc::CompletionQueue cq;
-  auto call = generic.PrepareUnaryCall(&ctx, "/grpc.health.v1.Health/Check", request, &cq);
-  call->StartCall();
-  grpc::Status status;
-  call->Finish(&response, &status, reinterpret_cast<void*>(1));
-  void* tag;
-  bool ok;
-  cq.Next(&tag, &ok);
-  cq.Shutdown();
-  while (cq.Next(&tag, &ok)) {
+  if (*timeout <= 0)
+    return Fail("health", absl::InvalidArgumentError("--timeout must be positive"));
+  std::vector<std::string> addresses = absl::StrSplit(flags->Get("addr", "127.0.0.1:7000"), ',');
+  for (const std::string& address : addresses) {
+    if (address.empty()) {
+      return Fail("health", absl::InvalidArgumentError("--addr: an empty address"));
+    }
   }
-  if (!status.ok()) return Fail("health", FromGrpc(status));
-  std::vector<grpc::Slice> slices;
-  response.Dump(&slices);
-  std::string bytes;
-  for (auto& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
-  // HealthCheckResponse{status = 1 (SERVING)}: field 1, varint 1.
-  if (bytes == std::string("\x08\x01", 2)) {
-    std::printf("SERVING\n");
-    return 0;
+  bool all_serving = true;
+  for (const std::string& address : addresses) {
+    auto status = CheckHealth(address, *timeout);
+    if (!status.ok()) {
+      all_serving = false;
+      const absl::Status& e = status.status();
+      std::string why;
+      if (absl::IsUnavailable(e)) {
+        why = absl::StrCat("no daemon answers (", e.message(), ")");
+      } else if (absl::IsDeadlineExceeded(e)) {
+        why = absl::StrCat("no answer within ", *timeout, " s");
+      } else if (absl::IsUnimplemented(e)) {
+        why = "it does not serve the grpc.health.v1 health service";
+      } else {
+        why = absl::StrCat(absl::StatusCodeToString(e.code()), ": ", e.message());
+      }
+      std::fprintf(stderr, "transtick health: %s: %s\n", address.c_str(), why.c_str());
+      continue;
+    }
+    std::printf("%s: %s\n", address.c_str(),
+                HealthCheckResponse::ServingStatus_Name(*status).c_str());
+    all_serving &= *status == HealthCheckResponse::SERVING;
   }
-  std::printf("NOT_SERVING\n");
-  return 1;
+  return all_serving ? 0 : 1;
 }
 
 }  // namespace

@@ -56,6 +56,14 @@ expect 0 "dvr" -- render --volume "$dir/cube.nrrd" --transfer "$dir/t.json" --si
   --out "$dir/b.exr"
 [[ -s $dir/b.exr ]] || { echo "FAIL: no EXR written"; fails=$((fails + 1)); }
 expect 0 "values 0 .. 200" -- info --volume "$dir/cube.nrrd"
+# Output formats come from one list (core's image_io): .hdr is written as
+# float, and a format outside the list is refused before anything renders.
+expect 0 "16x16 surfaces" -- render --local 0 --volume "$dir/cube.nrrd" --materials "$dir/m.json" \
+  --size 16x16 --out "$dir/c.hdr"
+[[ -s $dir/c.hdr ]] || { echo "FAIL: no HDR written"; fails=$((fails + 1)); }
+expect 2 "c.bmp' is not an image format transtick writes (.png, .jpg" -- render --local 0 \
+  --volume "$dir/cube.nrrd" --materials "$dir/m.json" --out "$dir/c.bmp"
+[[ -e $dir/c.bmp ]] && { echo "FAIL: .bmp written"; fails=$((fails + 1)); }
 
 expect 2 "9000x10" -- render --volume "$dir/cube.nrrd" --materials "$dir/m.json" --size 9000x10
 expect 2 "WxH" -- render --volume "$dir/cube.nrrd" --materials "$dir/m.json" --size big
@@ -69,6 +77,8 @@ expect 1 "short.nrrd" -- render --volume "$dir/short.nrrd" --materials "$dir/m.j
 printf '{"materials":[{"name":"x","min":5,"max":1,"color":[1,1,1]}]}' >"$dir/bad.json"
 expect 2 "bad.json" -- render --volume "$dir/cube.nrrd" --materials "$dir/bad.json"
 expect 2 "unknown command" -- frobnicate
+expect 1 "127.0.0.1:1: no daemon answers" -- health --addr 127.0.0.1:1 --timeout 2
+expect 2 "empty address" -- health --addr 127.0.0.1:1,
 
 echo "cli_test: $fails failed"
 [[ $fails == 0 ]]

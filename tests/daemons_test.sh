@@ -52,6 +52,10 @@ for _ in $(seq 100); do
 done
 "$T" status --root 127.0.0.1:$rport | grep -q '^3 workers' || fail "3 workers did not register"
 "$T" health --addr 127.0.0.1:$dport >/dev/null || fail "display not SERVING"
+# One line per daemon, from the decoded HealthCheckResponse.
+"$T" health --addr 127.0.0.1:$rport,127.0.0.1:$dport >"$dir/health.log" 2>&1 &&
+  grep -qx "127.0.0.1:$rport: SERVING" "$dir/health.log" &&
+  grep -qx "127.0.0.1:$dport: SERVING" "$dir/health.log" || fail "health: $(cat "$dir/health.log")"
 
 "$T" submit "$dir/job.json" --root 127.0.0.1:$rport --out-dir "$dir/out" >"$dir/submit.log" 2>&1 ||
   fail "submit: $(cat "$dir/submit.log")"
@@ -115,5 +119,10 @@ for p in "${wpids[0]}" "${wpids[2]}" "$rpid" "$dpid"; do
   wait "$p"; rc=$?
   [[ $rc == 0 ]] || fail "pid $p exited $rc on SIGTERM"
 done
+# Stopped daemons: health names each one that does not answer, and fails.
+"$T" health --addr 127.0.0.1:$rport,127.0.0.1:$dport --timeout 2 >"$dir/health2.log" 2>&1
+[[ $? == 1 ]] && grep -q "127.0.0.1:$rport: no daemon answers" "$dir/health2.log" &&
+  grep -q "127.0.0.1:$dport: no daemon answers" "$dir/health2.log" ||
+  fail "health of stopped daemons: $(cat "$dir/health2.log")"
 echo "daemons_test: $((fails == 0 ? 1 : 0)) passed, $fails failed checks"
 [[ $fails == 0 ]]

@@ -2,32 +2,61 @@
 
 #include <OpenImageIO/imageio.h>
 
-#include <algorithm>
-#include <cctype>
+#include <array>
+#include <optional>
 
+#include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 
 namespace transtick {
 namespace {
 
-bool IsFloatFormat(const std::string& path) {
-  auto dot = path.rfind('.');
-  if (dot == std::string::npos) return false;
-  std::string ext = path.substr(dot + 1);
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return std::tolower(c); });
-  return ext == "exr" || ext == "tif" || ext == "tiff" || ext == "hdr";
+// The 8-bit formats first, then the float ones.
+constexpr std::array<std::string_view, 7> kExtensions = {"png",  "jpg", "jpeg", "tif",
+                                                         "tiff", "exr", "hdr"};
+constexpr size_t kFirstFloat = 3;
+
+// The index of `path`'s extension in kExtensions, if it has one of them.
+std::optional<size_t> FormatOf(std::string_view path) {
+  const size_t dot = path.rfind('.');
+  if (dot == std::string_view::npos) return std::nullopt;
+  // absl::string_view is not std::string_view in Debian's absl.
+  std::string ext(path.substr(dot + 1));
+  for (char& c : ext) c = absl::ascii_tolower(static_cast<unsigned char>(c));
+  for (size_t i = 0; i < kExtensions.size(); ++i) {
+    if (ext == kExtensions[i]) return i;
+  }
+  return std::nullopt;
 }
 
 }  // namespace
 
+std::span<const std::string_view> SupportedImageExtensions() { return kExtensions; }
+
+bool IsSupportedImagePath(std::string_view path) { return FormatOf(path).has_value(); }
+
+std::string SupportedImageList() {
+  std::string list;
+  for (std::string_view ext : kExtensions) {
+    if (!list.empty()) list += ", ";
+    list += ".";
+    list += ext;
+  }
+  return list;
+}
+
 absl::Status WriteImage(const std::string& path, const Image& image) {
+  const std::optional<size_t> format = FormatOf(path);
+  if (!format) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(path, ": not an image format transtick writes (", SupportedImageList(), ")"));
+  }
   auto out = OIIO::ImageOutput::create(path);
   if (!out) {
     return absl::InvalidArgumentError(
         absl::StrCat(path, ": cannot write this image format (", OIIO::geterror(), ")"));
   }
-  const bool as_float = IsFloatFormat(path);
+  const bool as_float = *format >= kFirstFloat;
   OIIO::ImageSpec spec(image.width, image.height, 3,
                        as_float ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::UINT8);
   spec.attribute("Software", "transtick");

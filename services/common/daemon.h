@@ -1,6 +1,10 @@
-// Shared plumbing of the three daemons: mapping statuses across the gRPC
-// boundary, serving with the standard health service, stopping on SIGTERM,
-// and reading settings from flags or environment variables.
+// Shared plumbing of the three daemons: serving with the standard health
+// service, stopping on SIGTERM, logging, and reading settings from flags or
+// environment variables.
+//
+// The daemons also speak to each other, and this header brings the common
+// layer's RPC helpers with it: ToGrpc/FromGrpc (rpc_status.h), MakeChannel,
+// SharedChannel and Deadline (rpc_channel.h), and Flags (flags.h).
 #ifndef TRANSTICK_SERVICES_COMMON_DAEMON_H_
 #define TRANSTICK_SERVICES_COMMON_DAEMON_H_
 
@@ -14,12 +18,10 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "flags.h"
+#include "rpc_channel.h"
+#include "rpc_status.h"
 
 namespace transtick {
-
-// The one mapping between absl and gRPC statuses, at every service boundary.
-grpc::Status ToGrpc(const absl::Status& status);
-absl::Status FromGrpc(const grpc::Status& status);
 
 // A gRPC server on one address, with the health service reporting SERVING.
 // Owns the server; Shutdown is idempotent. Thread-safe.
@@ -51,23 +53,6 @@ int WaitForSignal();
 // The value of --flag, else $ENV, else `fallback`.
 std::string Setting(const Flags& flags, const std::string& flag, const char* env,
                     const std::string& fallback);
-
-// A channel with the cluster's message limits (large ray and image batches).
-std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address);
-
-// A channel to `address` kept for the life of the process and shared by
-// every caller with the same `purpose` ("rays", "deposits", ...), so that
-// per-frame streams reuse a warm connection instead of opening one each
-// frame. A channel whose peer has failed is replaced by a fresh one.
-// Thread-safe.
-std::shared_ptr<grpc::Channel> SharedChannel(const std::string& address,
-                                             const std::string& purpose);
-
-// A deadline `seconds` from now, for unary calls.
-std::chrono::system_clock::time_point Deadline(double seconds);
-
-// Replaces a trailing ":port" of `address` by the actual port (for ":0").
-std::string WithPort(const std::string& address, int port);
 
 // Sets up spdlog's default logger: "[time] [level] [name] message".
 void InitLogging(const std::string& name);

@@ -4,7 +4,9 @@
 
 #include <bit>
 
+#include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "rpc_status.h"
 #include "transtick/ray_codec.h"
 
 namespace transtick {
@@ -33,14 +35,13 @@ grpc::ServerUnaryReactor* DisplayService::BeginFrame(grpc::CallbackServerContext
 grpc::Status DisplayService::Begin(const v1::DisplayFrame& req) {
   if (req.width() < 1 || req.height() < 1 ||
       static_cast<uint64_t>(req.width()) * req.height() > max_frame_pixels_) {
-    return grpc::Status(
-        grpc::StatusCode::INVALID_ARGUMENT,
-        absl::StrCat("display: frame size ", req.width(), "x", req.height(), " is out of range"));
+    return ToGrpc(absl::InvalidArgumentError(
+        absl::StrCat("display: frame size ", req.width(), "x", req.height(), " is out of range")));
   }
   std::lock_guard<std::mutex> lock(mu_);
   if (frames_.count(req.frame_id())) {
-    return grpc::Status(grpc::StatusCode::ALREADY_EXISTS,
-                        absl::StrCat("display: frame ", req.frame_id(), " already begun"));
+    return ToGrpc(absl::AlreadyExistsError(
+        absl::StrCat("display: frame ", req.frame_id(), " already begun")));
   }
   // A framebuffer of a finished frame of the same size is cleared and used
   // again: faulting in fresh pages for every frame costs more.
@@ -106,21 +107,20 @@ grpc::Status DisplayService::Accumulate(const v1::DepositBatch& batch,
   // come after the other workers have completed the frame.
   if (batch.deposits().empty()) return grpc::Status::OK;
   if (!frame) {
-    return grpc::Status(grpc::StatusCode::NOT_FOUND,
-                        absl::StrCat("display: frame ", batch.frame_id(), " was not begun"));
+    return ToGrpc(
+        absl::NotFoundError(absl::StrCat("display: frame ", batch.frame_id(), " was not begun")));
   }
   std::lock_guard<std::mutex> lock(frame->mu);
   if (!frame->fb) {
-    return grpc::Status(
-        grpc::StatusCode::FAILED_PRECONDITION,
-        absl::StrCat("display: frame ", frame->id, " is complete; deposits after it are refused"));
+    return ToGrpc(absl::FailedPreconditionError(
+        absl::StrCat("display: frame ", frame->id, " is complete; deposits after it are refused")));
   }
   const uint32_t limit =
       static_cast<uint32_t>(frame->fb->width()) * static_cast<uint32_t>(frame->fb->height());
   auto deposits = DecodeDeposits(batch.deposits(), limit);
   if (!deposits.ok()) {
-    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                        absl::StrCat("display: ", deposits.status().message()));
+    return ToGrpc(
+        absl::InvalidArgumentError(absl::StrCat("display: ", deposits.status().message())));
   }
   bool completed = false;
   for (const Deposit& d : *deposits) completed |= frame->fb->Add(d);
@@ -135,12 +135,12 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
   if (!frame) {
     std::lock_guard<std::mutex> lock(mu_);
     if (auto it = aborted_.find(req->frame_id()); it != aborted_.end()) {
-      return grpc::Status(grpc::StatusCode::ABORTED,
-                          absl::StrCat("display: frame ", req->frame_id(), " was aborted",
-                                       it->second.empty() ? "" : ": ", it->second));
+      return ToGrpc(
+          absl::AbortedError(absl::StrCat("display: frame ", req->frame_id(), " was aborted",
+                                          it->second.empty() ? "" : ": ", it->second)));
     }
-    return grpc::Status(grpc::StatusCode::NOT_FOUND,
-                        absl::StrCat("display: frame ", req->frame_id(), " was not begun"));
+    return ToGrpc(
+        absl::NotFoundError(absl::StrCat("display: frame ", req->frame_id(), " was not begun")));
   }
   const uint64_t total = static_cast<uint64_t>(frame->fb->width()) * frame->fb->height();
   Image image;
@@ -148,7 +148,7 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
     std::unique_lock<std::mutex> lock(frame->mu);
     while (!frame->fb->Complete() && !frame->aborted) {
       frame->cv.wait_for(lock, std::chrono::milliseconds(250));
-      if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "cancelled");
+      if (ctx->IsCancelled()) return ToGrpc(absl::CancelledError("cancelled"));
       if (frame->fb->Complete() || frame->aborted) break;
       v1::FrameProgress p;
       p.set_pixels_done(frame->fb->complete_pixels());
@@ -158,10 +158,9 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
       lock.lock();
     }
     if (frame->aborted) {
-      return grpc::Status(
-          grpc::StatusCode::ABORTED,
+      return ToGrpc(absl::AbortedError(
           absl::StrCat("display: frame ", req->frame_id(), " was aborted",
-                       frame->abort_reason.empty() ? "" : ": ", frame->abort_reason));
+                       frame->abort_reason.empty() ? "" : ": ", frame->abort_reason)));
     }
     // Every deposit is in: the root hears it before the image is resolved,
     // so the workers end the frame while the image is made and sent.
@@ -198,7 +197,7 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
     c->set_row_end(r1);
     AppendFloats(image.rgb.data() + static_cast<size_t>(r0) * image.width * 3,
                  static_cast<size_t>(r1 - r0) * image.width * 3, c->mutable_rgb());
-    if (!writer->Write(p)) return grpc::Status(grpc::StatusCode::CANCELLED, "root went away");
+    if (!writer->Write(p)) return ToGrpc(absl::CancelledError("root went away"));
   }
   return grpc::Status::OK;
 }

@@ -4,7 +4,7 @@
 #include <iostream>
 
 #include "daemon.h"
-#include "display_service.h"
+#include "display_node.h"
 
 int main(int argc, char** argv) {
   using namespace transtick;
@@ -17,15 +17,14 @@ int main(int argc, char** argv) {
     return flags.ok() ? 0 : 2;
   }
   const std::string listen = Setting(*flags, "listen", "TRANSTICK_LISTEN", "0.0.0.0:7002");
-  DisplayService service;
-  auto server = Server::Start(listen, {&service});
-  if (!server.ok()) {
-    spdlog::error("{}", std::string(server.status().message()));
+  auto node = DisplayNode::Start(listen);
+  if (!node.ok()) {
+    spdlog::error("{}", std::string(node.status().message()));
     return 1;
   }
-  spdlog::info("display serving on port {}", (*server)->port());
+  spdlog::info("display serving on port {}", (*node)->port());
   int sig = WaitForSignal();
   spdlog::info("signal {}: stopping", sig);
-  (*server)->Shutdown(std::chrono::milliseconds(5000));
+  (*node)->Stop(std::chrono::milliseconds(5000));
   return 0;
 }

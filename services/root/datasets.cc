@@ -11,6 +11,7 @@
 #include "absl/strings/str_format.h"
 #include "balancer.h"
 #include "convert.h"
+#include "transtick/image_io.h"
 #include "transtick/partition.h"
 #include "transtick/volume_io.h"
 
@@ -22,16 +23,6 @@ using Clock = std::chrono::steady_clock;
 
 double MsSince(Clock::time_point t) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
-}
-
-bool SupportedOutput(const std::string& path) {
-  auto dot = path.rfind('.');
-  if (dot == std::string::npos) return false;
-  std::string ext = path.substr(dot + 1);
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return std::tolower(c); });
-  return ext == "png" || ext == "tif" || ext == "tiff" || ext == "exr" || ext == "jpg" ||
-         ext == "jpeg";
 }
 
 }  // namespace
@@ -102,9 +93,9 @@ absl::Status Datasets::Validate(const v1::Job& job) const {
         return absl::InvalidArgumentError(absl::StrCat(vw, ": ", c.status().message()));
       }
       if (auto s = balance_mode(vw, view.balance()); !s.ok()) return s;
-      if (!view.output().empty() && !SupportedOutput(view.output())) {
-        return absl::InvalidArgumentError(
-            absl::StrCat(vw, ": output '", view.output(), "' is not .png, .jpg, .tif or .exr"));
+      if (!view.output().empty() && !IsSupportedImagePath(view.output())) {
+        return absl::InvalidArgumentError(absl::StrCat(vw, ": output '", view.output(),
+                                                       "' is not one of ", SupportedImageList()));
       }
       ++views;
     }

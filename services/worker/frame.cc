@@ -8,9 +8,11 @@
 #include <algorithm>
 #include <future>
 
+#include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "convert.h"
 #include "daemon.h"
+#include "rpc_status.h"
 #include "transtick/ray_codec.h"
 
 namespace transtick {
@@ -347,20 +349,19 @@ class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBa
   void OnReadDone(bool ok) override {
     if (!frame_) {
       if (!ok) {
-        Finish(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                            "Rays: the stream closed before its first batch"));
+        Finish(
+            ToGrpc(absl::InvalidArgumentError("Rays: the stream closed before its first batch")));
         return;
       }
       frame_ = find_(in_.frame_id());
       if (!frame_) {
-        Finish(grpc::Status(grpc::StatusCode::NOT_FOUND,
-                            absl::StrCat("Rays: frame ", in_.frame_id(), " is not prepared here")));
+        Finish(ToGrpc(absl::NotFoundError(
+            absl::StrCat("Rays: frame ", in_.frame_id(), " is not prepared here"))));
         return;
       }
       if (!frame_->AttachLeft()) {
-        Finish(grpc::Status(grpc::StatusCode::ALREADY_EXISTS,
-                            absl::StrCat("Rays: frame ", in_.frame_id(),
-                                         " already has a stream from its left neighbour")));
+        Finish(ToGrpc(absl::AlreadyExistsError(absl::StrCat(
+            "Rays: frame ", in_.frame_id(), " already has a stream from its left neighbour"))));
         frame_ = nullptr;
         return;
       }

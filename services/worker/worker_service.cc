@@ -6,16 +6,18 @@
 #include <cstring>
 #include <thread>
 
+#include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "convert.h"
 #include "daemon.h"
+#include "rpc_status.h"
 #include "transtick/ray_codec.h"
 
 namespace transtick {
 namespace {
 
 grpc::Status Invalid(const std::string& message) {
-  return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, message);
+  return ToGrpc(absl::InvalidArgumentError(message));
 }
 
 absl::StatusOr<std::shared_ptr<const Scene>> AssembleSlab(const v1::SlabHeader& h,
@@ -91,10 +93,9 @@ grpc::Status WorkerService::LoadSlab(grpc::ServerContext* ctx,
   const v1::SlabHeader header = chunk.header();
   if (header.dataset_key().empty()) return Invalid("LoadSlab: empty dataset_key");
   if (header.scalar_count() * 4 > options_.max_slab_bytes) {
-    return grpc::Status(
-        grpc::StatusCode::RESOURCE_EXHAUSTED,
+    return ToGrpc(absl::ResourceExhaustedError(
         absl::StrCat("LoadSlab: ", header.scalar_count() * 4,
-                     " bytes of scalars exceed this worker's limit of ", options_.max_slab_bytes));
+                     " bytes of scalars exceed this worker's limit of ", options_.max_slab_bytes)));
   }
   std::vector<std::string> blocks;
   std::string scalars;
@@ -140,8 +141,8 @@ grpc::Status WorkerService::FetchPlanes(grpc::ServerContext*, const v1::PlanesRe
                                         grpc::ServerWriter<v1::SlabChunk>* writer) {
   std::shared_ptr<const Scene> scene = FindDataset(req->dataset_key());
   if (!scene) {
-    return grpc::Status(grpc::StatusCode::NOT_FOUND,
-                        absl::StrCat("FetchPlanes: dataset ", req->dataset_key(), " is not here"));
+    return ToGrpc(absl::NotFoundError(
+        absl::StrCat("FetchPlanes: dataset ", req->dataset_key(), " is not here")));
   }
   const int sb = scene->scalar_y_begin(), se = scene->scalar_y_end();
   // An empty range asks for nothing of that kind.
@@ -165,7 +166,7 @@ grpc::Status WorkerService::FetchPlanes(grpc::ServerContext*, const v1::PlanesRe
       pending += b.size();
       chunk.add_blocks(std::move(b));
       if (pending >= kChunkBytes) {
-        if (!writer->Write(chunk)) return grpc::Status(grpc::StatusCode::CANCELLED, "reader left");
+        if (!writer->Write(chunk)) return ToGrpc(absl::CancelledError("reader left"));
         chunk.Clear();
         pending = 0;
       }
@@ -177,7 +178,7 @@ grpc::Status WorkerService::FetchPlanes(grpc::ServerContext*, const v1::PlanesRe
     for (size_t i = 0; i < planes.values.size(); i += per_chunk) {
       AppendFloats(planes.values.data() + i, std::min(per_chunk, planes.values.size() - i),
                    chunk.mutable_scalars());
-      if (!writer->Write(chunk)) return grpc::Status(grpc::StatusCode::CANCELLED, "reader left");
+      if (!writer->Write(chunk)) return ToGrpc(absl::CancelledError("reader left"));
       chunk.Clear();
     }
   }
@@ -249,8 +250,8 @@ grpc::Status WorkerService::Reslab(grpc::ServerContext*, const v1::ReslabRequest
                                    v1::LoadReply* reply) {
   std::shared_ptr<const Scene> old = FindDataset(req->old_key());
   if (!old) {
-    return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
-                        absl::StrCat("Reslab: dataset ", req->old_key(), " is not loaded here"));
+    return ToGrpc(absl::FailedPreconditionError(
+        absl::StrCat("Reslab: dataset ", req->old_key(), " is not loaded here")));
   }
   const auto& dims = old->dims();
   const int y0 = req->y_begin(), y1 = req->y_end();
@@ -280,8 +281,8 @@ grpc::Status WorkerService::Reslab(grpc::ServerContext*, const v1::ReslabRequest
           }
         }
         if (!from) {
-          return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
-                              absl::StrCat("Reslab: no source holds plane ", lo));
+          return ToGrpc(
+              absl::FailedPreconditionError(absl::StrCat("Reslab: no source holds plane ", lo)));
         }
         const int end = std::min(hi, from->y_end());
         Fetch f{from, 0, 0, 0, 0, {}, {}, {}};
@@ -326,13 +327,13 @@ grpc::Status WorkerService::Prepare(const v1::FrameSpec& spec) {
     std::lock_guard<std::mutex> lock(mu_);
     auto it = datasets_.find(spec.dataset_key());
     if (it == datasets_.end()) {
-      return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
-                          absl::StrCat("dataset ", spec.dataset_key(), " is not loaded here"));
+      return ToGrpc(absl::FailedPreconditionError(
+          absl::StrCat("dataset ", spec.dataset_key(), " is not loaded here")));
     }
     scene = it->second;
     if (frames_.count(spec.frame_id())) {
-      return grpc::Status(grpc::StatusCode::ALREADY_EXISTS,
-                          absl::StrCat("frame ", spec.frame_id(), " is already prepared"));
+      return ToGrpc(absl::AlreadyExistsError(
+          absl::StrCat("frame ", spec.frame_id(), " is already prepared")));
     }
   }
   const int n = spec.cuts_size() - 1;
@@ -379,8 +380,8 @@ grpc::ServerUnaryReactor* WorkerService::RunFrame(grpc::CallbackServerContext* c
   grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
   std::shared_ptr<Frame> frame = FindFrame(req->frame_id());
   if (!frame) {
-    reactor->Finish(grpc::Status(grpc::StatusCode::NOT_FOUND,
-                                 absl::StrCat("frame ", req->frame_id(), " was not prepared")));
+    reactor->Finish(
+        ToGrpc(absl::NotFoundError(absl::StrCat("frame ", req->frame_id(), " was not prepared"))));
     return reactor;
   }
   // The reply goes once the stream to the right neighbour is open.

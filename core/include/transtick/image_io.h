@@ -1,10 +1,12 @@
-// Writing images with OpenImageIO, format by extension: 8-bit for PNG (and
-// JPEG), 32-bit float for TIFF and EXR.
+// Writing images with OpenImageIO, format by extension: 8-bit for PNG and
+// JPEG, 32-bit float for TIFF, EXR and Radiance HDR.
 #ifndef TRANSTICK_IMAGE_IO_H_
 #define TRANSTICK_IMAGE_IO_H_
 
 #include <cstdint>
+#include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -13,6 +15,22 @@
 
 namespace transtick {
 
+// The image formats transtick writes, as file extensions in lower case
+// without the dot: "png", "jpg", "jpeg" (8-bit), "tif", "tiff", "exr", "hdr"
+// (32-bit float). This is the one list: the CLI and the root check output
+// paths against it, and WriteImage writes nothing else. The view is of
+// static storage.
+std::span<const std::string_view> SupportedImageExtensions();
+
+// True when `path` ends in "." and one of SupportedImageExtensions(), in any
+// case ("a/b.PNG" is supported, "png" and "a.png/" are not).
+bool IsSupportedImagePath(std::string_view path);
+
+// The same list for messages: ".png, .jpg, .jpeg, .tif, .tiff, .exr, .hdr".
+std::string SupportedImageList();
+
+// Writes `image` in the format of `path`'s extension. An extension outside
+// SupportedImageExtensions() is an InvalidArgument error that lists them.
 absl::Status WriteImage(const std::string& path, const Image& image);
 
 // Reads an image back as float RGB (for tests and comparisons).

@@ -1,7 +1,7 @@
 // The ray descriptor: the whole state of a ray in flight, self-contained so
 // that a ray stopped at a slab plane resumes elsewhere with bit-identical
-// results. Its wire form (docs/ray_descriptor.md) carries every field below
-// bit for bit.
+// results. Its wire form (docs/formats.md, "Ray descriptor") carries every
+// field below bit for bit.
 #ifndef TRANSTICK_RAY_H_
 #define TRANSTICK_RAY_H_
 

@@ -1,7 +1,7 @@
 // The STICKS scheme (Montani & Scopigno 1990): for each track (x, y), the runs
 // of equal non-void material along z. Tracks are grouped into blocks of 32x32
 // (the paper's Sticks Holder Array) that serialise to bytes; the byte format
-// is written down in docs/sticks.md.
+// is written down in docs/formats.md, "Sticks block".
 #ifndef TRANSTICK_STICKS_H_
 #define TRANSTICK_STICKS_H_
 

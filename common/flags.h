@@ -1,7 +1,8 @@
 // A small command-line flag parser: --name value and --name=value, with
-// errors that name the flag.
-#ifndef TRANSTICK_CLI_FLAGS_H_
-#define TRANSTICK_CLI_FLAGS_H_
+// errors that name the flag. Used by the transtick command and by the
+// daemons.
+#ifndef TRANSTICK_COMMON_FLAGS_H_
+#define TRANSTICK_COMMON_FLAGS_H_
 
 #include <array>
 #include <map>
@@ -40,4 +41,4 @@ class Flags {
 
 }  // namespace transtick
 
-#endif  // TRANSTICK_CLI_FLAGS_H_
+#endif  // TRANSTICK_COMMON_FLAGS_H_

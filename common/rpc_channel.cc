@@ -1,0 +1,63 @@
+#include "rpc_channel.h"
+
+#include <grpcpp/create_channel.h>
+#include <grpcpp/security/credentials.h>
+#include <grpcpp/support/channel_arguments.h>
+
+#include <cstdint>
+#include <map>
+#include <mutex>
+
+#include "absl/strings/str_cat.h"
+
+namespace transtick {
+
+std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address) {
+  grpc::ChannelArguments args;
+  args.SetMaxReceiveMessageSize(kMaxMessageBytes);
+  args.SetMaxSendMessageSize(kMaxMessageBytes);
+  // Each channel gets its own connection: ray streams must not queue behind
+  // slab transfers to the same peer.
+  args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
+  return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+}
+
+std::shared_ptr<grpc::Channel> SharedChannel(const std::string& address,
+                                             const std::string& purpose) {
+  static std::mutex mu;
+  static auto* channels = new std::map<std::string, std::shared_ptr<grpc::Channel>>();
+  const std::string key = purpose + "|" + address;
+  std::lock_guard<std::mutex> lock(mu);
+  // Peers that went away for good (a worker replaced at a new port) would
+  // otherwise leave their channels here for the life of the process.
+  for (auto it = channels->begin(); it != channels->end();) {
+    const auto state = it->second->GetState(false);
+    if (it->first != key &&
+        (state == GRPC_CHANNEL_TRANSIENT_FAILURE || state == GRPC_CHANNEL_SHUTDOWN)) {
+      it = channels->erase(it);
+    } else {
+      ++it;
+    }
+  }
+  auto& channel = (*channels)[key];
+  // A peer that went away (and may be back at the same address) leaves its
+  // channel failing; a fresh one connects at once instead of backing off.
+  if (!channel || channel->GetState(false) == GRPC_CHANNEL_TRANSIENT_FAILURE ||
+      channel->GetState(false) == GRPC_CHANNEL_SHUTDOWN) {
+    channel = MakeChannel(address);
+  }
+  return channel;
+}
+
+std::chrono::system_clock::time_point Deadline(double seconds) {
+  return std::chrono::system_clock::now() +
+         std::chrono::microseconds(static_cast<int64_t>(seconds * 1e6));
+}
+
+std::string WithPort(const std::string& address, int port) {
+  auto colon = address.rfind(':');
+  std::string host = colon == std::string::npos ? address : address.substr(0, colon);
+  return absl::StrCat(host, ":", port);
+}
+
+}  // namespace transtick

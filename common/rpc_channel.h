@@ -1,0 +1,38 @@
+// Client channels as the cluster uses them: message limits large enough for
+// ray and image batches, channels shared per peer and purpose, deadlines for
+// unary calls. Used by the transtick command and by the daemons.
+#ifndef TRANSTICK_COMMON_RPC_CHANNEL_H_
+#define TRANSTICK_COMMON_RPC_CHANNEL_H_
+
+#include <grpcpp/channel.h>
+
+#include <chrono>
+#include <memory>
+#include <string>
+
+namespace transtick {
+
+// The largest message a channel or a server of the cluster sends or
+// receives, on both ends.
+inline constexpr int kMaxMessageBytes = 64 << 20;
+
+// A channel with the cluster's message limits and a connection of its own.
+std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address);
+
+// A channel to `address` kept for the life of the process and shared by
+// every caller with the same `purpose` ("rays", "deposits", ...), so that
+// per-frame streams reuse a warm connection instead of opening one each
+// frame. A channel whose peer has failed is replaced by a fresh one.
+// Thread-safe.
+std::shared_ptr<grpc::Channel> SharedChannel(const std::string& address,
+                                             const std::string& purpose);
+
+// A deadline `seconds` from now, for unary calls.
+std::chrono::system_clock::time_point Deadline(double seconds);
+
+// Replaces a trailing ":port" of `address` by the actual port (for ":0").
+std::string WithPort(const std::string& address, int port);
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_COMMON_RPC_CHANNEL_H_
