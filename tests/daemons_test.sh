@@ -4,14 +4,16 @@
 # move between the worker processes), a malformed job file gets a clear
 # error, a worker killed with SIGKILL is dropped and the next job still
 # renders (the survivors re-cut their slabs without the dead one's planes),
-# a worker killed in the middle of a job does not stall it, and every daemon
-# stops cleanly on SIGTERM.
+# a worker killed in the middle of a job does not stall it, nor does a worker
+# paused with SIGSTOP, a restarted root gets its workers back by itself, a
+# job survives the display's restart, and every daemon stops cleanly on
+# SIGTERM.
 set -u
 build=$1
 src=$2
 dir=$(mktemp -d)
 pids=()
-cleanup() { kill -9 "${pids[@]}" 2>/dev/null; rm -rf "$dir"; }
+cleanup() { kill -9 "${pids[@]}" 2>/dev/null; if [[ -n ${TRANSTICK_KEEP_TEST_DIR:-} ]]; then echo "kept $dir"; else rm -rf "$dir"; fi; }
 trap cleanup EXIT
 fails=0
 fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
@@ -110,6 +112,73 @@ else
   fail "job with a worker killed mid-frame did not complete in 120 s: $(tail -3 "$dir/submit3.log")"
 fi
 echo "mid-job kill: job done $(($(date +%s) - start)) s after submission"
+
+# A worker paused with SIGSTOP in the middle of a job: it stops renewing its
+# registration, the root drops it within seconds (not the 600 s frame
+# timeout), retries the frame on the others, and the job completes with the
+# right image.
+"$build/services/worker/transtick-worker" --root 127.0.0.1:$rport --listen 127.0.0.1:0 \
+  --threads 1 >"$dir/worker5.log" 2>&1 &
+pids+=($!); w5=$!
+for _ in $(seq 100); do
+  "$T" status --root 127.0.0.1:$rport 2>/dev/null | grep -q '^3 workers' && break
+  sleep 0.1
+done
+"$T" status --root 127.0.0.1:$rport | grep -q '^3 workers' || fail "a fifth worker did not register"
+rm -f "$dir/out/long.png"
+start=$(date +%s.%N)
+timeout 120 "$T" submit "$dir/long.json" --root 127.0.0.1:$rport --out-dir "$dir/out" \
+  >"$dir/submit4.log" 2>&1 &
+spid=$!
+sleep 1
+kill -STOP "$w5"
+if wait "$spid"; then
+  cmp -s "$dir/out/long.png" "$dir/long_ref.png" || fail "image after a worker paused mid-job differs"
+else
+  fail "job with a worker paused mid-frame did not complete in 120 s: $(tail -3 "$dir/submit4.log")"
+fi
+printf 'paused worker: 80-frame job done %.1f s after submission\n' "$(echo "$(date +%s.%N) - $start" | bc)"
+kill -9 "$w5"
+
+# The root killed and restarted: the workers register again by themselves
+# (their heartbeat), and the next job renders the right image.
+kill -9 "$rpid"
+wait "$rpid" 2>/dev/null
+start=$(date +%s.%N)
+"$build/services/root/transtick-root" --listen 127.0.0.1:$rport --data-dir "$dir/data" \
+  --display 127.0.0.1:$dport >"$dir/root2.log" 2>&1 &
+pids+=($!); rpid=$!
+for _ in $(seq 100); do
+  "$T" status --root 127.0.0.1:$rport 2>/dev/null | grep -q '^2 workers' && break
+  sleep 0.1
+done
+if "$T" status --root 127.0.0.1:$rport | grep -q '^2 workers'; then
+  printf 'root restart: both workers registered again %.1f s after the restart\n' \
+    "$(echo "$(date +%s.%N) - $start" | bc)"
+else
+  fail "workers did not register again with a restarted root"
+fi
+rm -f "$dir/out/a.png"
+"$T" submit "$dir/job.json" --root 127.0.0.1:$rport --out-dir "$dir/out" >"$dir/submit5.log" 2>&1 ||
+  fail "submit after a root restart: $(cat "$dir/submit5.log")"
+cmp -s "$dir/out/a.png" "$dir/ref.png" || fail "image after a root restart differs"
+
+# The display killed in the middle of a job and started again: the root
+# retries the frame with backoff until it is back, and the job completes.
+rm -f "$dir/out/long.png"
+timeout 120 "$T" submit "$dir/long.json" --root 127.0.0.1:$rport --out-dir "$dir/out" \
+  >"$dir/submit6.log" 2>&1 &
+spid=$!
+sleep 1
+kill -9 "$dpid"
+wait "$dpid" 2>/dev/null
+"$build/services/display/transtick-display" --listen 127.0.0.1:$dport >"$dir/display2.log" 2>&1 &
+pids+=($!); dpid=$!
+if wait "$spid"; then
+  cmp -s "$dir/out/long.png" "$dir/long_ref.png" || fail "image after a display restart differs"
+else
+  fail "job across a display restart did not complete: $(tail -3 "$dir/submit6.log")"
+fi
 
 # SIGTERM: every daemon exits 0 within docker's 10 s grace period.
 for p in "${wpids[0]}" "${wpids[2]}" "$rpid" "$dpid"; do

@@ -1,6 +1,7 @@
 #include "daemon.h"
 
 #include <grpcpp/health_check_service_interface.h>
+#include <malloc.h>
 #include <signal.h>
 #include <spdlog/spdlog.h>
 
@@ -67,6 +68,8 @@ std::string Setting(const Flags& flags, const std::string& flag, const char* env
   if (const char* v = std::getenv(env); v != nullptr && *v != '\0') return v;
   return fallback;
 }
+
+void ReturnLargeBlocksToTheSystem() { mallopt(M_MMAP_THRESHOLD, 1 << 20); }
 
 void InitLogging(const std::string& name) {
   spdlog::set_pattern(absl::StrCat("[%Y-%m-%d %H:%M:%S.%e] [%l] [", name, "] %v"));

@@ -9,6 +9,7 @@
 int main(int argc, char** argv) {
   using namespace transtick;
   BlockTerminationSignals();
+  ReturnLargeBlocksToTheSystem();
   InitLogging("display");
   auto flags = Flags::Parse(argc, argv, 1, {"listen"}, {"help"});
   if (!flags.ok() || flags->Has("help")) {

@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <atomic>
 #include <chrono>
 #include <thread>
 
@@ -24,8 +25,12 @@ constexpr double kAbortDeadline = 10;
 
 }  // namespace
 
-FrameDriver::FrameDriver(Registry& registry, std::string display, double frame_timeout_s)
-    : registry_(registry), display_(std::move(display)), frame_timeout_s_(frame_timeout_s) {
+FrameDriver::FrameDriver(Registry& registry, std::string display, double frame_timeout_s,
+                         std::chrono::milliseconds stall_timeout)
+    : registry_(registry),
+      display_(std::move(display)),
+      frame_timeout_s_(frame_timeout_s),
+      stall_timeout_(stall_timeout) {
   // Frame ids unique across root restarts, so a worker never mistakes a
   // stale frame for a new one.
   next_frame_id_ =
@@ -91,11 +96,18 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
   std::vector<v1::WorkerFrameStats> stats(members.size());
   auto end_all = [&](bool cancel) {
     // Statistics of workers that fail to end are simply missing.
+    // A cancelled frame does not wait on a member that stopped answering
+    // (its registration expired): it would hold the retry for the deadline.
     v1::FrameRef end = ref;
     end.set_cancel(cancel);
-    CallAll(members.size(), kCallDeadline, [&](size_t i, grpc::ClientContext* ctx, auto done) {
-      members[i].worker->stub->async()->EndFrame(ctx, &end, &stats[i], std::move(done));
-    });
+    CallAll(members.size(), cancel ? kAbortDeadline : kCallDeadline,
+            [&](size_t i, grpc::ClientContext* ctx, auto done) {
+              if (cancel && !registry_.Alive(members[i].worker->id)) {
+                done(grpc::Status(grpc::StatusCode::UNAVAILABLE, "not answering"));
+                return;
+              }
+              members[i].worker->stub->async()->EndFrame(ctx, &end, &stats[i], std::move(done));
+            });
     for (size_t i = 0; i < members.size(); ++i) stats[i].set_ring(members[i].ring);
   };
   auto abort = [&](const absl::Status& why) {
@@ -127,8 +139,12 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
   prepared.pop_back();
   absl::Status s = check("PrepareFrame", prepared);
   if (!begun.ok()) {
-    return abort(absl::Status(FromGrpc(begun).code(),
-                              absl::StrCat("display ", display_, ": ", begun.error_message())));
+    // A display that is down or not answering may come back: the frame is
+    // retried (UNAVAILABLE); a refusal is final.
+    const absl::StatusCode code =
+        IsWorkerFailure(begun) ? absl::StatusCode::kUnavailable : FromGrpc(begun).code();
+    return abort(
+        absl::Status(code, absl::StrCat("display ", display_, ": ", begun.error_message())));
   }
   if (!s.ok()) return abort(s);
   s = check(
@@ -146,6 +162,32 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
     v1::FrameRef await = ref;
     await.set_no_image(!on_chunk);
     auto reader = display->AwaitFrame(&ctx, await);
+    // The watchdog: a member that stops renewing its registration (dead, or
+    // paused), or a display that sends nothing (it reports progress every
+    // 250 ms), ends the wait within seconds; the frame is then retried on
+    // the workers still alive.
+    std::atomic<int64_t> last_message{Clock::now().time_since_epoch().count()};
+    std::atomic<bool> awaiting{true};
+    std::string stalled;  // written by the watchdog before it cancels
+    std::thread watchdog([&] {
+      while (awaiting) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+        for (const Member& m : members) {
+          if (awaiting && !registry_.Alive(m.worker->id)) {
+            stalled = absl::StrCat("worker ", m.worker->address, " stopped answering");
+            ctx.TryCancel();
+            return;
+          }
+        }
+        const auto silent = Clock::now() - Clock::time_point(Clock::duration(last_message.load()));
+        if (awaiting && silent > stall_timeout_) {
+          stalled = absl::StrCat("the display sent nothing for ",
+                                 std::chrono::duration<double>(silent).count(), " s");
+          ctx.TryCancel();
+          return;
+        }
+      }
+    });
     v1::FrameProgress p;
     int rows = 0;
     auto last_progress = Clock::now() - std::chrono::seconds(1);
@@ -156,6 +198,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
     std::thread ender;
     bool complete = false;
     while (reader->Read(&p)) {
+      last_message = Clock::now().time_since_epoch().count();
       if (cancelled()) ctx.TryCancel();
       if (p.complete() && !ender.joinable()) {
         complete = true;
@@ -184,9 +227,12 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
       }
     }
     grpc::Status st = reader->Finish();
+    awaiting = false;
+    watchdog.join();
     if (ender.joinable()) ender.join();
     if (cancelled()) return abort(absl::CancelledError("cancelled"));
     if (!relay.ok()) return abort(relay);
+    if (!stalled.empty()) return abort(absl::UnavailableError(stalled));
     const bool through = on_chunk ? rows == view.height() : complete;
     if (!st.ok() || !through) {
       absl::Status why =

@@ -8,6 +8,7 @@
 #define TRANSTICK_SERVICES_ROOT_FRAME_DRIVER_H_
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -37,8 +38,10 @@ class FrameDriver {
   // non-OK return aborts the frame with that status.
   using ChunkFn = std::function<absl::Status(v1::ImageChunk chunk)>;
 
-  // REQUIRES: `registry` outlives this.
-  FrameDriver(Registry& registry, std::string display, double frame_timeout_s);
+  // REQUIRES: `registry` outlives this. A frame fails when the display
+  // sends nothing for `stall_timeout`, or a member's registration expires.
+  FrameDriver(Registry& registry, std::string display, double frame_timeout_s,
+              std::chrono::milliseconds stall_timeout = std::chrono::seconds(10));
 
   // Runs one frame of `view`. Without `on_chunk` (a balancing prerender)
   // the display sends no image, only completion. Fails UNAVAILABLE when a
@@ -52,6 +55,7 @@ class FrameDriver {
   Registry& registry_;
   const std::string display_;
   const double frame_timeout_s_;
+  const std::chrono::milliseconds stall_timeout_;
   std::atomic<uint64_t> next_frame_id_;
 };
 

@@ -3,7 +3,9 @@
 #include <spdlog/spdlog.h>
 
 #include <chrono>
+#include <functional>
 #include <optional>
+#include <thread>
 
 #include "absl/strings/str_cat.h"
 #include "convert.h"
@@ -18,8 +20,20 @@ double MsSince(Clock::time_point t) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
 
-// A worker that dies is dropped and the frame runs again on the others.
-constexpr int kAttempts = 3;
+// A worker that dies is dropped and the frame runs again on the others; a
+// display that went away gets time to come back: the attempts are spaced
+// 0.25, 0.5, 1 and 2 s apart (about 4 s in all).
+constexpr int kAttempts = 5;
+constexpr auto kFirstBackoff = std::chrono::milliseconds(250);
+
+// Sleeps `d`, or less if `cancelled()` turns true.
+void SleepUnless(std::chrono::milliseconds d, const std::function<bool()>& cancelled) {
+  const auto until = Clock::now() + d;
+  while (Clock::now() < until && !cancelled()) {
+    std::this_thread::sleep_for(
+        std::min<Clock::duration>(std::chrono::milliseconds(20), until - Clock::now()));
+  }
+}
 
 }  // namespace
 
@@ -91,6 +105,8 @@ absl::Status JobRunner::RunView(Job& job, int d, int v, LoadedDataset& data) {
   auto cancelled = [&] { return job.cancelled() || queue_.stopping(); };
   absl::Status status;
   for (int attempt = 0; attempt < kAttempts; ++attempt) {
+    if (attempt > 0) SleepUnless(kFirstBackoff * (1 << (attempt - 1)), cancelled);
+    if (cancelled()) return absl::CancelledError("cancelled");
     auto workers = registry_.Workers(
         std::chrono::milliseconds(static_cast<int64_t>(options_.worker_wait_s * 1000)), cancelled);
     if (!workers.ok()) {

@@ -9,6 +9,7 @@
 int main(int argc, char** argv) {
   using namespace transtick;
   BlockTerminationSignals();
+  ReturnLargeBlocksToTheSystem();
   InitLogging("root");
   auto flags = Flags::Parse(
       argc, argv, 1, {"listen", "data-dir", "display", "rings", "max-volume-mb", "frame-timeout"},

@@ -23,7 +23,11 @@ absl::Status Registry::Register(const v1::RegisterRequest& req) {
     return absl::InvalidArgumentError("Register: absurd thread count");
   }
   absl::MutexLock lock(&mu_);
+  ExpireLocked();
   if (auto it = workers_.find(req.id()); it != workers_.end()) {
+    // The worker's heartbeat: the same worker at the same address.
+    if (it->second->address == req.address())
+      last_seen_[req.id()] = std::chrono::steady_clock::now();
     return absl::AlreadyExistsError(
         absl::StrCat("worker ", req.id(), " is already registered (at ", it->second->address, ")"));
   }
@@ -32,6 +36,7 @@ absl::Status Registry::Register(const v1::RegisterRequest& req) {
     if (it->second->address == req.address()) {
       spdlog::info("worker {} at {} replaces {}", req.id(), req.address(), it->first);
       held_.erase(it->first);
+      last_seen_.erase(it->first);
       it = workers_.erase(it);
     } else {
       ++it;
@@ -44,6 +49,7 @@ absl::Status Registry::Register(const v1::RegisterRequest& req) {
   w->order = next_order_++;
   w->stub = v1::Worker::NewStub(MakeChannel(w->address));
   workers_[w->id] = w;
+  last_seen_[w->id] = std::chrono::steady_clock::now();
   spdlog::info("worker {} registered at {} ({} threads); {} workers", w->id, w->address, w->threads,
                workers_.size());
   return absl::OkStatus();
@@ -52,6 +58,7 @@ absl::Status Registry::Register(const v1::RegisterRequest& req) {
 absl::Status Registry::Unregister(const std::string& id) {
   absl::MutexLock lock(&mu_);
   held_.erase(id);
+  last_seen_.erase(id);
   if (workers_.erase(id) == 0) {
     return absl::NotFoundError(absl::StrCat("worker ", id, " is not registered"));
   }
@@ -62,6 +69,7 @@ absl::Status Registry::Unregister(const std::string& id) {
 void Registry::Drop(const std::string& id, const std::string& why) {
   absl::MutexLock lock(&mu_);
   held_.erase(id);
+  last_seen_.erase(id);
   if (workers_.erase(id)) {
     spdlog::warn("dropping worker {}: {}; {} workers left", id, why, workers_.size());
   }
@@ -73,6 +81,7 @@ absl::StatusOr<std::vector<std::shared_ptr<WorkerEntry>>> Registry::Workers(
   {
     absl::MutexLock lock(&mu_);
     const auto until = std::chrono::steady_clock::now() + wait;
+    ExpireLocked();
     while (workers_.empty()) {
       if (cancelled()) return absl::CancelledError("cancelled");
       if (std::chrono::steady_clock::now() >= until) {
@@ -87,6 +96,33 @@ absl::StatusOr<std::vector<std::shared_ptr<WorkerEntry>>> Registry::Workers(
   }
   std::sort(out.begin(), out.end(), [](auto& a, auto& b) { return a->order < b->order; });
   return out;
+}
+
+void Registry::ExpireLocked() {
+  const auto now = std::chrono::steady_clock::now();
+  for (auto it = workers_.begin(); it != workers_.end();) {
+    auto seen = last_seen_.find(it->first);
+    if (seen != last_seen_.end() && now - seen->second <= expiry_) {
+      ++it;
+      continue;
+    }
+    spdlog::warn(
+        "dropping worker {} at {}: not heard from for {} ms; {} workers left", it->first,
+        it->second->address,
+        seen == last_seen_.end()
+            ? -1
+            : std::chrono::duration_cast<std::chrono::milliseconds>(now - seen->second).count(),
+        workers_.size() - 1);
+    held_.erase(it->first);
+    if (seen != last_seen_.end()) last_seen_.erase(seen);
+    it = workers_.erase(it);
+  }
+}
+
+bool Registry::Alive(const std::string& id) {
+  absl::MutexLock lock(&mu_);
+  ExpireLocked();
+  return workers_.count(id) > 0;
 }
 
 int Registry::size() const {
@@ -109,8 +145,9 @@ void Registry::ClearHeld(const std::string& id) {
   held_.erase(id);
 }
 
-void Registry::Describe(v1::StatusReply* reply) const {
+void Registry::Describe(v1::StatusReply* reply) {
   absl::MutexLock lock(&mu_);
+  ExpireLocked();
   std::vector<std::shared_ptr<WorkerEntry>> ws;
   for (auto& [id, w] : workers_) ws.push_back(w);
   std::sort(ws.begin(), ws.end(), [](auto& a, auto& b) { return a->order < b->order; });

@@ -38,6 +38,11 @@ struct HeldSlab {
 
 class Registry {
  public:
+  // A worker not heard from (Register renews) for `expiry` is dropped.
+  explicit Registry(std::chrono::milliseconds expiry = std::chrono::seconds(5)) : expiry_(expiry) {}
+
+  // Registers a worker, or renews one the registry knows at the same
+  // address (and then fails ALREADY_EXISTS, as for any known id).
   absl::Status Register(const v1::RegisterRequest& req);
   absl::Status Unregister(const std::string& id);
   // A worker that failed a call: forgotten with what it held.
@@ -49,19 +54,27 @@ class Registry {
   absl::StatusOr<std::vector<std::shared_ptr<WorkerEntry>>> Workers(
       std::chrono::milliseconds wait, const std::function<bool()>& cancelled);
   int size() const;
+  // Whether the worker is registered and was heard from within the expiry.
+  bool Alive(const std::string& id);
 
   std::map<std::string, HeldSlab> Held() const;  // by worker id
   void SetHeld(const std::string& id, const HeldSlab& slab);
   void ClearHeld(const std::string& id);
 
   // For Status: every worker with its slab, in registration order.
-  void Describe(v1::StatusReply* reply) const;
+  void Describe(v1::StatusReply* reply);
 
  private:
+  // Drops workers not heard from within the expiry.
+  void ExpireLocked() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+
+  const std::chrono::milliseconds expiry_;
   mutable absl::Mutex mu_;
   uint64_t next_order_ ABSL_GUARDED_BY(mu_) = 0;
+  std::map<std::string, std::chrono::steady_clock::time_point> last_seen_ ABSL_GUARDED_BY(mu_);
   std::map<std::string, std::shared_ptr<WorkerEntry>> workers_ ABSL_GUARDED_BY(mu_);  // by id
   std::map<std::string, HeldSlab> held_ ABSL_GUARDED_BY(mu_);  // by worker id
+  // Describe may expire workers, so it is not const.
 };
 
 // Whether a failed call means the worker itself is gone (rather than a

@@ -9,6 +9,7 @@
 int main(int argc, char** argv) {
   using namespace transtick;
   BlockTerminationSignals();
+  ReturnLargeBlocksToTheSystem();
   InitLogging("worker");
   auto flags = Flags::Parse(argc, argv, 1, {"listen", "root", "advertise", "threads"}, {"help"});
   if (!flags.ok() || flags->Has("help")) {

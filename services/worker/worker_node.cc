@@ -53,7 +53,9 @@ absl::StatusOr<std::unique_ptr<WorkerNode>> WorkerNode::Start(const WorkerNodeOp
 
 void WorkerNode::RegisterLoop() {
   auto stub = v1::Root::NewStub(MakeChannel(options_.root));
-  std::chrono::milliseconds backoff(100);
+  const std::chrono::milliseconds first_backoff(100), max_backoff(3000);
+  std::chrono::milliseconds backoff = first_backoff;
+  bool warned = false;
   while (!stopping_) {
     grpc::ClientContext ctx;
     ctx.set_deadline(Deadline(5));
@@ -63,15 +65,27 @@ void WorkerNode::RegisterLoop() {
     req.set_threads(threads_);
     v1::RegisterReply reply;
     grpc::Status s = stub->Register(&ctx, req, &reply);
-    if (s.ok()) {
-      registered_ = true;
-      spdlog::info("registered with the root at {}", options_.root);
-      return;
+    // ALREADY_EXISTS: the root knows this worker; the call renewed it.
+    const bool known = s.ok() || s.error_code() == grpc::StatusCode::ALREADY_EXISTS;
+    std::chrono::milliseconds wait = options_.heartbeat;
+    if (known) {
+      if (!registered_.exchange(true) || warned) {
+        spdlog::info("registered with the root at {}", options_.root);
+      }
+      warned = false;
+      backoff = first_backoff;
+    } else {
+      registered_ = false;
+      if (!warned) {
+        spdlog::warn("registration with {} failed ({}); retrying", options_.root,
+                     s.error_message());
+        warned = true;
+      }
+      wait = backoff;
+      backoff = std::min(backoff * 2, max_backoff);
     }
-    spdlog::warn("registration with {} failed ({}); retrying", options_.root, s.error_message());
     std::unique_lock<std::mutex> lock(mu_);
-    cv_.wait_for(lock, backoff, [this] { return stopping_.load(); });
-    backoff = std::min(backoff * 2, std::chrono::milliseconds(3000));
+    cv_.wait_for(lock, wait, [this] { return stopping_.load(); });
   }
 }
 

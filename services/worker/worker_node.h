@@ -1,5 +1,7 @@
 // A running worker: its server, its service, and its registration with the
-// root (retried until it succeeds, withdrawn on Stop). Used by the
+// root: retried until it succeeds, then renewed every heartbeat (so a
+// restarted root learns of this worker again by itself, and a root that
+// hears nothing for a while drops it), withdrawn on Stop. Used by the
 // transtick-worker daemon and by embedded clusters. Thread-safe.
 #ifndef TRANSTICK_SERVICES_WORKER_WORKER_NODE_H_
 #define TRANSTICK_SERVICES_WORKER_WORKER_NODE_H_
@@ -20,6 +22,7 @@ struct WorkerNodeOptions {
   std::string root;       // host:port of the root
   std::string advertise;  // empty: this host's name and the bound port
   int threads = 0;        // 0: one per core
+  std::chrono::milliseconds heartbeat{1000};
 };
 
 class WorkerNode {
