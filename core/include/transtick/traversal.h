@@ -19,6 +19,7 @@
 #include <limits>
 #include <optional>
 
+#include "transtick/check.h"
 #include "transtick/ray.h"
 #include "transtick/scene.h"
 
@@ -129,6 +130,12 @@ class Traversal {
                                                 const std::array<int, 3>& lo,
                                                 const std::array<int, 3>& hi,
                                                 uint8_t material) const {
+    // The termination argument rests on this: the exit face lies strictly
+    // ahead of the cell on its axis.
+    for (int a = 0; a < 3; ++a) {
+      TRANSTICK_DCHECK_LE(lo[a], cell[a]);
+      TRANSTICK_DCHECK_LT(cell[a], hi[a]);
+    }
     double tx = PlaneTime(0, lo[0], hi[0]);
     double ty = PlaneTime(1, lo[1], hi[1]);
     double tz = PlaneTime(2, lo[2], hi[2]);
