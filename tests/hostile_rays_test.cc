@@ -7,6 +7,8 @@
 
 #include <chrono>
 #include <cmath>
+#include <utility>
+#include <vector>
 
 #include "cluster.grpc.pb.h"
 #include "daemon.h"
@@ -272,6 +274,33 @@ TEST_F(HostileRaysTest, AbsurdStepIsRefusedAtPrepare) {
       << s.error_message();
   EXPECT_TRUE(prepare(21, "phantom-dvr", 1.0 / kMaxSamplesPerVoxel).ok());
   EXPECT_TRUE(prepare(22, "phantom", 1e-9).ok());
+}
+
+// Cuts that do not cut the volume into increasing slabs from 0 are refused
+// when the frame is prepared, even when the worker's own slab matches: the
+// ring's layout is built from them, and a slab of no planes or beyond the
+// volume would make it route rays nowhere.
+TEST_F(HostileRaysTest, BadCutsAreRefusedAtPrepare) {
+  auto prepare = [&](uint64_t id, std::vector<int> cuts, int index) {
+    v1::FrameSpec spec = Spec(id);
+    spec.clear_cuts();
+    for (int c : cuts) spec.add_cuts(c);
+    spec.set_index(index);
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(10));
+    v1::FrameAck ack;
+    return worker_stub_->PrepareFrame(&ctx, spec, &ack);
+  };
+  const int ny = dims_[1];
+  uint64_t id = 30;
+  for (auto [cuts, index] : std::vector<std::pair<std::vector<int>, int>>{
+           {{0, ny, ny}, 0}, {{0, ny, ny + 9}, 0}, {{-5, 0, ny}, 1}, {{0}, 0}, {{}, 0}}) {
+    grpc::Status s = prepare(id++, cuts, index);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << ::testing::PrintToString(cuts);
+    EXPECT_NE(s.error_message().find("cuts"), std::string::npos) << s.error_message();
+  }
+  // The worker goes on preparing good frames.
+  EXPECT_TRUE(prepare(id++, {0, ny}, 0).ok());
 }
 
 }  // namespace

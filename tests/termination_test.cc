@@ -47,13 +47,12 @@ TransferFunction Ramp() {
 int64_t Walk(const Scene& scene, const Vec3& origin, const Vec3& direction) {
   auto box = IntersectBox(origin, direction, scene.dims());
   if (!box) return 0;
-  Traversal trav(scene, origin, direction);
-  auto cell = CellAt(origin, direction, (*box)[0], scene.dims());
-  double t = (*box)[0];
+  Traversal trav(scene, origin, direction, CellAt(origin, direction, (*box)[0], scene.dims()),
+                 (*box)[0]);
   const int64_t cap = 4 * Traversal::MaxSegments(scene.dims()) + 16;
   int64_t n = 0;
-  double last_t = t;
-  while (auto seg = trav.Next(cell, t)) {
+  double last_t = trav.t();
+  while (auto seg = trav.Next()) {
     EXPECT_GE(seg->t0, last_t);
     EXPECT_GE(seg->t1, seg->t0);
     last_t = seg->t1;
@@ -66,10 +65,9 @@ std::vector<Segment> Segments(const Scene& scene, const Vec3& origin, const Vec3
   std::vector<Segment> out;
   auto box = IntersectBox(origin, direction, scene.dims());
   if (!box) return out;
-  Traversal trav(scene, origin, direction);
-  auto cell = CellAt(origin, direction, (*box)[0], scene.dims());
-  double t = (*box)[0];
-  while (auto seg = trav.Next(cell, t)) out.push_back(*seg);
+  Traversal trav(scene, origin, direction, CellAt(origin, direction, (*box)[0], scene.dims()),
+                 (*box)[0]);
+  while (auto seg = trav.Next()) out.push_back(*seg);
   return out;
 }
 

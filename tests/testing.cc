@@ -9,6 +9,7 @@
 #include "gtest/gtest.h"
 #include "transtick/ray_codec.h"
 #include "transtick/render.h"
+#include "transtick/ring_layout.h"
 
 namespace transtick::testing {
 
@@ -36,32 +37,45 @@ Image RenderSlabs(const Scene& whole, const std::vector<int>& cuts, const Camera
   std::vector<int> bounds = {0};
   bounds.insert(bounds.end(), cuts.begin(), cuts.end());
   bounds.push_back(whole.dims()[1]);
+  const RingLayout layout(bounds, whole.dims(), whole.spacing(), camera);
   std::vector<Scene> slabs;
   std::vector<Tracer> tracers;
   slabs.reserve(bounds.size() - 1);
   for (size_t i = 0; i + 1 < bounds.size(); ++i)
     slabs.push_back(whole.Slab(bounds[i], bounds[i + 1]));
   for (const Scene& s : slabs) tracers.emplace_back(s, settings, camera);
-  auto owner = [&](int y) {
-    for (size_t i = 0; i + 1 < bounds.size(); ++i)
-      if (y >= bounds[i] && y < bounds[i + 1]) return static_cast<int>(i);
-    return -1;
-  };
   Framebuffer fb(camera.width(), camera.height());
   std::vector<std::deque<RayDescriptor>> queues(slabs.size());
   TraceCounters counters;
-  // Primary rays start on the slab where they enter the volume (the paper's
-  // distributed policy).
-  for (int py = 0; py < camera.height(); ++py) {
-    for (int px = 0; px < camera.width(); ++px) {
-      uint32_t pixel = static_cast<uint32_t>(py) * camera.width() + px;
-      RayDescriptor ray;
-      if (!tracers[0].MakePrimary(camera.Generate(px, py), pixel, &ray)) {
-        fb.Add(tracers[0].MissDeposit(pixel));
-        continue;
+  // Each slab makes its own primary rays by the rule the workers use
+  // (RingLayout::Primary): only for the pixels of its footprint, keeping
+  // the rays that enter the volume in its slab; each miss is deposited by
+  // one slab. Every pixel must be taken care of exactly once.
+  std::vector<int> taken(static_cast<size_t>(camera.width()) * camera.height(), 0);
+  for (int i = 0; i < layout.slabs(); ++i) {
+    for (int py = 0; py < camera.height(); ++py) {
+      for (int px = 0; px < camera.width(); ++px) {
+        const uint32_t pixel = static_cast<uint32_t>(py) * camera.width() + px;
+        RayDescriptor ray;
+        switch (layout.Primary(i, px, py, tracers[i], &ray)) {
+          case RingLayout::PrimaryRole::kTrace:
+            EXPECT_EQ(layout.SlabOf(ray.cell[1]), i);
+            EXPECT_EQ(ray.pixel, pixel);
+            queues[i].push_back(ray);
+            ++taken[pixel];
+            break;
+          case RingLayout::PrimaryRole::kMiss:
+            fb.Add(tracers[i].MissDeposit(pixel));
+            ++taken[pixel];
+            break;
+          case RingLayout::PrimaryRole::kNone:
+            break;
+        }
       }
-      queues[owner(ray.cell[1])].push_back(ray);
     }
+  }
+  for (size_t p = 0; p < taken.size(); ++p) {
+    EXPECT_EQ(taken[p], 1) << "pixel " << p % camera.width() << "," << p / camera.width();
   }
   uint64_t moved = 0;
   std::vector<RayDescriptor> spawned;
@@ -82,8 +96,14 @@ Image RenderSlabs(const Scene& whole, const std::vector<int>& cuts, const Camera
         if (outcome == Tracer::Outcome::kFinished) {
           fb.Add(deposit);
         } else {
-          int o = owner(ray.cell[1]);
+          // To the neighbour, as a worker sends it; a neighbour that does
+          // not hold the cell either passes it on in turn.
+          const RingLayout::Hop hop = layout.Route(static_cast<int>(i), ray.cell);
+          EXPECT_NE(hop, RingLayout::Hop::kFinished);
+          if (hop == RingLayout::Hop::kFinished) continue;
+          const int o = RingLayout::Neighbour(static_cast<int>(i), hop);
           EXPECT_GE(o, 0);
+          EXPECT_LT(o, layout.slabs());
           EXPECT_NE(o, static_cast<int>(i));
           ++moved;
           // Through the wire form, as between workers.

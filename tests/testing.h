@@ -23,8 +23,9 @@ std::string DataFile(const std::string& name);
 std::string TempDir();
 
 // Cuts `whole` into slabs at `cuts` (ascending, exclusive of 0 and ny) and
-// traces every pixel by passing rays between them, as the cluster does,
-// counting the hand-overs in *handoffs.
+// traces every pixel as the cluster does: each slab makes its own primary
+// rays and passes rays that leave it to a neighbour, both by RingLayout.
+// Counts the hand-overs (one per hop) in *handoffs.
 Image RenderSlabs(const Scene& whole, const std::vector<int>& cuts, const Camera& camera,
                   const RenderSettings& settings, uint64_t* handoffs = nullptr);
 

@@ -46,11 +46,9 @@ TEST(TraversalTest, MatchesBruteForceSampling) {
     Vec3 origin = target - dir * 200.0;
     auto box = IntersectBox(origin, dir, dims);
     ASSERT_TRUE(box.has_value());
-    Traversal trav(scene, origin, dir);
-    auto cell = CellAt(origin, dir, (*box)[0], dims);
-    double t = (*box)[0];
+    Traversal trav(scene, origin, dir, CellAt(origin, dir, (*box)[0], dims), (*box)[0]);
     std::vector<Segment> segs;
-    while (auto seg = trav.Next(cell, t)) segs.push_back(*seg);
+    while (auto seg = trav.Next()) segs.push_back(*seg);
     ASSERT_FALSE(segs.empty());
     // Segments tile the ray's stay in the box.
     EXPECT_EQ(segs.front().t0, (*box)[0]);
@@ -87,16 +85,69 @@ TEST(TraversalTest, SkipsEmptySpaceInFewSteps) {
   Vec3 dir = Normalize(Vec3{1, 1, 1});
   Vec3 origin = Vec3{64.5, 64.5, 64.5} - dir * 300.0;
   auto box = IntersectBox(origin, dir, dims);
-  Traversal trav(scene, origin, dir);
-  auto cell = CellAt(origin, dir, (*box)[0], dims);
-  double t = (*box)[0];
+  Traversal trav(scene, origin, dir, CellAt(origin, dir, (*box)[0], dims), (*box)[0]);
   int steps = 0, hits = 0;
-  while (auto seg = trav.Next(cell, t)) {
+  while (auto seg = trav.Next()) {
     ++steps;
     hits += seg->material == 1;
   }
   EXPECT_EQ(hits, 1);
   EXPECT_LT(steps, 80);
+}
+
+// The iterator's state is the whole state: a walk stopped after any
+// segment and resumed from cell() and t() (as a descriptor carries them to
+// another node) gives the same segments, bit for bit, as the walk that
+// went on; a copy of the iterator does too. Once Next has returned
+// nullopt, the state stays where the ray left the volume.
+TEST(TraversalTest, ResumedFromCellAndTGivesTheSameSegments) {
+  std::array<int, 3> dims = {40, 37, 45};
+  Scene scene = BlobScene(dims, 8);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1, 1);
+  int resumed = 0;
+  for (int r = 0; r < 300; ++r) {
+    Vec3 target{(u(rng) + 1) * 0.5 * dims[0], (u(rng) + 1) * 0.5 * dims[1],
+                (u(rng) + 1) * 0.5 * dims[2]};
+    Vec3 dir = Normalize(Vec3{u(rng), u(rng), u(rng)});
+    if (r % 7 == 0) dir = Vec3{0, r % 14 == 0 ? 1.0 : -1.0, 0};
+    const Vec3 origin = target - dir * 200.0;
+    auto box = IntersectBox(origin, dir, dims);
+    ASSERT_TRUE(box.has_value());
+    Traversal whole(scene, origin, dir, CellAt(origin, dir, (*box)[0], dims), (*box)[0]);
+    std::vector<Segment> want;
+    while (auto seg = whole.Next()) want.push_back(*seg);
+    ASSERT_FALSE(want.empty());
+    EXPECT_FALSE(Traversal::Inside(whole.cell(), dims));
+    EXPECT_EQ(whole.t(), want.back().t1);
+    EXPECT_FALSE(whole.Next().has_value());
+    // Stop after `stop` segments, resume in a fresh iterator (through a
+    // descriptor) and in a copy.
+    const size_t stop = rng() % want.size();
+    Traversal first(scene, origin, dir, CellAt(origin, dir, (*box)[0], dims), (*box)[0]);
+    for (size_t i = 0; i < stop; ++i) ASSERT_TRUE(first.Next().has_value());
+    RayDescriptor ray;
+    ray.origin = origin;
+    ray.direction = dir;
+    ray.cell = first.cell();
+    ray.t = first.t();
+    Traversal again(scene, ray);
+    Traversal copy = first;
+    for (size_t i = stop; i < want.size(); ++i) {
+      for (Traversal* it : {&again, &copy}) {
+        auto seg = it->Next();
+        ASSERT_TRUE(seg.has_value()) << "ray " << r << " segment " << i;
+        ASSERT_EQ(seg->t0, want[i].t0);
+        ASSERT_EQ(seg->t1, want[i].t1);
+        ASSERT_EQ(seg->material, want[i].material);
+      }
+      ASSERT_EQ(again.cell(), copy.cell());
+    }
+    EXPECT_FALSE(again.Next().has_value());
+    EXPECT_EQ(again.cell(), whole.cell());
+    resumed += stop > 0;
+  }
+  EXPECT_GT(resumed, 200);
 }
 
 TEST(TraversalTest, BoxIntersection) {

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "transtick/check.h"
+
 namespace transtick {
 namespace {
 
@@ -28,6 +30,7 @@ void Framebuffer::Clear() {
 }
 
 bool Framebuffer::Add(const Deposit& d) {
+  TRANSTICK_DCHECK_LT(d.pixel, pixels_.size());
   Pixel& p = pixels_[d.pixel];
   for (int c = 0; c < 3; ++c) p.sum[c] += ToFixed(d.color[c]);
   if (d.kind == RayKind::kPrimary) {

@@ -13,6 +13,7 @@
 #include "convert.h"
 #include "daemon.h"
 #include "rpc_status.h"
+#include "transtick/check.h"
 #include "transtick/ray_codec.h"
 
 namespace transtick {
@@ -41,20 +42,6 @@ constexpr size_t kWorkUnit = 256;
 constexpr auto kIdleWait = std::chrono::milliseconds(5);
 // How long a stream may stay open after End for its peer to close its side.
 constexpr auto kCloseWait = std::chrono::seconds(10);
-
-// The footprints of the ring's slabs, from the cuts.
-std::vector<ImageRect> SlabFootprints(const v1::FrameSpec& spec, const Scene& scene,
-                                      const Camera& camera) {
-  const auto& d = scene.dims();
-  const auto& sp = scene.spacing();
-  std::vector<ImageRect> rects;
-  for (int i = 0; i + 1 < spec.cuts_size(); ++i) {
-    const Vec3 lo{-0.5 * d[0] * sp[0], (spec.cuts(i) - 0.5 * d[1]) * sp[1], -0.5 * d[2] * sp[2]};
-    const Vec3 hi{0.5 * d[0] * sp[0], (spec.cuts(i + 1) - 0.5 * d[1]) * sp[1], 0.5 * d[2] * sp[2]};
-    rects.push_back(camera.Footprint(lo, hi));
-  }
-  return rects;
-}
 
 }  // namespace
 
@@ -413,7 +400,8 @@ Frame::Frame(const v1::FrameSpec& spec, std::shared_ptr<const Scene> scene, Came
           static_cast<int64_t>((spec.row_end() - spec.row_begin() + spec.row_step() - 1) /
                                std::max(1, spec.row_step())) *
           camera_.width()),
-      footprints_(SlabFootprints(spec, *scene_, camera_)),
+      layout_(std::vector<int>(spec.cuts().begin(), spec.cuts().end()), scene_->dims(),
+              scene_->spacing(), camera_),
       left_(std::make_unique<Link>(options)),
       right_(std::make_unique<Link>(options)),
       deposits_(kDepositRecordBytes, options.deposit_batch, options.deposit_linger),
@@ -544,33 +532,21 @@ bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>*
   if (k0 >= pixels_in_rows_) return false;
   const int64_t k1 = std::min<int64_t>(k0 + kWorkUnit, pixels_in_rows_);
   const int width = camera_.width();
-  const int y0 = scene_->y_begin(), y1 = scene_->y_end();
   const int me = spec_.index();
-  const ImageRect& mine = footprints_[me];
-  // A miss is deposited once: by the first slab whose footprint holds the
-  // pixel, or by slab 0 for a pixel in no footprint (its ray meets no slab).
-  auto first_footprint = [&](int col, int row) {
-    for (size_t i = 0; i < footprints_.size(); ++i) {
-      if (footprints_[i].Contains(col, row)) return static_cast<int>(i);
-    }
-    return -1;
-  };
   for (int64_t k = k0; k < k1; ++k) {
     const int row = spec_.row_begin() + static_cast<int>(k / width) * spec_.row_step();
     const int col = static_cast<int>(k % width);
-    const uint32_t pixel = static_cast<uint32_t>(row) * width + col;
-    if (!mine.Contains(col, row)) {
-      // The ray cannot enter this slab.
-      if (me == 0 && first_footprint(col, row) < 0) misses->push_back(tracer_.MissDeposit(pixel));
-      continue;
-    }
     RayDescriptor ray;
-    if (!tracer_.MakePrimary(camera_.Generate(col, row), pixel, &ray)) {
-      if (first_footprint(col, row) == me) misses->push_back(tracer_.MissDeposit(pixel));
-      continue;
+    switch (layout_.Primary(me, col, row, tracer_, &ray)) {
+      case RingLayout::PrimaryRole::kTrace:
+        out->push_back(ray);
+        break;
+      case RingLayout::PrimaryRole::kMiss:
+        misses->push_back(tracer_.MissDeposit(static_cast<uint32_t>(row) * width + col));
+        break;
+      case RingLayout::PrimaryRole::kNone:
+        break;
     }
-    // The paper's distributed policy: keep only rays entering this slab.
-    if (ray.cell[1] >= y0 && ray.cell[1] < y1) out->push_back(ray);
   }
   return true;
 }
@@ -581,7 +557,7 @@ void Frame::TraceLoop(int thread_index) {
   std::vector<RayDescriptor> work;
   std::vector<Deposit> misses;
   std::string to_left, to_right, deposits;
-  const int y0 = scene_->y_begin();
+  const int me = spec_.index();
   auto flush = [&] {
     left_->outbox.Append(to_left);
     right_->outbox.Append(to_right);
@@ -621,7 +597,10 @@ void Frame::TraceLoop(int thread_index) {
       if (tracer_.Trace(ray, work, deposit, st.counters) == Tracer::Outcome::kFinished) {
         AppendDeposit(deposit, &deposits);
       } else {
-        AppendRay(ray, ray.cell[1] < y0 ? &to_left : &to_right);
+        // A ray that left the slab is inside the volume (else it finished).
+        const RingLayout::Hop hop = layout_.Route(me, ray.cell);
+        TRANSTICK_DCHECK(hop != RingLayout::Hop::kFinished);
+        AppendRay(ray, hop == RingLayout::Hop::kLeft ? &to_left : &to_right);
       }
     }
     flush();

@@ -24,6 +24,7 @@
 #include "cluster.grpc.pb.h"
 #include "transtick/camera.h"
 #include "transtick/ray.h"
+#include "transtick/ring_layout.h"
 #include "transtick/scene.h"
 #include "transtick/tracer.h"
 
@@ -124,7 +125,9 @@ struct FrameOptions {
 // batches between the network and the inbox and outboxes.
 class Frame : public std::enable_shared_from_this<Frame> {
  public:
-  // REQUIRES: the scene outlives the frame (the frame shares ownership).
+  // REQUIRES: the scene outlives the frame (the frame shares ownership);
+  // spec.cuts() valid for the scene's planes (ValidCuts), with the scene
+  // holding slab spec.index() of them (WorkerService::Prepare checks both).
   Frame(const v1::FrameSpec& spec, std::shared_ptr<const Scene> scene, Camera camera,
         const FrameOptions& options);
   ~Frame();
@@ -184,10 +187,10 @@ class Frame : public std::enable_shared_from_this<Frame> {
   const Tracer tracer_;
   const uint32_t pixel_limit_;
   const int64_t pixels_in_rows_;  // pixels of this ring's rows
-  // Each slab's footprint on the image (Camera::Footprint): the only pixels
-  // whose primary rays can enter that slab. This worker generates the rays
-  // of its own footprint only.
-  const std::vector<ImageRect> footprints_;
+  // The ring's slabs under this frame's view: which primary rays this
+  // worker makes (those of its own slab's footprint that enter its slab)
+  // and which neighbour a ray leaving the slab goes to.
+  const RingLayout layout_;
 
   Inbox inbox_;
   std::unique_ptr<Link> left_, right_;

@@ -8,9 +8,11 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
 #include "convert.h"
 #include "daemon.h"
 #include "rpc_status.h"
+#include "transtick/partition.h"
 #include "transtick/ray_codec.h"
 
 namespace transtick {
@@ -337,8 +339,13 @@ grpc::Status WorkerService::Prepare(const v1::FrameSpec& spec) {
     }
   }
   const int n = spec.cuts_size() - 1;
-  if (n < 1 || spec.index() < 0 || spec.index() >= n ||
-      spec.cuts(spec.index()) != scene->y_begin() ||
+  const std::vector<int> cuts(spec.cuts().begin(), spec.cuts().end());
+  if (n < 1 || !ValidCuts(cuts, scene->dims()[1], n)) {
+    return Invalid(absl::StrCat("frame ", spec.frame_id(), ": cuts [", absl::StrJoin(cuts, ", "),
+                                "] do not cut the volume's ", scene->dims()[1],
+                                " planes into increasing slabs from 0"));
+  }
+  if (spec.index() < 0 || spec.index() >= n || spec.cuts(spec.index()) != scene->y_begin() ||
       spec.cuts(spec.index() + 1) != scene->y_end()) {
     return Invalid(absl::StrCat("frame ", spec.frame_id(), ": slab ", spec.index(),
                                 " of the cuts does not match the loaded slab [", scene->y_begin(),

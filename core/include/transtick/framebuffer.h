@@ -34,6 +34,8 @@ class Framebuffer {
   void Clear();
 
   // Adds a deposit. Returns true when this deposit completed its pixel.
+  // REQUIRES: deposit.pixel < width * height (decoders check pixels from
+  // the network against the image before they get here).
   bool Add(const Deposit& deposit);
 
   uint64_t complete_pixels() const { return complete_.load(std::memory_order_relaxed); }

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "transtick/check.h"
 #include "transtick/classification.h"
 #include "transtick/sticks.h"
 #include "transtick/volume.h"
@@ -38,6 +39,10 @@ class BrickMap {
 
   // The brick's material, or kMixed. REQUIRES: (x, y, z) inside the volume.
   uint8_t At(int x, int y, int z) const {
+    TRANSTICK_DCHECK(x >= 0 && y >= 0 && z >= 0);
+    TRANSTICK_DCHECK_LT(x >> kShift, bdims_[0]);
+    TRANSTICK_DCHECK_LT(y >> kShift, bdims_[1]);
+    TRANSTICK_DCHECK_LT(z >> kShift, bdims_[2]);
     return bricks_[(static_cast<size_t>(z >> kShift) * bdims_[1] + (y >> kShift)) * bdims_[0] +
                    (x >> kShift)];
   }
@@ -127,6 +132,8 @@ class Scene {
     x = x < 0 ? 0 : (x >= dims_[0] ? dims_[0] - 1 : x);
     y = y < 0 ? 0 : (y >= dims_[1] ? dims_[1] - 1 : y);
     z = z < 0 ? 0 : (z >= dims_[2] ? dims_[2] - 1 : z);
+    TRANSTICK_DCHECK_GE(y, scalar_y_begin_);
+    TRANSTICK_DCHECK_LT(y, scalar_y_begin_ + scalar_planes_);
     return scalars_[(static_cast<size_t>(z) * scalar_planes_ + (y - scalar_y_begin_)) * dims_[0] +
                     x];
   }

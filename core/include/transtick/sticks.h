@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "transtick/check.h"
 
 namespace transtick {
 
@@ -72,12 +73,18 @@ class Sticks {
 
   // REQUIRES: 0 <= x < dims[0], y_begin <= y < y_end.
   std::span<const Stick> Track(int x, int y) const {
+    TRANSTICK_DCHECK_GE(x, 0);
+    TRANSTICK_DCHECK_LT(x, dims_[0]);
+    TRANSTICK_DCHECK_GE(y, y_begin_);
+    TRANSTICK_DCHECK_LT(y, y_end_);
     size_t t = TrackIndex(x, y);
     return {sticks_.data() + offsets_[t], sticks_.data() + offsets_[t + 1]};
   }
 
   // The stick or gap containing z. REQUIRES: as Track(), 0 <= z < dims[2].
   StickSpan Find(int x, int y, int z) const {
+    TRANSTICK_DCHECK_GE(z, 0);
+    TRANSTICK_DCHECK_LT(z, dims_[2]);
     int gap_begin = 0;
     for (const Stick& s : Track(x, y)) {
       if (z < s.begin) return {gap_begin, s.begin, 0};

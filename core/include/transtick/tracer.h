@@ -113,24 +113,31 @@ class Tracer {
     Segment seg;
     std::array<int32_t, 3> cell;
   };
-  // One ray's walk, with the scene's bounds copied to the stack: loaded
-  // through the scene at every step they cost a reload each time a counter
-  // is written.
+  // One ray's walk: the traversal, which owns the ray's cell and t while
+  // it runs, and the scene's bounds copied to the stack (loaded through the
+  // scene at every step they cost a reload each time a counter is
+  // written). Made on the stack of each Trace* function, so that its
+  // state can stay in registers.
   struct Walker {
     Traversal trav;
     std::array<int, 3> dims;
     int y_begin, y_end;
     int64_t steps_left;
+    // Writes where the walk is back into the descriptor, which then
+    // resumes there (kLeftSlab), and returns `outcome`.
+    Outcome Stop(RayDescriptor& ray, Outcome outcome) const {
+      ray.cell = trav.cell();
+      ray.t = trav.t();
+      return outcome;
+    }
   };
   Walker MakeWalker(const RayDescriptor& ray) const {
-    return {Traversal(scene_, ray.origin, ray.direction), scene_.dims(), scene_.y_begin(),
-            scene_.y_end(), max_segments_};
+    return {Traversal(scene_, ray), scene_.dims(), scene_.y_begin(), scene_.y_end(), max_segments_};
   }
   // The step every kind of ray takes next: the next segment, or nullopt
   // with *outcome set, finished (the ray left the volume, or reached the
   // bound w.steps_left counts down) or left the slab.
-  static std::optional<Step> Walk(RayDescriptor& ray, Walker& w, Outcome* outcome,
-                                  TraceCounters& counters);
+  static std::optional<Step> Walk(Walker& w, Outcome* outcome, TraceCounters& counters);
 
   Outcome TraceSurfaces(RayDescriptor& ray, std::vector<RayDescriptor>& spawned,
                         TraceCounters& counters) const;

@@ -19,6 +19,7 @@
 #include <limits>
 #include <optional>
 
+#include "transtick/check.h"
 #include "transtick/ray.h"
 #include "transtick/scene.h"
 
@@ -58,30 +59,53 @@ inline int FloorClamped(double p, int lo, int hi) {
 std::array<int32_t, 3> CellAt(const Vec3& origin, const Vec3& direction, double t,
                               const std::array<int, 3>& dims);
 
-// A value type, cheap to make per ray; no allocation.
+// The walk of one ray as an iterator that owns its state: the ray's origin
+// and direction and where it is now, (cell, t). Each Next() returns the
+// segment that starts there and moves the state to the start of the next:
+//
+//   Traversal it(scene, ray);
+//   while (auto seg = it.Next()) { ... }
+//   ray.cell = it.cell(), ray.t = it.t();  // to resume elsewhere
+//
+// A small value type, made per ray on the stack: no allocation and no
+// virtual call per step, and the state stays in registers while the walk
+// is inlined into its loop. A copy resumes from the same state. Not
+// thread-safe (one ray, one thread); the scene must outlive it.
 class Traversal {
  public:
-  // Components for which !MovesAlong(d) are taken as parallel.
-  Traversal(const Scene& scene, const Vec3& origin, const Vec3& direction)
-      : scene_(scene), origin_(origin) {
+  // Starts from (cell, t). Components for which !MovesAlong(d) are taken
+  // as parallel.
+  // REQUIRES: the point at t lies within a cell of `cell` and the origin
+  // within 1e9 of the volume (Tracer::Validate checks both for rays from
+  // elsewhere).
+  Traversal(const Scene& scene, const Vec3& origin, const Vec3& direction,
+            const std::array<int32_t, 3>& cell, double t)
+      : scene_(&scene), origin_(origin), cell_(cell), t_(t) {
     for (int a = 0; a < 3; ++a) {
       const double d = direction[a];
       const bool moves = MovesAlong(d);
       step_[a] = moves ? (d > 0 ? 1 : -1) : 0;
       inv_[a] = moves ? 1.0 / d : 0.0;
       dir_[a] = moves ? d : 0.0;
+      TRANSTICK_DCHECK(std::abs(origin[a]) <= 1e9 + scene.dims()[a]);
+      TRANSTICK_DCHECK(origin[a] + direction[a] * t >= cell[a] - 1.0 &&
+                       origin[a] + direction[a] * t <= cell[a] + 2.0);
     }
   }
+  // Resumes a ray from its descriptor's origin, direction, cell and t.
+  Traversal(const Scene& scene, const RayDescriptor& ray)
+      : Traversal(scene, ray.origin, ray.direction, ray.cell, ray.t) {}
 
   static bool Inside(const std::array<int32_t, 3>& cell, const std::array<int, 3>& dims) {
     return cell[0] >= 0 && cell[1] >= 0 && cell[2] >= 0 && cell[0] < dims[0] && cell[1] < dims[1] &&
            cell[2] < dims[2];
   }
 
-  // Returns the segment that starts at (cell, t) and moves (cell, t) to the
-  // start of the next one; nullopt once the cell has left the volume, or
-  // when the ray cannot leave its box (no axis it moves along: a hostile
-  // descriptor), which the caller treats as finished.
+  // Returns the segment that starts at (cell(), t()) and moves the state
+  // to the start of the next one; nullopt, leaving the state as it is, once
+  // the cell has left the volume, or when the ray cannot leave its box (no
+  // axis it moves along: a hostile descriptor), which the caller treats as
+  // finished.
   //
   // Termination (docs/design.md, "Why every ray ends"): each returned
   // segment moves the cell at least one cell along an axis the ray moves on,
@@ -89,27 +113,31 @@ class Traversal {
   // potential sum_a step_a * cell_a rises by at least 1 per segment and a
   // ray takes at most MaxSegments(dims) segments in all, on however many
   // nodes, whatever state it starts from.
-  // REQUIRES: cell inside the volume implies its track lies in the scene's
-  // slab when its brick is occupied (callers stop at the slab's planes);
-  // the point at t lies within a cell of `cell` and the origin within 1e9
-  // of the volume (Tracer::Validate checks both for rays from elsewhere).
-  TRANSTICK_INLINE std::optional<Segment> Next(std::array<int32_t, 3>& cell, double& t) const {
-    const auto& dims = scene_.dims();
-    if (!Inside(cell, dims)) return std::nullopt;
-    const uint8_t brick = scene_.bricks().At(cell[0], cell[1], cell[2]);
+  // REQUIRES: cell() inside the volume implies its track lies in the
+  // scene's slab when its brick is occupied (callers stop at the slab's
+  // planes).
+  TRANSTICK_INLINE std::optional<Segment> Next() {
+    const auto& dims = scene_->dims();
+    if (!Inside(cell_, dims)) return std::nullopt;
+    const uint8_t brick = scene_->bricks().At(cell_[0], cell_[1], cell_[2]);
     if (brick != BrickMap::kMixed) {
       std::array<int, 3> lo, hi;
       for (int a = 0; a < 3; ++a) {
-        lo[a] = (cell[a] >> BrickMap::kShift) << BrickMap::kShift;
+        lo[a] = (cell_[a] >> BrickMap::kShift) << BrickMap::kShift;
         hi[a] = std::min(lo[a] + BrickMap::kBrick, dims[a]);
       }
-      return Leave(cell, t, lo, hi, brick);
+      return Leave(lo, hi, brick);
     }
-    StickSpan span = scene_.sticks().Find(cell[0], cell[1], cell[2]);
-    std::array<int, 3> lo = {cell[0], cell[1], span.begin};
-    std::array<int, 3> hi = {cell[0] + 1, cell[1] + 1, span.end};
-    return Leave(cell, t, lo, hi, span.material);
+    StickSpan span = scene_->sticks().Find(cell_[0], cell_[1], cell_[2]);
+    std::array<int, 3> lo = {cell_[0], cell_[1], span.begin};
+    std::array<int, 3> hi = {cell_[0] + 1, cell_[1] + 1, span.end};
+    return Leave(lo, hi, span.material);
   }
+
+  // Where the walk is: the cell the next segment starts in, and the time
+  // it starts at (a ray's descriptor stores both to resume it).
+  const std::array<int32_t, 3>& cell() const { return cell_; }
+  double t() const { return t_; }
 
   // The most segments a ray can take through a volume of `dims`.
   static int64_t MaxSegments(const std::array<int, 3>& dims) {
@@ -125,10 +153,14 @@ class Traversal {
 
   // Moves from the box [lo, hi) of constant material to the cell beyond its
   // exit face.
-  TRANSTICK_INLINE std::optional<Segment> Leave(std::array<int32_t, 3>& cell, double& t,
-                                                const std::array<int, 3>& lo,
-                                                const std::array<int, 3>& hi,
-                                                uint8_t material) const {
+  TRANSTICK_INLINE std::optional<Segment> Leave(const std::array<int, 3>& lo,
+                                                const std::array<int, 3>& hi, uint8_t material) {
+    // The termination argument rests on this: the exit face lies strictly
+    // ahead of the cell on its axis.
+    for (int a = 0; a < 3; ++a) {
+      TRANSTICK_DCHECK_LE(lo[a], cell_[a]);
+      TRANSTICK_DCHECK_LT(cell_[a], hi[a]);
+    }
     double tx = PlaneTime(0, lo[0], hi[0]);
     double ty = PlaneTime(1, lo[1], hi[1]);
     double tz = PlaneTime(2, lo[2], hi[2]);
@@ -141,12 +173,12 @@ class Traversal {
     if (!(t1 <= std::numeric_limits<double>::max())) return std::nullopt;
     // Guard against a plane behind the current position (rounding at a start
     // point lying on the plane): never move backwards.
-    if (t1 < t) t1 = t;
-    Segment seg{t, t1, material};
+    if (t1 < t_) t1 = t_;
+    Segment seg{t_, t1, material};
     for (int a = 0; a < 3; ++a) {
       if (a == axis) {
         // Strictly forward: the box holds the cell, so hi > cell >= lo.
-        cell[a] = step_[a] > 0 ? hi[a] : lo[a] - 1;
+        cell_[a] = step_[a] > 0 ? hi[a] : lo[a] - 1;
       } else {
         // From the point, clamped to the box, and never back against the
         // ray's direction: at a point on an edge or a corner, rounding could
@@ -159,18 +191,21 @@ class Traversal {
         // traversal step 7%).
         const double p = origin_[a] + dir_[a] * t1;
         const int c = std::clamp(static_cast<int>(std::floor(p)), lo[a], hi[a] - 1);
-        cell[a] = step_[a] > 0 ? std::max(cell[a], c) : std::min(cell[a], c);
+        cell_[a] = step_[a] > 0 ? std::max(cell_[a], c) : std::min(cell_[a], c);
       }
     }
-    t = t1;
+    t_ = t1;
     return seg;
   }
 
-  const Scene& scene_;
+  const Scene* scene_;
   Vec3 origin_;
   Vec3 dir_;
   Vec3 inv_;
   int step_[3];
+  // Where the walk is.
+  std::array<int32_t, 3> cell_;
+  double t_;
 };
 
 }  // namespace transtick

@@ -1,0 +1,234 @@
+// Where rays go on a ring: known answers for SlabOf, Route and the
+// footprints, and over random cuts and views, the properties the cluster's
+// images rest on. Every pixel's primary ray is made by exactly the slab its
+// entry cell lies in, or its miss deposited exactly once; a ray handed on
+// hop by hop reaches the slab holding its cell.
+#include "transtick/ring_layout.h"
+
+#include <algorithm>
+#include <cstdlib>
+#include <random>
+#include <vector>
+
+#include "gtest/gtest.h"
+#include "testing.h"
+#include "transtick/partition.h"
+#include "transtick/synthetic.h"
+#include "transtick/traversal.h"
+
+namespace transtick {
+namespace {
+
+using Hop = RingLayout::Hop;
+using PrimaryRole = RingLayout::PrimaryRole;
+
+constexpr std::array<int, 3> kDims = {40, 34, 38};
+
+Camera CameraFor(const std::array<double, 3>& spacing, int width, int height, double azimuth,
+                 double elevation, Projection projection = Projection::kPerspective,
+                 double zoom = 1) {
+  CameraSpec spec;
+  spec.width = width;
+  spec.height = height;
+  spec.azimuth_deg = azimuth;
+  spec.elevation_deg = elevation;
+  spec.projection = projection;
+  spec.zoom = zoom;
+  auto camera = Camera::Create(
+      spec, Vec3{kDims[0] * spacing[0], kDims[1] * spacing[1], kDims[2] * spacing[2]});
+  EXPECT_TRUE(camera.ok()) << camera.status();
+  return *camera;
+}
+
+Scene SphereScene(const std::array<double, 3>& spacing) {
+  Volume v = MakeSphere(kDims, {20, 17, 19}, 14);
+  v.spacing = spacing;
+  Classification c;
+  c.materials = {{.name = "ball", .min = 50, .max = 150}};
+  return *Scene::ForSurfaces(v, c);
+}
+
+// n random valid cuts of `planes`, one-plane slabs included now and then.
+std::vector<int> RandomCuts(std::mt19937& rng, int planes) {
+  const int n = 1 + static_cast<int>(rng() % 8);
+  std::vector<int> inner;
+  for (int y = 1; y < planes; ++y) inner.push_back(y);
+  std::shuffle(inner.begin(), inner.end(), rng);
+  inner.resize(n - 1);
+  std::sort(inner.begin(), inner.end());
+  std::vector<int> cuts = {0};
+  cuts.insert(cuts.end(), inner.begin(), inner.end());
+  cuts.push_back(planes);
+  EXPECT_TRUE(ValidCuts(cuts, planes, n));
+  return cuts;
+}
+
+TEST(RingLayoutTest, SlabOfKnownAnswers) {
+  const Camera camera = CameraFor({1, 1, 1}, 16, 16, 0, 0);
+  const RingLayout layout({0, 3, 7, 8, 34}, kDims, {1, 1, 1}, camera);
+  EXPECT_EQ(layout.slabs(), 4);
+  EXPECT_EQ(layout.y_begin(2), 7);
+  EXPECT_EQ(layout.y_end(2), 8);
+  const int want[] = {0, 0, 0, 1, 1, 1, 1, 2, 3, 3};
+  for (int y = 0; y < 10; ++y) EXPECT_EQ(layout.SlabOf(y), want[y]) << "y " << y;
+  EXPECT_EQ(layout.SlabOf(33), 3);
+  const RingLayout one({0, 34}, kDims, {1, 1, 1}, camera);
+  for (int y = 0; y < 34; ++y) EXPECT_EQ(one.SlabOf(y), 0);
+}
+
+TEST(RingLayoutTest, RouteKnownAnswers) {
+  const Camera camera = CameraFor({1, 1, 1}, 16, 16, 0, 0);
+  const RingLayout layout({0, 3, 7, 8, 34}, kDims, {1, 1, 1}, camera);
+  EXPECT_EQ(layout.Route(1, {5, 2, 5}), Hop::kLeft);
+  EXPECT_EQ(layout.Route(1, {5, 0, 5}), Hop::kLeft);
+  EXPECT_EQ(layout.Route(1, {5, 7, 5}), Hop::kRight);
+  // Past the next slab (a brick crossed in one step): still the right
+  // neighbour, which passes the ray on.
+  EXPECT_EQ(layout.Route(1, {5, 20, 5}), Hop::kRight);
+  EXPECT_EQ(layout.Route(2, {5, 6, 5}), Hop::kLeft);
+  EXPECT_EQ(layout.Route(2, {5, 8, 5}), Hop::kRight);
+  // Off the volume on any axis: finished.
+  EXPECT_EQ(layout.Route(1, {-1, 2, 5}), Hop::kFinished);
+  EXPECT_EQ(layout.Route(1, {5, 2, 38}), Hop::kFinished);
+  EXPECT_EQ(layout.Route(0, {5, -1, 5}), Hop::kFinished);
+  EXPECT_EQ(layout.Route(3, {5, 34, 5}), Hop::kFinished);
+  EXPECT_EQ(RingLayout::Neighbour(1, Hop::kLeft), 0);
+  EXPECT_EQ(RingLayout::Neighbour(1, Hop::kRight), 2);
+}
+
+TEST(RingLayoutTest, FootprintsAreTheSlabsWorldBoxes) {
+  const std::array<double, 3> spacing = {1, 1.5, 2};
+  const Camera camera = CameraFor(spacing, 64, 48, 30, 20);
+  const std::vector<int> cuts = {0, 10, 11, 34};
+  const RingLayout layout(cuts, kDims, spacing, camera);
+  for (int i = 0; i < 3; ++i) {
+    const Vec3 lo{-20.0, (cuts[i] - 17.0) * 1.5, -38.0};
+    const Vec3 hi{20.0, (cuts[i + 1] - 17.0) * 1.5, 38.0};
+    const ImageRect want = camera.Footprint(lo, hi);
+    const ImageRect& got = layout.Footprint(i);
+    EXPECT_EQ(got.x0, want.x0) << i;
+    EXPECT_EQ(got.x1, want.x1) << i;
+    EXPECT_EQ(got.y0, want.y0) << i;
+    EXPECT_EQ(got.y1, want.y1) << i;
+  }
+}
+
+// Every pixel of every view, over random cuts: exactly one slab makes its
+// primary ray, the one holding the ray's entry cell, or, when the ray
+// misses, exactly one slab deposits the miss, MissSlab's.
+TEST(RingLayoutTest, EveryPixelIsTakenCareOfExactlyOnce) {
+  std::mt19937 rng(17);
+  struct View {
+    double azimuth, elevation;
+    Projection projection;
+    double zoom;
+  };
+  const View views[] = {
+      {0, 0, Projection::kPerspective, 1},       {45, 20, Projection::kPerspective, 1},
+      {0, 90, Projection::kPerspective, 1},      {10, -89, Projection::kOrthographic, 1},
+      {200, -30, Projection::kPerspective, 2.5}, {120, 60, Projection::kOrthographic, 0.6},
+      {90, 0, Projection::kPerspective, 4}};
+  int traced = 0, missed = 0, off_footprint_misses = 0;
+  for (const std::array<double, 3>& spacing :
+       {std::array<double, 3>{1, 1, 1}, std::array<double, 3>{0.7, 1.3, 2}}) {
+    const Scene scene = SphereScene(spacing);
+    for (const View& v : views) {
+      const Camera camera =
+          CameraFor(spacing, 41, 37, v.azimuth, v.elevation, v.projection, v.zoom);
+      const Tracer tracer(scene, RenderSettings{}, camera);
+      for (int round = 0; round < 4; ++round) {
+        const RingLayout layout(RandomCuts(rng, kDims[1]), kDims, spacing, camera);
+        for (int row = 0; row < camera.height(); ++row) {
+          for (int col = 0; col < camera.width(); ++col) {
+            RayDescriptor want;
+            const uint32_t pixel = static_cast<uint32_t>(row) * camera.width() + col;
+            const bool hits = tracer.MakePrimary(camera.Generate(col, row), pixel, &want);
+            int tracers = 0, missers = 0, in_footprints = 0;
+            for (int i = 0; i < layout.slabs(); ++i) {
+              in_footprints += layout.Footprint(i).Contains(col, row);
+              RayDescriptor ray;
+              switch (layout.Primary(i, col, row, tracer, &ray)) {
+                case PrimaryRole::kTrace:
+                  ++tracers;
+                  EXPECT_EQ(i, layout.SlabOf(want.cell[1]));
+                  EXPECT_EQ(ray.cell, want.cell);
+                  EXPECT_EQ(ray.t, want.t);
+                  EXPECT_EQ(ray.pixel, pixel);
+                  break;
+                case PrimaryRole::kMiss:
+                  ++missers;
+                  EXPECT_EQ(i, layout.MissSlab(col, row));
+                  break;
+                case PrimaryRole::kNone:
+                  break;
+              }
+            }
+            ASSERT_EQ(tracers + missers, 1) << "pixel " << col << "," << row;
+            EXPECT_EQ(tracers == 1, hits) << "pixel " << col << "," << row;
+            // A ray that meets the volume meets the slab it enters, whose
+            // footprint therefore holds the pixel.
+            if (hits) {
+              EXPECT_TRUE(layout.Footprint(layout.SlabOf(want.cell[1])).Contains(col, row));
+            }
+            traced += tracers;
+            missed += missers;
+            off_footprint_misses += missers == 1 && in_footprints == 0;
+          }
+        }
+      }
+    }
+  }
+  // Both kinds of pixel, and misses found both ways, were seen.
+  EXPECT_GT(traced, 10000);
+  EXPECT_GT(missed, 10000);
+  EXPECT_GT(off_footprint_misses, 1000);
+  EXPECT_LT(off_footprint_misses, missed);
+}
+
+// A ray handed on by Route one hop at a time reaches the slab that holds
+// its cell, in as many hops as slabs lie between, and never leaves the
+// ring; a cell off the volume finishes wherever it is.
+TEST(RingLayoutTest, HopsReachTheSlabHoldingTheCell) {
+  std::mt19937 rng(5);
+  const Camera camera = CameraFor({1, 1, 1}, 8, 8, 0, 0);
+  for (int round = 0; round < 500; ++round) {
+    const RingLayout layout(RandomCuts(rng, kDims[1]), kDims, {1, 1, 1}, camera);
+    for (int from = 0; from < layout.slabs(); ++from) {
+      for (int y = 0; y < kDims[1]; ++y) {
+        const std::array<int32_t, 3> cell = {static_cast<int32_t>(rng() % kDims[0]), y,
+                                             static_cast<int32_t>(rng() % kDims[2])};
+        const int owner = layout.SlabOf(y);
+        EXPECT_GE(y, layout.y_begin(owner));
+        EXPECT_LT(y, layout.y_end(owner));
+        if (owner == from) continue;
+        int at = from, hops = 0;
+        while (at != owner) {
+          const Hop hop = layout.Route(at, cell);
+          ASSERT_NE(hop, Hop::kFinished);
+          ASSERT_EQ(hop, owner < at ? Hop::kLeft : Hop::kRight);
+          at = RingLayout::Neighbour(at, hop);
+          ASSERT_GE(at, 0);
+          ASSERT_LT(at, layout.slabs());
+          ++hops;
+        }
+        EXPECT_EQ(hops, std::abs(owner - from));
+      }
+      std::array<int32_t, 3> off = {3, 3, 3};
+      const int axis = static_cast<int>(rng() % 3);
+      off[axis] = (rng() & 1) ? -1 : kDims[axis];
+      ASSERT_FALSE(Traversal::Inside(off, kDims));
+      EXPECT_EQ(layout.Route(from, off), Hop::kFinished);
+    }
+  }
+}
+
+TEST(RingLayoutDeathTest, InvalidCutsAreAProgrammerError) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  const Camera camera = CameraFor({1, 1, 1}, 8, 8, 0, 0);
+  EXPECT_DEATH((void)RingLayout({0, 5, 5, 34}, kDims, {1, 1, 1}, camera), "ValidCuts");
+  EXPECT_DEATH((void)RingLayout({0, 20}, kDims, {1, 1, 1}, camera), "ValidCuts");
+  EXPECT_DEATH((void)RingLayout({0}, kDims, {1, 1, 1}, camera), "cuts_.size\\(\\) >= 2u");
+}
+
+}  // namespace
+}  // namespace transtick
