@@ -1,6 +1,8 @@
 #include "transtick/sticks.h"
 
+#include <algorithm>
 #include <random>
+#include <span>
 
 #include "gtest/gtest.h"
 #include "testing.h"
@@ -77,8 +79,8 @@ TEST(SticksTest, PartialBlocksFromSeveralSlabsRebuildAnother) {
   Volume v = MakeRandom(dims, 9, 3);
   auto labels = Labels(v, 3);
   std::vector<std::string> blocks;
-  for (auto [y0, y1] : {std::pair{0, 17}, std::pair{17, 50}, std::pair{50, 51},
-                        std::pair{51, 100}}) {
+  for (auto [y0, y1] :
+       {std::pair{0, 17}, std::pair{17, 50}, std::pair{50, 51}, std::pair{51, 100}}) {
     Sticks part = Sticks::Encode(labels, dims, y0, y1);
     for (std::string& b : part.EncodeRows(y0, y1)) blocks.push_back(std::move(b));
   }
@@ -95,6 +97,54 @@ TEST(SticksTest, PartialBlocksFromSeveralSlabsRebuildAnother) {
             std::string::npos);
   EXPECT_NE(Sticks::FromBlocks(dims, 40, 71, 3, rows).status().message().find("no block covers"),
             std::string::npos);
+}
+
+// The stick or gap of a track by a plain scan, as Find did before it
+// searched: the reference for every track length Find handles.
+StickSpan ScanTrack(std::span<const Stick> track, int depth, int z) {
+  int gap_begin = 0;
+  for (const Stick& s : track) {
+    if (z < s.begin) return {gap_begin, s.begin, 0};
+    if (z < s.end) return {s.begin, s.end, s.material};
+    gap_begin = s.end;
+  }
+  return {gap_begin, depth, 0};
+}
+
+TEST(SticksTest, FindAgreesWithAScanForEveryTrackLength) {
+  // Track (x, 0) holds x one-voxel sticks with gaps, track (x, 1) x sticks
+  // that touch (alternating materials), track (x, 2) random runs: short
+  // tracks and long ones, sticks at both ends of a track and not.
+  const std::array<int, 3> dims = {50, 3, 101};
+  std::vector<uint8_t> labels(static_cast<size_t>(dims[0]) * dims[1] * dims[2], 0);
+  auto at = [&](int x, int y, int z) -> uint8_t& {
+    return labels[(static_cast<size_t>(z) * dims[1] + y) * dims[0] + x];
+  };
+  std::mt19937 rng(4);
+  for (int x = 0; x < dims[0]; ++x) {
+    for (int k = 0; k < x; ++k) at(x, 0, (x % 2) + 2 * k) = 1 + k % 3;
+    for (int k = 0; k < x; ++k) at(x, 1, k) = 1 + k % 2;
+    for (int z = 0; z < dims[2]; ++z) at(x, 2, z) = (rng() % 4 == 0) ? 1 + rng() % 3 : at(x, 2, z);
+  }
+  Sticks s = Sticks::Encode(labels, dims, 0, dims[1]);
+  ExpectMatches(s, labels, dims);
+  size_t longest = 0;
+  for (int y = 0; y < dims[1]; ++y) {
+    for (int x = 0; x < dims[0]; ++x) {
+      const auto track = s.Track(x, y);
+      longest = std::max(longest, track.size());
+      for (int z = 0; z < dims[2]; ++z) {
+        const StickSpan want = ScanTrack(track, dims[2], z);
+        const StickSpan got = s.Find(x, y, z);
+        ASSERT_EQ(got.begin, want.begin) << x << "," << y << "," << z;
+        ASSERT_EQ(got.end, want.end) << x << "," << y << "," << z;
+        ASSERT_EQ(got.material, want.material) << x << "," << y << "," << z;
+      }
+    }
+  }
+  EXPECT_GE(longest, 49u);
+  EXPECT_EQ(s.Track(0, 0).size(), 0u);
+  EXPECT_EQ(s.Track(7, 1).size(), 7u);
 }
 
 TEST(SticksTest, PhantomCompresses) {

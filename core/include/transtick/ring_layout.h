@@ -21,8 +21,9 @@ namespace transtick {
 
 // The slabs of one ring for one frame's view: slab i holds the planes
 // [cuts[i], cuts[i + 1]) and its neighbours are slabs i - 1 (left) and
-// i + 1 (right). Immutable after construction, thread-safe, cheap to copy
-// (one rectangle per slab and the camera).
+// i + 1 (right). Immutable after construction and thread-safe; a value
+// (the cuts, one rectangle per slab and a copy of the camera), built once
+// per frame.
 class RingLayout {
  public:
   // REQUIRES: cuts valid for dims[1] planes (partition.h ValidCuts):

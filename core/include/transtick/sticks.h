@@ -5,6 +5,7 @@
 #ifndef TRANSTICK_STICKS_H_
 #define TRANSTICK_STICKS_H_
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <span>
@@ -85,13 +86,25 @@ class Sticks {
   StickSpan Find(int x, int y, int z) const {
     TRANSTICK_DCHECK_GE(z, 0);
     TRANSTICK_DCHECK_LT(z, dims_[2]);
-    int gap_begin = 0;
-    for (const Stick& s : Track(x, y)) {
-      if (z < s.begin) return {gap_begin, s.begin, 0};
-      if (z < s.end) return {s.begin, s.end, s.material};
-      gap_begin = s.end;
+    const std::span<const Stick> track = Track(x, y);
+    if (track.size() <= kScanMax) {
+      int gap_begin = 0;
+      for (const Stick& s : track) {
+        if (z < s.begin) return {gap_begin, s.begin, 0};
+        if (z < s.end) return {s.begin, s.end, s.material};
+        gap_begin = s.end;
+      }
+      return {gap_begin, dims_[2], 0};
     }
-    return {gap_begin, dims_[2], 0};
+    // Binary search for the first stick ending after z (a track's sticks
+    // are sorted and disjoint, by construction and as FromBlocks decodes
+    // them).
+    const Stick* s = std::partition_point(track.data(), track.data() + track.size(),
+                                          [z](const Stick& st) { return st.end <= z; });
+    const int gap_begin = s == track.data() ? 0 : s[-1].end;
+    if (s == track.data() + track.size()) return {gap_begin, dims_[2], 0};
+    if (z < s->begin) return {gap_begin, s->begin, 0};
+    return {s->begin, s->end, s->material};
   }
   uint8_t MaterialAt(int x, int y, int z) const { return Find(x, y, z).material; }
 
@@ -106,6 +119,17 @@ class Sticks {
     return static_cast<size_t>(y - y_begin_) * static_cast<size_t>(dims_[0]) +
            static_cast<size_t>(x);
   }
+
+  // Find scans tracks of at most this many sticks and searches longer
+  // ones. Real tracks are short: on cthead with skin and bone, 54% hold no
+  // stick, 89% at most 8, the longest 28; there a scan is as fast as this
+  // hybrid and a pure binary search was 2-3% slower (render_bench az45, 1
+  // thread, min ms of 5 alternated sets: scan 94.2-99.3, hybrid 93.7-96.0,
+  // search 96.5-109.2). A scan costs O(sticks) per step, though, and a
+  // ray walking along z through a track of noise calls Find once per stick:
+  // on 200x200x300 noise (112 sticks a track) seen frontally the search
+  // took the frame from 94.3 to 81.1 ms.
+  static constexpr size_t kScanMax = 8;
 
   std::array<int, 3> dims_ = {0, 0, 0};
   int y_begin_ = 0;
