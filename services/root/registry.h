@@ -61,7 +61,8 @@ class Registry {
   void SetHeld(const std::string& id, const HeldSlab& slab);
   void ClearHeld(const std::string& id);
 
-  // For Status: every worker with its slab, in registration order.
+  // For Status: every worker with its slab, in registration order (after
+  // dropping the expired ones, hence not const).
   void Describe(v1::StatusReply* reply);
 
  private:
@@ -74,7 +75,6 @@ class Registry {
   std::map<std::string, std::chrono::steady_clock::time_point> last_seen_ ABSL_GUARDED_BY(mu_);
   std::map<std::string, std::shared_ptr<WorkerEntry>> workers_ ABSL_GUARDED_BY(mu_);  // by id
   std::map<std::string, HeldSlab> held_ ABSL_GUARDED_BY(mu_);  // by worker id
-  // Describe may expire workers, so it is not const.
 };
 
 // Whether a failed call means the worker itself is gone (rather than a

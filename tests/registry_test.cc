@@ -1,0 +1,75 @@
+// The root's registry: registration, renewal by heartbeat, expiry, and what
+// a worker is believed to hold.
+#include "registry.h"
+
+#include <chrono>
+#include <thread>
+
+#include "gtest/gtest.h"
+
+namespace transtick {
+namespace {
+
+v1::RegisterRequest Request(const std::string& id, const std::string& address) {
+  v1::RegisterRequest r;
+  r.set_id(id);
+  r.set_address(address);
+  r.set_threads(2);
+  return r;
+}
+
+TEST(RegistryTest, HeartbeatsKeepAWorkerAndSilenceDropsIt) {
+  Registry registry(std::chrono::milliseconds(300));
+  ASSERT_TRUE(registry.Register(Request("a", "127.0.0.1:1")).ok());
+  ASSERT_TRUE(registry.Register(Request("b", "127.0.0.1:2")).ok());
+  registry.SetHeld("a", HeldSlab{"k@0-10", "k", 0, 10, 0});
+  // "a" renews every 100 ms; "b" says nothing.
+  for (int i = 0; i < 6; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    absl::Status s = registry.Register(Request("a", "127.0.0.1:1"));
+    EXPECT_EQ(s.code(), absl::StatusCode::kAlreadyExists) << s;
+  }
+  EXPECT_TRUE(registry.Alive("a"));
+  EXPECT_FALSE(registry.Alive("b"));
+  EXPECT_EQ(registry.size(), 1);
+  EXPECT_EQ(registry.Held().count("a"), 1u);
+  // The same id from another address is refused and renews nothing: "a"
+  // expires on time although the impostor keeps calling.
+  const auto last_renewal = std::chrono::steady_clock::now();
+  while (true) {
+    absl::Status s = registry.Register(Request("a", "127.0.0.1:9"));
+    // OK only once "a" at :1 has expired: then the caller is a new worker.
+    if (s.ok() || !registry.Alive("a")) break;
+    EXPECT_EQ(s.code(), absl::StatusCode::kAlreadyExists) << s;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    ASSERT_LT(std::chrono::steady_clock::now() - last_renewal, std::chrono::seconds(5));
+  }
+  EXPECT_GE(std::chrono::steady_clock::now() - last_renewal, std::chrono::milliseconds(290));
+  EXPECT_EQ(registry.Held().count("a"), 0u);  // forgotten with its slab
+  (void)registry.Unregister("a");
+  // Once dropped, a worker registers anew (a root that forgot it, or a
+  // worker that came back).
+  EXPECT_TRUE(registry.Register(Request("a", "127.0.0.1:1")).ok());
+  EXPECT_TRUE(registry.Alive("a"));
+}
+
+TEST(RegistryTest, WorkersWaitsForAFirstWorkerAndHonoursCancel) {
+  Registry registry;
+  auto none = registry.Workers(std::chrono::milliseconds(50), [] { return false; });
+  EXPECT_EQ(none.status().code(), absl::StatusCode::kUnavailable);
+  auto cancelled = registry.Workers(std::chrono::seconds(5), [] { return true; });
+  EXPECT_EQ(cancelled.status().code(), absl::StatusCode::kCancelled);
+  std::thread late([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    ASSERT_TRUE(registry.Register(Request("w", "127.0.0.1:3")).ok());
+  });
+  auto got = registry.Workers(std::chrono::seconds(5), [] { return false; });
+  late.join();
+  ASSERT_TRUE(got.ok()) << got.status();
+  ASSERT_EQ(got->size(), 1u);
+  EXPECT_EQ((*got)[0]->id, "w");
+  EXPECT_FALSE(registry.Register(Request("", "x")).ok());
+}
+
+}  // namespace
+}  // namespace transtick
