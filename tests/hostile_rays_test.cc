@@ -303,5 +303,24 @@ TEST_F(HostileRaysTest, BadCutsAreRefusedAtPrepare) {
   EXPECT_TRUE(prepare(id++, {0, ny}, 0).ok());
 }
 
+// Evict names what it evicts: an empty key is refused (it used to wipe every
+// slab while the root thought them loaded), and the slab stays usable.
+TEST_F(HostileRaysTest, EvictNeedsAKey) {
+  auto evict = [&](const std::string& key) {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(10));
+    v1::DatasetRef ref;
+    ref.set_dataset_key(key);
+    v1::FrameAck ack;
+    return worker_stub_->Evict(&ctx, ref, &ack);
+  };
+  grpc::Status s = evict("");
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << s.error_message();
+  EXPECT_EQ(evict("no-such-slab").error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_TRUE(Prepare(40).ok());  // the slab is still here
+  EXPECT_TRUE(evict("phantom-dvr").ok());
+  EXPECT_EQ(evict("phantom-dvr").error_code(), grpc::StatusCode::NOT_FOUND);
+}
+
 }  // namespace
 }  // namespace transtick

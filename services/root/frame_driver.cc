@@ -21,6 +21,11 @@ double MsSince(Clock::time_point t) {
 
 // Deadlines of the frame's unary calls, in seconds.
 constexpr double kCallDeadline = 30;
+// PrepareFrame and RunFrame answer in milliseconds; a member that does not
+// answer within this (a paused worker) fails the frame, which is retried
+// once its registration has expired. 30 s here made a pause at that moment
+// cost 30 s instead of at most 10.
+constexpr double kStartDeadline = 10;
 constexpr double kAbortDeadline = 10;
 
 }  // namespace
@@ -127,7 +132,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
   df.set_width(view.width());
   df.set_height(view.height());
   std::vector<grpc::Status> prepared = CallAll(
-      members.size() + 1, kCallDeadline, [&](size_t i, grpc::ClientContext* ctx, auto done) {
+      members.size() + 1, kStartDeadline, [&](size_t i, grpc::ClientContext* ctx, auto done) {
         if (i == members.size()) {
           display->async()->BeginFrame(ctx, &df, &acks[i], std::move(done));
         } else {
@@ -149,7 +154,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
   if (!s.ok()) return abort(s);
   s = check(
       "RunFrame",
-      CallAll(members.size(), kCallDeadline, [&](size_t i, grpc::ClientContext* ctx, auto done) {
+      CallAll(members.size(), kStartDeadline, [&](size_t i, grpc::ClientContext* ctx, auto done) {
         members[i].worker->stub->async()->RunFrame(ctx, &ref, &acks[i], std::move(done));
       }));
   if (!s.ok()) return abort(s);

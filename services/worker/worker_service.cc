@@ -124,11 +124,15 @@ grpc::Status WorkerService::LoadSlab(grpc::ServerContext* ctx,
 }
 
 grpc::Status WorkerService::Evict(grpc::ServerContext*, const v1::DatasetRef* req, v1::FrameAck*) {
-  std::lock_guard<std::mutex> lock(mu_);
+  // An empty key used to mean "everything": one stray call wiped every slab
+  // while the root believed them loaded, and later frames on them failed.
   if (req->dataset_key().empty()) {
-    datasets_.clear();
-  } else {
-    datasets_.erase(req->dataset_key());
+    return ToGrpc(absl::InvalidArgumentError("Evict: a dataset_key is required"));
+  }
+  std::lock_guard<std::mutex> lock(mu_);
+  if (datasets_.erase(req->dataset_key()) == 0) {
+    return ToGrpc(absl::NotFoundError(
+        absl::StrCat("Evict: dataset ", req->dataset_key(), " is not loaded here")));
   }
   return grpc::Status::OK;
 }
