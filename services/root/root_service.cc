@@ -16,23 +16,10 @@ JobQueueOptions QueueOptions(const RootOptions& o) {
   return q;
 }
 
-RunnerOptions ToRunnerOptions(const RootOptions& o) {
-  RunnerOptions r;
-  r.data_dir = o.data_dir;
-  r.display = o.display;
-  r.rings = o.rings;
-  r.max_volume_bytes = o.max_volume_bytes;
-  r.frame_timeout_s = o.frame_timeout_s;
-  r.worker_wait_s = o.worker_wait_s;
-  return r;
-}
-
 }  // namespace
 
 RootService::RootService(const RootOptions& options)
-    : options_(options),
-      queue_(QueueOptions(options)),
-      runner_(ToRunnerOptions(options), queue_, registry_) {}
+    : options_(options), queue_(QueueOptions(options)), runner_(options, queue_, registry_) {}
 
 RootService::~RootService() { Stop(); }
 

@@ -17,14 +17,9 @@
 
 namespace transtick {
 
-struct RootOptions {
-  std::string data_dir = "/data";
-  std::string display = "127.0.0.1:7002";
-  int rings = 1;
-  uint64_t max_volume_bytes = uint64_t{8} << 30;
-  double frame_timeout_s = 600;
-  // How long a job waits for at least one worker to register.
-  double worker_wait_s = 120;
+// The runner's settings (data directory, display, rings, limits, timeouts)
+// and the queue's.
+struct RootOptions : RunnerOptions {
   int max_jobs_kept = 32;
   int max_queued_jobs = 1000;
   // Image bytes a job may hold for its watchers before its frames wait.
