@@ -17,6 +17,7 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "clock.h"
 #include "absl/strings/str_split.h"
 #include "client.h"
 #include "cluster.grpc.pb.h"
@@ -108,11 +109,6 @@ absl::StatusOr<Volume> LoadVolume(const Flags& flags) {
   if (*skip < 0) return absl::InvalidArgumentError("--raw-skip must not be negative");
   spec.header_bytes = static_cast<uint64_t>(*skip);
   return ReadRaw(path, spec, options);
-}
-
-double MsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-      .count();
 }
 
 const std::set<std::string> kRawFlags = {"volume",      "raw-dims", "raw-type",     "raw-endian",

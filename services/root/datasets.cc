@@ -8,6 +8,7 @@
 #include <filesystem>
 
 #include "absl/strings/str_cat.h"
+#include "clock.h"
 #include "absl/strings/str_format.h"
 #include "balancer.h"
 #include "convert.h"
@@ -19,12 +20,6 @@ namespace transtick {
 namespace {
 
 namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
-
-double MsSince(Clock::time_point t) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
-}
-
 }  // namespace
 
 absl::Status Datasets::Validate(const v1::Job& job) const {

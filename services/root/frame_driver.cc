@@ -7,17 +7,12 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "clock.h"
 #include "daemon.h"
 #include "fanout.h"
 
 namespace transtick {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-
-double MsSince(Clock::time_point t) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
-}
 
 // Deadlines of the frame's unary calls, in seconds.
 constexpr double kCallDeadline = 30;

@@ -8,17 +8,12 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "clock.h"
 #include "convert.h"
 #include "transtick/tracer.h"
 
 namespace transtick {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-
-double MsSince(Clock::time_point t) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
-}
 
 // A worker that dies is dropped and the frame runs again on the others; a
 // display that went away gets time to come back: the attempts are spaced

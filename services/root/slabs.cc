@@ -7,6 +7,7 @@
 #include <map>
 
 #include "absl/strings/str_cat.h"
+#include "clock.h"
 #include "daemon.h"
 #include "fanout.h"
 #include "transtick/partition.h"
@@ -14,12 +15,6 @@
 
 namespace transtick {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-
-double MsSince(Clock::time_point t) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
-}
 
 }  // namespace
 

@@ -10,6 +10,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "clock.h"
 #include "convert.h"
 #include "daemon.h"
 #include "rpc_status.h"
@@ -18,12 +19,6 @@
 
 namespace transtick {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-
-double MsBetween(Clock::time_point a, Clock::time_point b) {
-  return std::chrono::duration<double, std::milli>(b - a).count();
-}
 
 // Names the calling thread (for top, perf and gdb); at most 15 characters.
 void NameThread(const char* name) { pthread_setname_np(pthread_self(), name); }
