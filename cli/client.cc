@@ -5,7 +5,10 @@
 #include <bit>
 #include <cstdio>
 #include <filesystem>
+#include <chrono>
 #include <map>
+#include <set>
+#include <thread>
 
 #include "absl/strings/str_cat.h"
 #include "cluster.grpc.pb.h"
@@ -13,6 +16,7 @@
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "rpc_channel.h"
 #include "rpc_status.h"
+#include "transtick/camera.h"
 #include "transtick/image_io.h"
 #include "transtick/ray_codec.h"
 
@@ -38,65 +42,105 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::str
     std::fprintf(stderr, "%s: %d frames, %d jobs ahead\n", submitted.job_id().c_str(),
                  submitted.frames(), submitted.queue_position());
   }
-  grpc::ClientContext ctx;
-  v1::JobRef ref;
-  ref.set_job_id(submitted.job_id());
-  auto reader = stub->Watch(&ctx, ref);
-  v1::JobEvent e;
+  // Watches until the job ends. A stream that breaks (the root restarted,
+  // the network failed) is watched again with the frames already saved, so
+  // the root sends (and if need be renders again) only the others.
   std::vector<v1::ClusterFrameStats> stats;
-  std::map<std::pair<int, int>, Image> images;
-  std::map<std::pair<int, int>, int> rows_in;
+  std::set<int> have;
   v1::JobState state = v1::QUEUED;
   std::string error;
   absl::Status save_error;
-  while (reader->Read(&e)) {
-    state = e.state();
-    error = e.error();
-    if (e.has_image()) {
-      const v1::ImageChunk& c = e.image();
-      auto key = std::make_pair(e.dataset(), e.view());
-      Image& img = images[key];
-      if (img.rgb.empty()) {
-        img.width = c.width();
-        img.height = c.height();
-        img.rgb.resize(static_cast<size_t>(c.width()) * c.height() * 3);
-      }
-      const size_t floats = static_cast<size_t>(c.row_end() - c.row_begin()) * c.width() * 3;
-      if (c.width() != img.width || c.row_begin() < 0 || c.row_end() > img.height ||
-          c.rgb().size() != floats * 4) {
-        return absl::DataLossError("the root sent a malformed image chunk");
-      }
-      DecodeFloats(c.rgb(), img.rgb.data() + static_cast<size_t>(c.row_begin()) * img.width * 3);
-      rows_in[key] += c.row_end() - c.row_begin();
-      if (e.has_stats()) stats.push_back(e.stats());
-      if (rows_in[key] == img.height) {
-        std::string out = c.output();
-        if (out.empty())
-          out = absl::StrCat(submitted.job_id(), "-d", e.dataset(), "-v", e.view(), ".png");
-        fs::path path(out);
-        if (path.is_relative() && !options.out_dir.empty()) path = fs::path(options.out_dir) / path;
-        if (path.has_parent_path()) {
-          std::error_code ec;
-          fs::create_directories(path.parent_path(), ec);
+  auto last_contact = std::chrono::steady_clock::now();
+  auto backoff = std::chrono::milliseconds(250);
+  while (true) {
+    grpc::ClientContext ctx;
+    v1::WatchRequest request;
+    request.set_job_id(submitted.job_id());
+    request.set_resume(true);
+    for (int f : have) request.add_have_frames(f);
+    auto reader = stub->Watch(&ctx, request);
+    std::map<int, Image> images;  // frames being received
+    std::map<int, int> rows_in;
+    v1::JobEvent e;
+    while (reader->Read(&e)) {
+      last_contact = std::chrono::steady_clock::now();
+      backoff = std::chrono::milliseconds(250);
+      state = e.state();
+      error = e.error();
+      if (e.has_image()) {
+        const v1::ImageChunk& c = e.image();
+        const int frame = e.frame();
+        Image& img = images[frame];
+        if (img.rgb.empty()) {
+          if (c.width() <= 0 || c.height() <= 0 || c.width() > CameraSpec::kMaxImageSize ||
+              c.height() > CameraSpec::kMaxImageSize) {
+            return absl::DataLossError("the root sent an image chunk of an impossible size");
+          }
+          img.width = c.width();
+          img.height = c.height();
+          img.rgb.resize(static_cast<size_t>(c.width()) * c.height() * 3);
         }
-        absl::Status s = WriteImage(path.string(), img);
-        if (!s.ok() && save_error.ok()) save_error = s;
-        if (options.progress) {
-          std::fprintf(stderr, "\r\033[K%s: frame %d/%d saved to %s (%.1f ms)\n",
-                       submitted.job_id().c_str(), e.frames_done() + 1, e.frames_total(),
-                       path.c_str(), e.has_stats() ? e.stats().frame_ms() : 0.0);
+        const size_t floats = static_cast<size_t>(c.row_end() - c.row_begin()) * c.width() * 3;
+        if (c.width() != img.width || c.height() != img.height || c.row_begin() < 0 ||
+            c.row_end() > img.height || c.row_end() < c.row_begin() ||
+            c.rgb().size() != floats * 4) {
+          return absl::DataLossError("the root sent a malformed image chunk");
         }
-        images.erase(key);
+        DecodeFloats(c.rgb(), img.rgb.data() + static_cast<size_t>(c.row_begin()) * img.width * 3);
+        rows_in[frame] += c.row_end() - c.row_begin();
+        if (e.has_stats()) stats.push_back(e.stats());
+        if (rows_in[frame] == img.height) {
+          std::string out = c.output();
+          if (out.empty())
+            out = absl::StrCat(submitted.job_id(), "-d", e.dataset(), "-v", e.view(), ".png");
+          fs::path path(out);
+          if (path.is_relative() && !options.out_dir.empty())
+            path = fs::path(options.out_dir) / path;
+          if (path.has_parent_path()) {
+            std::error_code ec;
+            fs::create_directories(path.parent_path(), ec);
+          }
+          absl::Status s = WriteImage(path.string(), img);
+          if (!s.ok() && save_error.ok()) save_error = s;
+          have.insert(frame);
+          if (options.progress) {
+            std::fprintf(stderr, "\r\033[K%s: frame %zu/%d saved to %s (%.1f ms)\n",
+                         submitted.job_id().c_str(), have.size(), e.frames_total(),
+                         path.c_str(), e.has_stats() ? e.stats().frame_ms() : 0.0);
+          }
+          images.erase(frame);
+          rows_in.erase(frame);
+        }
+      } else if (options.progress && e.pixels_total() > 0) {
+        std::fprintf(stderr, "\r\033[K%s: frame %d/%d, %5.1f%% of %llu pixels",
+                     submitted.job_id().c_str(), e.frames_done() + 1, e.frames_total(),
+                     100.0 * e.pixels_done() / e.pixels_total(),
+                     static_cast<unsigned long long>(e.pixels_total()));
       }
-    } else if (options.progress && e.pixels_total() > 0) {
-      std::fprintf(stderr, "\r\033[K%s: frame %d/%d, %5.1f%% of %llu pixels",
-                   submitted.job_id().c_str(), e.frames_done() + 1, e.frames_total(),
-                   100.0 * e.pixels_done() / e.pixels_total(),
-                   static_cast<unsigned long long>(e.pixels_total()));
     }
+    absl::Status s = FromGrpc(reader->Finish());
+    const bool ended = state == v1::DONE || state == v1::FAILED || state == v1::CANCELLED;
+    if (s.ok() && ended) break;
+    if (absl::IsNotFound(s)) {
+      return absl::NotFoundError(absl::StrCat(
+          "the root no longer knows ", submitted.job_id(),
+          " (it restarted without a state directory, or forgot the job)"));
+    }
+    if (!s.ok() && !absl::IsUnavailable(s) && !absl::IsCancelled(s)) return s;
+    // The stream broke, or the root stopped before the job ended.
+    if (std::chrono::steady_clock::now() - last_contact > options.reconnect) {
+      return absl::UnavailableError(absl::StrCat(
+          "lost the root at ", root, " while watching ", submitted.job_id(), " and could not ",
+          "reach it again for ", options.reconnect.count(), " s",
+          s.ok() ? "" : absl::StrCat(": ", s.message())));
+    }
+    if (options.progress) {
+      std::fprintf(stderr, "\r\033[K%s: lost the root (%s); watching again\n",
+                   submitted.job_id().c_str(), s.ok() ? "it stopped" : std::string(s.message()).c_str());
+    }
+    std::this_thread::sleep_for(backoff);
+    backoff = std::min(backoff * 2, std::chrono::milliseconds(2000));
   }
-  grpc::Status s = reader->Finish();
-  if (!s.ok()) return FromGrpc(s);
   if (state == v1::FAILED)
     return absl::AbortedError(absl::StrCat(submitted.job_id(), " failed: ", error));
   if (state == v1::CANCELLED)

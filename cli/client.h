@@ -4,6 +4,7 @@
 #ifndef TRANSTICK_CLI_CLIENT_H_
 #define TRANSTICK_CLI_CLIENT_H_
 
+#include <chrono>
 #include <string>
 #include <vector>
 
@@ -16,12 +17,16 @@ namespace transtick {
 struct WatchOptions {
   std::string out_dir;    // where images with relative output paths go
   bool progress = false;  // a progress line on stderr
+  // How long to keep trying to reach the root again after the watch
+  // stream broke, counted from the last event received.
+  std::chrono::seconds reconnect{300};
   // Images of views without an output path: out_dir/JOB-dD-vV.png.
 };
 
 // Submits `job` to the root and follows it to the end, saving each frame's
-// image to its output path. Returns the frames' statistics, or the job's
-// error.
+// image to its output path; when the stream breaks it watches again (the
+// root resumes the job from its store and sends the frames not yet saved).
+// Returns the frames' statistics, or the job's error.
 absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::string& root,
                                                                   const v1::Job& job,
                                                                   const WatchOptions& options);

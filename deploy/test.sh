@@ -72,7 +72,11 @@ for b in transtick transtick-root transtick-worker transtick-display; do
 done
 
 export TRANSTICK_IMAGE=$image TRANSTICK_DATA=${data:-/nonexistent} TRANSTICK_RINGS=2
-export TRANSTICK_BIND=127.0.0.1 TRANSTICK_ROOT_PORT=0
+# A fixed free port (not 0): a restarted root container must come back on
+# the address its client watches.
+root_port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])' 2>/dev/null ||
+  echo $((20000 + RANDOM % 20000)))
+export TRANSTICK_BIND=127.0.0.1 TRANSTICK_ROOT_PORT=$root_port
 compose() { "${TT_COMPOSE[@]}" -p "$project" -f deploy/docker-compose.yml "$@"; }
 if compose config -q; then pass "compose file accepted by ${TT_COMPOSE[*]}"; else fail "compose config"; fi
 if ((build_only)); then finish; exit; fi
@@ -220,6 +224,47 @@ else
   fail "job on 2 workers"
 fi
 compare cluster2 "2 workers, 2 rings"
+
+# The root container killed (SIGKILL) while a job runs, and started again:
+# it takes the job up from its state volume (frames already delivered are
+# not rendered again), the client watches again by itself, the images are
+# right, and the jobs before are still in its history.
+step=$SECONDS
+{
+  printf '{"name":"deploy-restart","datasets":[{"volume":"%s","materials":%s,"views":[' "$volume" "$materials"
+  for i in $(seq 12); do
+    ((i > 1)) && printf ','
+    printf '{"azimuth":45,"width":200,"height":200,"shadows":true,"output":"view45.png"},'
+    printf '{"azimuth":120,"elevation":20,"width":160,"height":120,"shadows":true,"output":"view120.png"}'
+  done
+  printf ']}]}\n'
+} >"$work/restart.json"
+timeout "${TRANSTICK_TEST_TIMEOUT:-300}" "$client" submit "$work/restart.json" --root "$root_addr" \
+  --out-dir "$work/restart" >"$work/restart.log" 2>&1 &
+spid=$!
+deadline=$((SECONDS + 60))
+until "$client" status --root "$root_addr" 2>/dev/null | grep -qE 'RUNNING +[1-9]'; do
+  ((SECONDS < deadline)) || break
+  sleep 0.2
+done
+"$TT_DOCKER" kill "$root_id" >/dev/null
+compose start root >/dev/null 2>&1
+if wait "$spid"; then
+  pass "job across a root kill and restart done in $((SECONDS - step)) s"
+else
+  fail "job across a root kill and restart: $(tail -c 400 "$work/restart.log" | tr '\r' '\n' | tail -3)"
+fi
+compare restart "across a root restart"
+if compose logs --no-color root 2>/dev/null | grep -q "recovered: [0-9]* of 24 frames delivered"; then
+  pass "the restarted root took the job up from its state volume"
+else
+  fail "the restarted root did not recover the job from its state volume"
+fi
+if (($("$client" status --root "$root_addr" 2>/dev/null | grep -c ' DONE ') >= 3)); then
+  pass "the jobs before the restart are still in the root's history"
+else
+  fail "the root's history after a restart: $("$client" status --root "$root_addr" 2>&1 | tail -4)"
+fi
 
 # ---------------------------------------------------------------- teardown
 # Stop first to read the exit codes: 137 means SIGKILL after the grace period.

@@ -453,7 +453,7 @@ TEST_F(ClusterTest, CancelStopsAJobAndTheNextOneRuns) {
   // The job's events end with CANCELLED, well before its 200 frames.
   {
     grpc::ClientContext ctx;
-    v1::JobRef ref;
+    v1::WatchRequest ref;
     ref.set_job_id(submitted.job_id());
     auto reader = root->Watch(&ctx, ref);
     v1::JobEvent e, last;

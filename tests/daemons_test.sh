@@ -5,7 +5,8 @@
 # error, a worker killed with SIGKILL is dropped and the next job still
 # renders (the survivors re-cut their slabs without the dead one's planes),
 # a worker killed in the middle of a job does not stall it, nor does a worker
-# paused with SIGSTOP, a restarted root gets its workers back by itself, a
+# paused with SIGSTOP, a restarted root gets its workers back by itself and
+# resumes its jobs from its state directory, a
 # job survives the display's restart, and every daemon stops cleanly on
 # SIGTERM.
 set -u
@@ -40,7 +41,7 @@ dport=$(port); rport=$(port)
 "$build/services/display/transtick-display" --listen 127.0.0.1:$dport >"$dir/display.log" 2>&1 &
 pids+=($!); dpid=$!
 "$build/services/root/transtick-root" --listen 127.0.0.1:$rport --data-dir "$dir/data" \
-  --display 127.0.0.1:$dport >"$dir/root.log" 2>&1 &
+  --state-dir "$dir/state" --display 127.0.0.1:$dport >"$dir/root.log" 2>&1 &
 pids+=($!); rpid=$!
 wpids=()
 for i in 1 2 3; do
@@ -140,13 +141,44 @@ fi
 printf 'paused worker: 80-frame job done %.1f s after submission\n' "$(echo "$(date +%s.%N) - $start" | bc)"
 kill -9 "$w5"
 
-# The root killed and restarted: the workers register again by themselves
-# (their heartbeat), and the next job renders the right image.
+# The root killed (SIGKILL) in the middle of a job, with a second job queued
+# behind it, and started again on the same state directory: the workers
+# register again by themselves (their heartbeat), both clients watch again,
+# the running job resumes from its first undelivered frame (frames already
+# delivered are not rendered again), the queued job runs, and every image is
+# right.
+{
+  printf '{"name":"turn","datasets":[{"volume":"box.nrrd","materials_file":"m.json","views":['
+  for i in $(seq 0 39); do
+    ((i > 0)) && printf ','
+    printf '{"azimuth":%d,"elevation":20,"width":320,"height":320,"output":"turn%d.png"}' $((i * 9)) "$i"
+  done
+  printf ']}]}\n'
+} >"$dir/turn.json"
+for i in $(seq 0 39); do
+  "$T" render --local 0 --volume "$dir/data/box.nrrd" --materials "$dir/m.json" --azimuth $((i * 9)) \
+    --elevation 20 --size 320x320 --out "$dir/turn_ref$i.png" 2>/dev/null
+done
+rm -f "$dir/out/a.png"
+timeout 180 "$T" submit "$dir/turn.json" --root 127.0.0.1:$rport --out-dir "$dir/out" \
+  >"$dir/submit5.log" 2>&1 &
+spid=$!
+sleep 0.3
+queued_t=$(grep -c "queued: 't'" "$dir/root.log")
+timeout 180 "$T" submit "$dir/job.json" --root 127.0.0.1:$rport --out-dir "$dir/out" \
+  >"$dir/submit5b.log" 2>&1 &
+spid2=$!
+for _ in $(seq 600); do
+  (($(ls "$dir/out" | grep -c '^turn') >= 5 && $(grep -c "queued: 't'" "$dir/root.log") > queued_t)) && break
+  sleep 0.05
+done
+turn_job=$(grep "queued: 'turn'" "$dir/root.log" | grep -o 'job-[0-9]*' | tail -1)
 kill -9 "$rpid"
 wait "$rpid" 2>/dev/null
+saved_before=$(ls "$dir/out" | grep -c '^turn')
 start=$(date +%s.%N)
 "$build/services/root/transtick-root" --listen 127.0.0.1:$rport --data-dir "$dir/data" \
-  --display 127.0.0.1:$dport >"$dir/root2.log" 2>&1 &
+  --state-dir "$dir/state" --display 127.0.0.1:$dport >"$dir/root2.log" 2>&1 &
 pids+=($!); rpid=$!
 for _ in $(seq 100); do
   "$T" status --root 127.0.0.1:$rport 2>/dev/null | grep -q '^2 workers' && break
@@ -158,10 +190,26 @@ if "$T" status --root 127.0.0.1:$rport | grep -q '^2 workers'; then
 else
   fail "workers did not register again with a restarted root"
 fi
-rm -f "$dir/out/a.png"
-"$T" submit "$dir/job.json" --root 127.0.0.1:$rport --out-dir "$dir/out" >"$dir/submit5.log" 2>&1 ||
-  fail "submit after a root restart: $(cat "$dir/submit5.log")"
-cmp -s "$dir/out/a.png" "$dir/ref.png" || fail "image after a root restart differs"
+if wait "$spid"; then
+  printf 'root restart: the 40-frame job done %.1f s after the restart\n' \
+    "$(echo "$(date +%s.%N) - $start" | bc)"
+  for i in $(seq 0 39); do
+    cmp -s "$dir/out/turn$i.png" "$dir/turn_ref$i.png" || fail "frame $i across a root restart differs"
+  done
+else
+  fail "job across a root restart did not complete: $(tail -3 "$dir/submit5.log")"
+fi
+wait "$spid2" || fail "queued job across a root restart: $(tail -3 "$dir/submit5b.log")"
+cmp -s "$dir/out/a.png" "$dir/ref.png" || fail "image of the queued job after a root restart differs"
+# What the new root rendered of the running job: its undelivered frames
+# only (a frame or two more when their images were in flight at the kill).
+delivered=$(grep -o "$turn_job recovered: [0-9]* of 40" "$dir/root2.log" | awk '{print $3}')
+rendered=$(grep -c "($turn_job [0-9]*/[0-9]*)" "$dir/root2.log")
+echo "root restart: $saved_before frames saved before the kill, $delivered recorded delivered, $rendered rendered after"
+if [[ -z $delivered ]] || ((delivered < 1 || rendered > 40 - delivered + 2 || delivered > saved_before)); then
+  fail "resume after a root restart: $delivered of 40 delivered, $rendered rendered again"
+fi
+grep -q "recovered: 0 of 1 frames delivered" "$dir/root2.log" || fail "the queued job was not recovered"
 
 # The display killed in the middle of a job and started again: the root
 # retries the frame with backoff until it is back, and the job completes.

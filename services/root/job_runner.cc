@@ -38,9 +38,9 @@ JobRunner::JobRunner(const RunnerOptions& options, JobQueue& queue, Registry& re
       registry_(registry),
       datasets_(options.data_dir, options.max_volume_bytes),
       slabs_(registry),
-      driver_(registry, options.display, options.frame_timeout_s) {
-  thread_ = std::thread([this] { Loop(); });
-}
+      driver_(registry, options.display, options.frame_timeout_s) {}
+
+void JobRunner::Start() { thread_ = std::thread([this] { Loop(); }); }
 
 JobRunner::~JobRunner() { Stop(); }
 
@@ -51,18 +51,14 @@ void JobRunner::Stop() {
 
 void JobRunner::Loop() {
   while (std::shared_ptr<Job> job = queue_.Next()) {
-    absl::Status status = absl::CancelledError("cancelled before it started");
     if (!job->cancelled()) {
-      job->SetState(v1::RUNNING);
-      job->Publish(v1::JobEvent());
+      job->SetRunning();
       spdlog::info("{} running", job->id());
-      status = RunJob(*job);
     }
-    const v1::JobState state =
-        job->cancelled() ? v1::CANCELLED : (status.ok() ? v1::DONE : v1::FAILED);
-    job->SetState(state, status.ok() ? "" : std::string(status.message()));
-    job->Publish(v1::JobEvent());
-    job->Finish();
+    absl::Status status;
+    do {
+      status = job->cancelled() ? absl::CancelledError("cancelled") : RunJob(*job);
+    } while (!job->Complete(status));
     if (status.ok()) {
       spdlog::info("{} done", job->id());
     } else {
@@ -72,19 +68,25 @@ void JobRunner::Loop() {
 }
 
 absl::Status JobRunner::RunJob(Job& job) {
-  for (int d = 0; d < job.spec().datasets_size(); ++d) {
-    auto data = datasets_.Load(job.spec().datasets(d));
-    if (!data.ok()) return data.status();
-    for (int v = 0; v < job.spec().datasets(d).views_size(); ++v) {
-      if (job.cancelled()) return absl::CancelledError("cancelled");
-      if (auto s = RunView(job, d, v, **data); !s.ok()) return s;
-      job.FrameDone();
+  std::shared_ptr<LoadedDataset> data;
+  int loaded = -1;
+  while (std::optional<int> frame = job.NextFrame()) {
+    if (job.cancelled()) return absl::CancelledError("cancelled");
+    const FrameKey key = job.key(*frame);
+    if (key.dataset != loaded) {
+      auto d = datasets_.Load(job.spec().datasets(key.dataset));
+      if (!d.ok()) return d.status();
+      data = *std::move(d);
+      loaded = key.dataset;
     }
+    if (auto s = RunView(job, *frame, *data); !s.ok()) return s;
+    job.FrameRendered(*frame);
   }
   return absl::OkStatus();
 }
 
-absl::Status JobRunner::RunView(Job& job, int d, int v, LoadedDataset& data) {
+absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data) {
+  const int d = job.key(frame).dataset, v = job.key(frame).view;
   const v1::View& view = job.spec().datasets(d).views(v);
   const std::string mode = view.balance().empty() ? job.spec().balance() : view.balance();
   const BalanceRule rule = *ParseBalanceRule(job.spec().balance_rule());
@@ -151,6 +153,7 @@ absl::Status JobRunner::RunView(Job& job, int d, int v, LoadedDataset& data) {
         if (!s.ok()) return s;
       }
       v1::JobEvent e;
+      e.set_frame(frame);
       e.set_dataset(d);
       e.set_view(v);
       e.set_pixels_done(pixels);
@@ -162,22 +165,23 @@ absl::Status JobRunner::RunView(Job& job, int d, int v, LoadedDataset& data) {
     };
     auto on_progress = [&](uint64_t done, uint64_t total) {
       v1::JobEvent e;
+      e.set_frame(frame);
       e.set_dataset(d);
       e.set_view(v);
       e.set_pixels_done(done);
       e.set_pixels_total(total);
       job.Publish(std::move(e));
     };
-    auto frame = driver_.Run(view, data, layout, cancelled, on_progress, on_chunk);
-    if (!frame.ok()) {
-      status = frame.status();
+    auto result = driver_.Run(view, data, layout, cancelled, on_progress, on_chunk);
+    if (!result.ok()) {
+      status = result.status();
       if (status.code() != absl::StatusCode::kUnavailable || job.cancelled()) return status;
       spdlog::warn("{}: frame failed ({}); retrying", job.id(), std::string(status.message()));
       continue;
     }
-    (*balancer)->Learn(*frame, layout, data.balance, &report);
+    (*balancer)->Learn(*result, layout, data.balance, &report);
     if (!held) return absl::InternalError("frame ended without its image");
-    return PublishStats(job, d, v, layout, *frame, report, *std::move(held));
+    return PublishStats(job, d, v, layout, *result, report, *std::move(held));
   }
   return status;
 }

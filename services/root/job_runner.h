@@ -1,8 +1,8 @@
 // The root's runner: one thread that takes jobs from the queue in order and
-// renders them view by view: load the dataset, form rings from the
+// renders their pending frames (Job::NextFrame) view by view: load the dataset, form rings from the
 // registered workers, balance, distribute the slabs, drive the frame, and
 // pass its image and statistics to the job's watchers. A frame that fails
-// because a worker or the display failed runs again (three attempts).
+// because a worker or the display failed runs again (five attempts, backing off).
 // Thread-safe: Start once, Stop from any thread.
 #ifndef TRANSTICK_SERVICES_ROOT_JOB_RUNNER_H_
 #define TRANSTICK_SERVICES_ROOT_JOB_RUNNER_H_
@@ -38,13 +38,17 @@ class JobRunner {
   JobRunner& operator=(const JobRunner&) = delete;
 
   absl::Status Validate(const v1::Job& job) const { return datasets_.Validate(job); }
+  // Starts the runner's thread. Call once.
+  void Start();
   // Stops the queue (cancelling its jobs) and joins the runner. Idempotent.
   void Stop();
 
  private:
   void Loop();
   absl::Status RunJob(Job& job);
-  absl::Status RunView(Job& job, int dataset, int view, LoadedDataset& data);
+  // Renders the job's frame (on attempt after attempt while workers or the
+  // display fail) and publishes its image.
+  absl::Status RunView(Job& job, int frame, LoadedDataset& data);
   // The frame's statistics, logged and sent with its last image chunk.
   absl::Status PublishStats(Job& job, int dataset, int view, const Layout& layout,
                             const FrameResult& frame, const BalanceReport& balance,

@@ -12,19 +12,25 @@ int main(int argc, char** argv) {
   ReturnLargeBlocksToTheSystem();
   InitLogging("root");
   auto flags = Flags::Parse(
-      argc, argv, 1, {"listen", "data-dir", "display", "rings", "max-volume-mb", "frame-timeout"},
+      argc, argv, 1, {"listen", "data-dir", "state-dir", "display", "rings", "max-volume-mb", "frame-timeout",
+       "max-queued-jobs", "max-jobs-per-client", "max-job-megapixels"},
       {"help"});
   if (!flags.ok() || flags->Has("help")) {
     if (!flags.ok()) std::cerr << "transtick-root: " << flags.status().message() << "\n";
-    std::cerr << "usage: transtick-root [--listen ADDR] [--data-dir DIR] [--display ADDR] "
-                 "[--rings R] [--max-volume-mb N] [--frame-timeout S]\n(environment: "
-                 "TRANSTICK_LISTEN, TRANSTICK_DATA_DIR, TRANSTICK_DISPLAY, TRANSTICK_RINGS, "
-                 "TRANSTICK_MAX_VOLUME_MB, TRANSTICK_FRAME_TIMEOUT)\n";
+    std::cerr << "usage: transtick-root [--listen ADDR] [--data-dir DIR] [--state-dir DIR] "
+                 "[--display ADDR] [--rings R] [--max-volume-mb N] [--frame-timeout S] "
+                 "[--max-queued-jobs N] [--max-jobs-per-client N] [--max-job-megapixels N]\n"
+                 "(environment: TRANSTICK_LISTEN, TRANSTICK_DATA_DIR, TRANSTICK_STATE_DIR, "
+                 "TRANSTICK_DISPLAY, TRANSTICK_RINGS, TRANSTICK_MAX_VOLUME_MB, "
+                 "TRANSTICK_FRAME_TIMEOUT, TRANSTICK_MAX_QUEUED_JOBS, "
+                 "TRANSTICK_MAX_JOBS_PER_CLIENT, TRANSTICK_MAX_JOB_MEGAPIXELS)\n"
+                 "Without a state directory the jobs live in memory and a restart loses them.\n";
     return flags.ok() ? 0 : 2;
   }
   RootOptions o;
   const std::string listen = Setting(*flags, "listen", "TRANSTICK_LISTEN", "0.0.0.0:7000");
   o.data_dir = Setting(*flags, "data-dir", "TRANSTICK_DATA_DIR", "/data");
+  o.state_dir = Setting(*flags, "state-dir", "TRANSTICK_STATE_DIR", "");
   o.display = Setting(*flags, "display", "TRANSTICK_DISPLAY", "127.0.0.1:7002");
   try {
     o.rings = std::stoi(Setting(*flags, "rings", "TRANSTICK_RINGS", "1"));
@@ -32,8 +38,19 @@ int main(int argc, char** argv) {
         std::stoull(Setting(*flags, "max-volume-mb", "TRANSTICK_MAX_VOLUME_MB", "8192")) << 20;
     o.frame_timeout_s =
         std::stod(Setting(*flags, "frame-timeout", "TRANSTICK_FRAME_TIMEOUT", "600"));
+    o.max_queued = std::stoi(Setting(*flags, "max-queued-jobs", "TRANSTICK_MAX_QUEUED_JOBS", "1000"));
+    o.max_jobs_per_client =
+        std::stoi(Setting(*flags, "max-jobs-per-client", "TRANSTICK_MAX_JOBS_PER_CLIENT", "100"));
+    o.max_job_pixels = static_cast<uint64_t>(std::stoull(Setting(
+                           *flags, "max-job-megapixels", "TRANSTICK_MAX_JOB_MEGAPIXELS", "2048")))
+                       << 20;
   } catch (...) {
-    std::cerr << "transtick-root: --rings, --max-volume-mb and --frame-timeout take numbers\n";
+    std::cerr << "transtick-root: --rings, --max-volume-mb, --frame-timeout and the --max-* "
+                 "limits take numbers\n";
+    return 2;
+  }
+  if (o.max_queued < 1 || o.max_jobs_per_client < 1 || o.max_job_pixels == 0) {
+    std::cerr << "transtick-root: the --max-* limits must be positive\n";
     return 2;
   }
   if (o.rings < 1 || o.rings > 64) {
@@ -45,8 +62,9 @@ int main(int argc, char** argv) {
     spdlog::error("{}", std::string(node.status().message()));
     return 1;
   }
-  spdlog::info("root serving on port {}; data {}, display {}, {} ring(s)", (*node)->port(),
-               o.data_dir, o.display, o.rings);
+  spdlog::info("root serving on port {}; data {}, state {}, display {}, {} ring(s)",
+               (*node)->port(), o.data_dir, o.state_dir.empty() ? "(memory)" : o.state_dir,
+               o.display, o.rings);
   int sig = WaitForSignal();
   spdlog::info("signal {}: stopping", sig);
   (*node)->Stop(std::chrono::milliseconds(5000));

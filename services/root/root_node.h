@@ -32,7 +32,9 @@ class RootNode {
 inline absl::StatusOr<std::unique_ptr<RootNode>> RootNode::Start(const std::string& listen,
                                                                  const RootOptions& options) {
   auto node = std::unique_ptr<RootNode>(new RootNode());
-  node->service_ = std::make_unique<RootService>(options);
+  auto service = RootService::Create(options);
+  if (!service.ok()) return service.status();
+  node->service_ = *std::move(service);
   auto server = Server::Start(listen, {node->service_.get()});
   if (!server.ok()) return server.status();
   node->server_ = *std::move(server);

@@ -8,27 +8,39 @@
 namespace transtick {
 namespace {
 
-JobQueueOptions QueueOptions(const RootOptions& o) {
-  JobQueueOptions q;
-  q.max_queued = o.max_queued_jobs;
-  q.max_jobs_kept = o.max_jobs_kept;
-  q.max_pending_image_bytes = o.max_pending_image_bytes;
-  return q;
+// Who submitted a job, until clients authenticate: the host part of the
+// peer's address ("ipv4:127.0.0.1:5123" -> "ipv4:127.0.0.1").
+std::string PeerHost(const std::string& peer) {
+  const size_t colon = peer.rfind(':');
+  return colon == std::string::npos || colon < peer.find(':') + 1 ? peer : peer.substr(0, colon);
 }
 
 }  // namespace
 
-RootService::RootService(const RootOptions& options)
-    : options_(options), queue_(QueueOptions(options)), runner_(options, queue_, registry_) {}
+absl::StatusOr<std::unique_ptr<RootService>> RootService::Create(const RootOptions& options) {
+  auto store = JobStore::Open(options.state_dir);
+  if (!store.ok()) return store.status();
+  auto service = std::unique_ptr<RootService>(new RootService(options, *std::move(store)));
+  if (absl::Status s = service->queue_.Recover(); !s.ok()) return s;
+  service->runner_.Start();
+  return service;
+}
+
+RootService::RootService(const RootOptions& options, std::unique_ptr<JobStore> store)
+    : options_(options),
+      store_(std::move(store)),
+      queue_(options, *store_),
+      runner_(options, queue_, registry_) {}
 
 RootService::~RootService() { Stop(); }
 
 void RootService::Stop() { runner_.Stop(); }
 
-grpc::Status RootService::Submit(grpc::ServerContext*, const v1::Job* job, v1::SubmitReply* reply) {
+grpc::Status RootService::Submit(grpc::ServerContext* ctx, const v1::Job* job,
+                                 v1::SubmitReply* reply) {
   if (auto s = runner_.Validate(*job); !s.ok()) return ToGrpc(s);
   int position = 0;
-  auto record = queue_.Submit(*job, &position);
+  auto record = queue_.Submit(*job, PeerHost(ctx->peer()), &position);
   if (!record.ok()) return ToGrpc(record.status());
   reply->set_job_id((*record)->id());
   reply->set_frames((*record)->frames_total());
@@ -38,12 +50,14 @@ grpc::Status RootService::Submit(grpc::ServerContext*, const v1::Job* job, v1::S
   return grpc::Status::OK;
 }
 
-grpc::Status RootService::Watch(grpc::ServerContext* ctx, const v1::JobRef* req,
+grpc::Status RootService::Watch(grpc::ServerContext* ctx, const v1::WatchRequest* req,
                                 grpc::ServerWriter<v1::JobEvent>* writer) {
   std::shared_ptr<Job> job = queue_.Find(req->job_id());
   if (!job) return ToGrpc(absl::NotFoundError(absl::StrCat("no job '", req->job_id(), "'")));
+  const std::set<int> have(req->have_frames().begin(), req->have_frames().end());
+  if (req->resume() && job->Resume(have)) queue_.Requeue(job);
   const bool done = job->Stream([&](const v1::JobEvent& e) { return writer->Write(e); },
-                                [&] { return ctx->IsCancelled(); });
+                                [&] { return ctx->IsCancelled(); }, have);
   return done ? grpc::Status::OK : grpc::Status(grpc::StatusCode::CANCELLED, "watcher left");
 }
 

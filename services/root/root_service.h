@@ -12,23 +12,22 @@
 
 #include "cluster.grpc.pb.h"
 #include "job_queue.h"
+#include "job_store.h"
 #include "job_runner.h"
 #include "registry.h"
 
 namespace transtick {
 
-// The runner's settings (data directory, display, rings, limits, timeouts)
-// and the queue's.
-struct RootOptions : RunnerOptions {
-  int max_jobs_kept = 32;
-  int max_queued_jobs = 1000;
-  // Image bytes a job may hold for its watchers before its frames wait.
-  uint64_t max_pending_image_bytes = uint64_t{256} << 20;
+// The runner's settings (data directory, display, rings, limits, timeouts),
+// the queue's limits and where the jobs are kept.
+struct RootOptions : RunnerOptions, JobQueueOptions {
+  std::string state_dir;  // the job store's directory; "" keeps jobs in memory only
 };
 
 class RootService final : public v1::Root::Service {
  public:
-  explicit RootService(const RootOptions& options);
+  // Opens the job store, takes up the jobs it holds and starts the runner.
+  static absl::StatusOr<std::unique_ptr<RootService>> Create(const RootOptions& options);
   ~RootService() override;
 
   // Cancels the running job, stops the runner. Idempotent.
@@ -38,7 +37,7 @@ class RootService final : public v1::Root::Service {
 
   grpc::Status Submit(grpc::ServerContext* ctx, const v1::Job* job,
                       v1::SubmitReply* reply) override;
-  grpc::Status Watch(grpc::ServerContext* ctx, const v1::JobRef* req,
+  grpc::Status Watch(grpc::ServerContext* ctx, const v1::WatchRequest* req,
                      grpc::ServerWriter<v1::JobEvent>* writer) override;
   grpc::Status Status(grpc::ServerContext* ctx, const v1::StatusRequest* req,
                       v1::StatusReply* reply) override;
@@ -50,7 +49,10 @@ class RootService final : public v1::Root::Service {
                           v1::RegisterReply* reply) override;
 
  private:
+  RootService(const RootOptions& options, std::unique_ptr<JobStore> store);
+
   const RootOptions options_;
+  std::unique_ptr<JobStore> store_;
   JobQueue queue_;
   Registry registry_;
   JobRunner runner_;  // after queue_ and registry_: it uses both
