@@ -85,6 +85,13 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
       if (IsWorkerFailure(s)) {
         registry_.Drop(members[i].worker->id, s.error_message());
         why = absl::UnavailableError(why.message());
+      } else if (s.error_code() == grpc::StatusCode::FAILED_PRECONDITION) {
+        // The worker lacks the slab the registry says it holds (evicted,
+        // or lost): the belief goes, and the retry sends the slab again.
+        spdlog::warn("{} on {}: {}; the root believed it held that slab and sends it again", what,
+                     members[i].worker->address, s.error_message());
+        registry_.ClearHeld(members[i].worker->id);
+        why = absl::UnavailableError(why.message());
       }
       if (first.ok()) first = why;
     }
