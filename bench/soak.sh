@@ -2,7 +2,8 @@
 # Memory over many jobs: a root, a display and two workers as separate
 # processes serve N jobs (default 200) submitted one after another, each
 # three views of a real head; prints every daemon's RSS after the first job
-# (warm) and after the last, and the growth. The root keeps no image after
+# (warm) and after the last, and the growth, and the size of the root's state
+# directory. The root keeps no image after
 # it is delivered, so its RSS should stay flat.
 # Usage: bench/soak.sh [BUILD_DIR] [JOBS] [SIZE]
 set -euo pipefail
@@ -24,7 +25,7 @@ dport=$(port); rport=$(port)
 "$build/services/display/transtick-display" --listen 127.0.0.1:$dport >"$dir/display.log" 2>&1 &
 pids+=($!); dpid=$!
 "$build/services/root/transtick-root" --listen 127.0.0.1:$rport --data-dir "$data" \
-  --display 127.0.0.1:$dport >"$dir/root.log" 2>&1 &
+  --state-dir "$dir/state" --display 127.0.0.1:$dport >"$dir/root.log" 2>&1 &
 pids+=($!); rpid=$!
 wpids=()
 for i in 1 2; do
@@ -62,3 +63,5 @@ show() {
 show root "$rpid"
 show display "$dpid"
 for i in "${!wpids[@]}"; do show "worker$((i + 1))" "${wpids[$i]}"; done
+printf 'root state directory (jobs.db, WAL, history of the last 32 jobs): %s\n' \
+  "$(du -sh "$dir/state" | cut -f1)"
