@@ -1,7 +1,9 @@
 #include "convert.h"
 
+#include <google/protobuf/struct.pb.h>
 #include <google/protobuf/util/json_util.h>
 
+#include <cctype>
 #include <cmath>
 #include <fstream>
 #include <sstream>
@@ -25,18 +27,112 @@ absl::StatusOr<std::string> ReadTextFile(const std::string& path, size_t max_byt
   return text;
 }
 
+namespace {
+
+// Rewrites, in the JSON `tree` of a `type` message, every enum field whose
+// value is a string to the enum's spelling: upper case, '_' for '-'
+// ("test-rays" -> "TEST_RAYS").
+void SpellEnums(google::protobuf::Value& tree, const google::protobuf::Descriptor& type) {
+  if (!tree.has_struct_value()) return;
+  for (auto& [key, value] : *tree.mutable_struct_value()->mutable_fields()) {
+    const google::protobuf::FieldDescriptor* f = type.FindFieldByName(key);
+    for (int i = 0; f == nullptr && i < type.field_count(); ++i) {
+      if (type.field(i)->json_name() == key) f = type.field(i);
+    }
+    if (f == nullptr || f->is_map()) continue;
+    auto fix = [&](google::protobuf::Value& v) {
+      if (f->type() == google::protobuf::FieldDescriptor::TYPE_ENUM && v.has_string_value()) {
+        std::string name = v.string_value();
+        for (char& c : name) c = c == '-' ? '_' : static_cast<char>(std::toupper(c));
+        v.set_string_value(name);
+      } else if (f->type() == google::protobuf::FieldDescriptor::TYPE_MESSAGE) {
+        SpellEnums(v, *f->message_type());
+      }
+    };
+    if (f->is_repeated() && value.has_list_value()) {
+      for (auto& v : *value.mutable_list_value()->mutable_values()) fix(v);
+    } else {
+      fix(value);
+    }
+  }
+}
+
+}  // namespace
+
 absl::Status ParseJson(std::string_view json, const std::string& source,
                        google::protobuf::Message* message) {
   google::protobuf::util::JsonParseOptions options;
   options.ignore_unknown_fields = false;
-  auto status = google::protobuf::util::JsonStringToMessage(
-      google::protobuf::StringPiece(json.data(), json.size()), message, options);
+  const google::protobuf::StringPiece text(json.data(), json.size());
+  auto status = google::protobuf::util::JsonStringToMessage(text, message, options);
   if (!status.ok()) {
+    // Enum values as job files wrote them when they were strings.
+    google::protobuf::Value tree;
+    std::string respelled;
+    if (google::protobuf::util::JsonStringToMessage(text, &tree).ok()) {
+      SpellEnums(tree, *message->GetDescriptor());
+      if (google::protobuf::util::MessageToJsonString(tree, &respelled).ok()) {
+        message->Clear();
+        if (google::protobuf::util::JsonStringToMessage(respelled, message, options).ok()) {
+          return absl::OkStatus();
+        }
+      }
+    }
+    message->Clear();
     return absl::InvalidArgumentError(absl::StrCat(source, ": not a valid ",
                                                    message->GetDescriptor()->name(), ": ",
                                                    std::string(status.message())));
   }
   return absl::OkStatus();
+}
+
+absl::StatusOr<int> ParseEnumValue(const google::protobuf::EnumDescriptor& type,
+                                   std::string_view name, std::string_view what) {
+  if (name.empty()) return 0;
+  std::string spelled(name);
+  for (char& c : spelled) c = c == '-' ? '_' : static_cast<char>(std::toupper(c));
+  const google::protobuf::EnumValueDescriptor* v = type.FindValueByName(spelled);
+  if (v != nullptr && v->number() != 0) return v->number();
+  std::string names;
+  for (int i = 0; i < type.value_count(); ++i) {
+    if (type.value(i)->number() == 0) continue;
+    absl::StrAppend(&names, names.empty() ? "" : ", ",
+                    EnumValueName(type, type.value(i)->number()));
+  }
+  return absl::InvalidArgumentError(
+      absl::StrCat(std::string(what), " '", std::string(name), "' is not one of ", names));
+}
+
+std::string EnumValueName(const google::protobuf::EnumDescriptor& type, int value) {
+  const google::protobuf::EnumValueDescriptor* v = type.FindValueByNumber(value);
+  if (v == nullptr) return absl::StrCat(value);
+  std::string name = v->name();
+  for (char& c : name) c = c == '_' ? '-' : static_cast<char>(std::tolower(c));
+  return name;
+}
+
+absl::StatusOr<v1::BalanceMode> EffectiveBalance(const v1::Job& job, const v1::View& view) {
+  for (v1::BalanceMode m : {view.balance(), job.balance()}) {
+    if (!v1::BalanceMode_IsValid(m)) {
+      return absl::InvalidArgumentError(absl::StrCat("balance ", static_cast<int>(m),
+                                                     " is not a balancing mode"));
+    }
+  }
+  if (view.balance() != v1::BALANCE_DEFAULT) return view.balance();
+  return job.balance() == v1::BALANCE_DEFAULT ? v1::OFF : job.balance();
+}
+
+absl::StatusOr<BalanceRule> ToBalanceRule(v1::BalanceRule rule) {
+  switch (rule) {
+    case v1::BALANCE_RULE_DEFAULT:
+    case v1::COST:
+      return BalanceRule::kCost;
+    case v1::PAPER:
+      return BalanceRule::kPaper;
+    default:
+      return absl::InvalidArgumentError(
+          absl::StrCat("balance_rule ", static_cast<int>(rule), " is not a rule"));
+  }
 }
 
 absl::StatusOr<Classification> ToClassification(const v1::MaterialSet& set) {
@@ -117,13 +213,17 @@ absl::StatusOr<TransferFunction> LoadTransferFunction(const std::string& path) {
 
 absl::StatusOr<CameraSpec> ToCameraSpec(const v1::View& v) {
   CameraSpec c;
-  if (v.projection().empty() || v.projection() == "perspective") {
-    c.projection = Projection::kPerspective;
-  } else if (v.projection() == "orthographic") {
-    c.projection = Projection::kOrthographic;
-  } else {
-    return absl::InvalidArgumentError(
-        absl::StrCat("projection '", v.projection(), "' is not perspective or orthographic"));
+  switch (v.projection()) {
+    case v1::PROJECTION_DEFAULT:
+    case v1::PERSPECTIVE:
+      c.projection = Projection::kPerspective;
+      break;
+    case v1::ORTHOGRAPHIC:
+      c.projection = Projection::kOrthographic;
+      break;
+    default:
+      return absl::InvalidArgumentError(absl::StrCat(
+          "projection ", static_cast<int>(v.projection()), " is not perspective or orthographic"));
   }
   c.azimuth_deg = v.azimuth();
   c.elevation_deg = v.elevation();

@@ -11,6 +11,7 @@
 #include "transtick.pb.h"
 #include "transtick/camera.h"
 #include "transtick/classification.h"
+#include "transtick/partition.h"
 #include "transtick/tracer.h"
 
 namespace transtick {
@@ -34,6 +35,30 @@ absl::StatusOr<TransferFunction> LoadTransferFunction(const std::string& path);
 // does not: the projection name, vector lengths, finite numbers.
 absl::StatusOr<CameraSpec> ToCameraSpec(const v1::View& view);
 RenderSettings ToRenderSettings(const v1::View& view);
+
+// A proto enum's value by name as job files and the command's flags spell
+// it, "test-rays" or "TEST_RAYS" ("" is the enum's 0, its default). Errors
+// name `what` and the values that exist.
+absl::StatusOr<int> ParseEnumValue(const google::protobuf::EnumDescriptor& type,
+                                   std::string_view name, std::string_view what);
+template <typename E>
+absl::StatusOr<E> ParseEnum(std::string_view name, std::string_view what) {
+  auto v = ParseEnumValue(*google::protobuf::GetEnumDescriptor<E>(), name, what);
+  if (!v.ok()) return v.status();
+  return static_cast<E>(*v);
+}
+// A value's name in lower case with hyphens ("test-rays"), for logs and
+// messages; its number when the enum has no such value.
+std::string EnumValueName(const google::protobuf::EnumDescriptor& type, int value);
+template <typename E>
+std::string EnumName(E value) {
+  return EnumValueName(*google::protobuf::GetEnumDescriptor<E>(), static_cast<int>(value));
+}
+
+// The balancing of a view: its own, or else its job's (OFF when neither
+// says). Fails on a value this build does not know.
+absl::StatusOr<v1::BalanceMode> EffectiveBalance(const v1::Job& job, const v1::View& view);
+absl::StatusOr<BalanceRule> ToBalanceRule(v1::BalanceRule rule);
 
 // Protobuf JSON with the field names as written in the .proto.
 std::string ToJson(const google::protobuf::Message& message);

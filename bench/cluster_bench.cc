@@ -198,7 +198,7 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> RunFrames(const std::string& 
                                                              int grid = 0) {
   v1::Job job;
   job.set_name("bench");
-  if (!balance.empty()) job.set_balance(balance);
+  if (!balance.empty()) job.set_balance(*ParseEnum<v1::BalanceMode>(balance, "--balance"));
   job.set_balance_grid(grid);
   v1::Dataset* d = job.add_datasets();
   d->set_volume(s.file);

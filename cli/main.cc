@@ -17,9 +17,9 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
-#include "clock.h"
 #include "absl/strings/str_split.h"
 #include "client.h"
+#include "clock.h"
 #include "cluster.grpc.pb.h"
 #include "convert.h"
 #include "flags.h"
@@ -171,7 +171,9 @@ absl::StatusOr<v1::View> ViewFromFlags(const Flags& flags) {
   v.set_fov(*fov);
   if (*step < 0) return absl::InvalidArgumentError("--step must be positive");
   v.set_step(*step);
-  v.set_projection(flags.Get("projection", "perspective"));
+  auto projection = ParseEnum<v1::Projection>(flags.Get("projection", "perspective"), "--projection");
+  if (!projection.ok()) return projection.status();
+  v.set_projection(*projection);
   if (flags.Has("eye") || flags.Has("target")) {
     if (!flags.Has("eye") || !flags.Has("target")) {
       return absl::InvalidArgumentError("--eye and --target go together");
@@ -296,7 +298,7 @@ void PrintClusterFrame(const v1::ClusterFrameStats& fs) {
   std::fprintf(stderr, "frame %dx%d in %.1f ms on %d workers (%d ring%s), max/mean active %.2f\n",
                fs.width(), fs.height(), fs.frame_ms(), fs.workers_size(), fs.rings(),
                fs.rings() == 1 ? "" : "s", fs.active_imbalance());
-  if (fs.balance() != "off") {
+  if (fs.balance() != v1::OFF) {
     // Each ring's cuts run from 0 to the number of planes: "[0 64 128] [0 70 128]".
     auto rings = [](const google::protobuf::RepeatedField<int32_t>& cuts) {
       std::string out;
@@ -308,7 +310,7 @@ void PrintClusterFrame(const v1::ClusterFrameStats& fs) {
       return cuts.empty() ? out : out + "]";
     };
     std::fprintf(stderr, "  balance %s: cuts %s -> %s, %.1f ms, %d planes moved\n",
-                 fs.balance().c_str(), rings(fs.cuts_before()).c_str(),
+                 EnumName(fs.balance()).c_str(), rings(fs.cuts_before()).c_str(),
                  rings(fs.cuts_after()).c_str(), fs.balance_ms(), fs.planes_moved());
   }
   for (const auto& w : fs.workers()) {
@@ -442,11 +444,15 @@ int Render(int argc, char** argv) {
   v1::Job job;
   job.set_name("render");
   *job.add_datasets() = dataset;
-  job.set_balance(flags->Get("balance", "off"));
+  auto balance = ParseEnum<v1::BalanceMode>(flags->Get("balance", "off"), "--balance");
+  if (!balance.ok()) return fail(balance.status());
+  job.set_balance(*balance);
   auto grid = flags->GetInt("balance-grid", 32);
   if (!grid.ok()) return fail(grid.status());
   job.set_balance_grid(*grid);
-  job.set_balance_rule(flags->Get("balance-rule", "cost"));
+  auto rule = ParseEnum<v1::BalanceRule>(flags->Get("balance-rule", "cost"), "--balance-rule");
+  if (!rule.ok()) return fail(rule.status());
+  job.set_balance_rule(*rule);
   WatchOptions wo;
   wo.progress = isatty(STDERR_FILENO);
   auto stats = SubmitAndWatch(root, job, wo);

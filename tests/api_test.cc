@@ -1,5 +1,6 @@
 #include <fstream>
 
+#include "absl/strings/str_cat.h"
 #include "convert.h"
 #include "gtest/gtest.h"
 #include "testing.h"
@@ -26,6 +27,50 @@ TEST(ApiTest, LoadsMaterialsWithDefaults) {
   EXPECT_EQ(c->Classify(1500), 1);
   EXPECT_EQ(c->Classify(1900), 2);
   EXPECT_EQ(c->Classify(100), 0);
+}
+
+// Balancing, cut rules and projections are enums; job files keep the
+// spelling they had as strings.
+TEST(ApiTest, EnumsReadAsJobFilesWroteThem) {
+  for (const char* balance : {"test-rays", "TEST_RAYS", "Test-Rays"}) {
+    v1::Job job;
+    const std::string json = absl::StrCat(R"({"name":"j","balance":")", balance,
+                                          R"(","balance_rule":"paper","datasets":[{"volume":"v",)",
+                                          R"("views":[{"projection":"orthographic",)",
+                                          R"("balance":"previous-frame"},{"width":3}]}]})");
+    ASSERT_TRUE(ParseJson(json, "job.json", &job).ok()) << balance;
+    EXPECT_EQ(job.balance(), v1::TEST_RAYS);
+    EXPECT_EQ(job.balance_rule(), v1::PAPER);
+    EXPECT_EQ(job.datasets(0).views(0).projection(), v1::ORTHOGRAPHIC);
+    EXPECT_EQ(job.datasets(0).views(0).balance(), v1::PREVIOUS_FRAME);
+    EXPECT_EQ(job.datasets(0).views(1).width(), 3);
+    EXPECT_EQ(*EffectiveBalance(job, job.datasets(0).views(0)), v1::PREVIOUS_FRAME);
+    EXPECT_EQ(*EffectiveBalance(job, job.datasets(0).views(1)), v1::TEST_RAYS);
+  }
+  v1::Job job;
+  EXPECT_EQ(*EffectiveBalance(job, v1::View()), v1::OFF) << "neither says: off";
+  // A wrong name is still an error naming the file.
+  absl::Status bad = ParseJson(R"({"balance":"magic"})", "job.json", &job);
+  EXPECT_FALSE(bad.ok());
+  EXPECT_NE(bad.message().find("job.json"), std::string::npos) << bad;
+  // Flags name the values that exist.
+  auto flag = ParseEnum<v1::BalanceMode>("magic", "--balance");
+  ASSERT_FALSE(flag.ok());
+  EXPECT_EQ(flag.status().message(),
+            "--balance 'magic' is not one of off, test-rays, previous-frame");
+  EXPECT_EQ(*ParseEnum<v1::BalanceMode>("", "--balance"), v1::BALANCE_DEFAULT);
+  EXPECT_EQ(*ParseEnum<v1::Projection>("orthographic", "--projection"), v1::ORTHOGRAPHIC);
+  EXPECT_FALSE(ParseEnum<v1::Projection>("projection-default", "--projection").ok())
+      << "the 0 value is not a name users write";
+  EXPECT_EQ(EnumName(v1::PREVIOUS_FRAME), "previous-frame");
+  EXPECT_EQ(EnumName(static_cast<v1::BalanceMode>(77)), "77");
+  // A value this build does not know (from a newer client) is refused.
+  v1::View future;
+  future.set_balance(static_cast<v1::BalanceMode>(9));
+  EXPECT_FALSE(EffectiveBalance(job, future).ok());
+  future.set_projection(static_cast<v1::Projection>(9));
+  EXPECT_FALSE(ToCameraSpec(future).ok());
+  EXPECT_FALSE(ToBalanceRule(static_cast<v1::BalanceRule>(9)).ok());
 }
 
 TEST(ApiTest, BadMaterialsNameTheProblem) {

@@ -198,7 +198,7 @@ TEST_F(ClusterTest, BalancingAndRingsNeverChangeTheImage) {
         dvr->set_volume(volume_);
         *dvr->mutable_transfer() = Transfer();
         for (const auto& v : dvr_views) *dvr->add_views() = v;
-        job.set_balance(balance);
+        job.set_balance(*ParseEnum<v1::BalanceMode>(balance, "balance"));
         job.set_balance_grid(8);
         auto stats = SubmitAndWatch((*cluster)->root_address(), job, WatchOptions{});
         ASSERT_TRUE(stats.ok()) << stats.status();
@@ -264,7 +264,7 @@ TEST_F(ClusterTest, BalancingEvensOutConcentratedContent) {
     v1::Job job = MakeJob({view});
     job.mutable_datasets(0)->set_volume(file);
     *job.mutable_datasets(0)->mutable_materials() = FaintMaterials();
-    job.set_balance(balance);
+    job.set_balance(*ParseEnum<v1::BalanceMode>(balance, "balance"));
     // The view's own 160x160 rays as test rays: the default 32x32 measure
     // too little CPU time to place the cuts reliably on a loaded machine
     // (a cut at 36 was seen under a parallel build).
@@ -304,7 +304,7 @@ TEST_F(ClusterTest, PreviousFrameBalancingCarriesCutsForward) {
   v1::View a = View(0, 0, true, "p0.exr"), b = View(10, 0, true, "p1.exr");
   v1::Job job = MakeJob({a, b});
   job.mutable_datasets(0)->set_volume(file);
-  job.set_balance("previous-frame");
+  job.set_balance(v1::PREVIOUS_FRAME);
   auto stats = SubmitAndWatch((*cluster)->root_address(), job, WatchOptions{});
   ASSERT_TRUE(stats.ok()) << stats.status();
   ASSERT_EQ(stats->size(), 2u);
@@ -416,7 +416,7 @@ TEST_F(ClusterTest, ConcurrentClientsAllComplete) {
   for (int c = 0; c < kClients; ++c) {
     clients.emplace_back([&, c] {
       v1::Job job = MakeJob({views[c], views[c]});
-      job.set_balance(c == 2 ? "test-rays" : "off");
+      job.set_balance(c == 2 ? v1::TEST_RAYS : v1::OFF);
       auto stats = SubmitAndWatch((*cluster)->root_address(), job, WatchOptions{});
       results[c] = stats.status();
       if (stats.ok() && stats->size() != 2) results[c] = absl::InternalError("frames missing");

@@ -33,13 +33,6 @@ std::vector<int> UniformCuts(int planes, int slabs) {
   return cuts;
 }
 
-absl::StatusOr<BalanceRule> ParseBalanceRule(std::string_view name) {
-  if (name.empty() || name == "cost") return BalanceRule::kCost;
-  if (name == "paper") return BalanceRule::kPaper;
-  return absl::InvalidArgumentError(
-      absl::StrCat("balance rule '", std::string(name), "' is not 'cost' or 'paper'"));
-}
-
 bool ValidCuts(const std::vector<int>& cuts, int planes, int slabs) {
   if (static_cast<int>(cuts.size()) != slabs + 1 || cuts.front() != 0 || cuts.back() != planes) {
     return false;

@@ -57,7 +57,7 @@ class Off : public Balancer {
  public:
   absl::Status Plan(const v1::View&, BalanceMemory&, Layout&, const Prerender&,
                     BalanceReport* report) override {
-    report->mode = "off";
+    report->mode = v1::OFF;
     return absl::OkStatus();
   }
 };
@@ -69,7 +69,7 @@ class TestRays : public Balancer {
 
   absl::Status Plan(const v1::View& view, BalanceMemory& memory, Layout& layout,
                     const Prerender& prerender, BalanceReport* report) override {
-    report->mode = "test-rays";
+    report->mode = v1::TEST_RAYS;
     const int planes = Planes(layout);
     auto cached = memory.view_cuts.find(ViewKey(view));
     if (cached != memory.view_cuts.end()) {
@@ -118,7 +118,7 @@ class PreviousFrame : public Balancer {
 
   absl::Status Plan(const v1::View&, BalanceMemory& memory, Layout& layout, const Prerender&,
                     BalanceReport* report) override {
-    report->mode = "previous-frame";
+    report->mode = v1::PREVIOUS_FRAME;
     if (!memory.next_cuts.empty()) layout.SetCuts(memory.next_cuts, Planes(layout));
     report->cuts_before = report->cuts_after = layout.Cuts();
     return absl::OkStatus();
@@ -141,20 +141,15 @@ void Balancer::Learn(const FrameResult&, const Layout& layout, BalanceMemory& me
   memory.next_cuts = layout.Cuts();
 }
 
-absl::Status CheckBalanceMode(std::string_view mode) {
-  if (mode.empty() || mode == "off" || mode == "test-rays" || mode == "previous-frame") {
-    return absl::OkStatus();
+std::unique_ptr<Balancer> MakeBalancer(v1::BalanceMode mode, BalanceRule rule, int grid) {
+  switch (mode) {
+    case v1::TEST_RAYS:
+      return std::make_unique<TestRays>(rule, grid);
+    case v1::PREVIOUS_FRAME:
+      return std::make_unique<PreviousFrame>(rule);
+    default:
+      return std::make_unique<Off>();
   }
-  return absl::InvalidArgumentError(absl::StrCat(
-      "balance '", std::string(mode), "' is not 'off', 'test-rays' or 'previous-frame'"));
-}
-
-absl::StatusOr<std::unique_ptr<Balancer>> MakeBalancer(std::string_view mode, BalanceRule rule,
-                                                       int grid) {
-  if (absl::Status s = CheckBalanceMode(mode); !s.ok()) return s;
-  if (mode == "test-rays") return std::make_unique<TestRays>(rule, grid);
-  if (mode == "previous-frame") return std::make_unique<PreviousFrame>(rule);
-  return std::make_unique<Off>();
 }
 
 std::string ViewKey(const v1::View& view) {

@@ -1,8 +1,8 @@
 // Static load balancing of a frame's slabs (docs/balancing.md) as policies:
-// "off" keeps the uniform cuts, "test-rays" re-cuts from a prerender of
-// test rays through the same camera (the paper's section 3.4) and reuses
-// the cuts for the same view, "previous-frame" re-cuts the next frame from
-// this frame's costs. Used by the runner thread only.
+// OFF keeps the uniform cuts, TEST_RAYS re-cuts from a prerender of test
+// rays through the same camera (the paper's section 3.4) and reuses the
+// cuts for the same view, PREVIOUS_FRAME re-cuts the next frame from this
+// frame's costs. Used by the runner thread only.
 #ifndef TRANSTICK_SERVICES_ROOT_BALANCER_H_
 #define TRANSTICK_SERVICES_ROOT_BALANCER_H_
 
@@ -25,7 +25,7 @@ namespace transtick {
 // What balancing did for a frame, for its statistics.
 struct BalanceReport {
   std::string job_id;  // for the log
-  std::string mode;
+  v1::BalanceMode mode = v1::OFF;
   std::vector<std::vector<int>> cuts_before, cuts_after;
   std::map<std::string, double> test_ray_ms;  // by worker id
   double balance_ms = 0;
@@ -50,11 +50,9 @@ class Balancer {
                      BalanceReport* report);
 };
 
-// The policy named `mode` ("", "off", "test-rays", "previous-frame"), or an
-// error naming the modes. `grid` is the test-ray grid (0: the default).
-absl::StatusOr<std::unique_ptr<Balancer>> MakeBalancer(std::string_view mode, BalanceRule rule,
-                                                       int grid);
-absl::Status CheckBalanceMode(std::string_view mode);
+// The policy for `mode` (BALANCE_DEFAULT is OFF). `grid` is the test-ray
+// grid (0: the default).
+std::unique_ptr<Balancer> MakeBalancer(v1::BalanceMode mode, BalanceRule rule, int grid);
 
 // The view as it determines the image's rays: what balancing cuts depend on.
 std::string ViewKey(const v1::View& view);

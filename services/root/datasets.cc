@@ -8,9 +8,9 @@
 #include <filesystem>
 
 #include "absl/strings/str_cat.h"
-#include "clock.h"
 #include "absl/strings/str_format.h"
 #include "balancer.h"
+#include "clock.h"
 #include "convert.h"
 #include "transtick/image_io.h"
 #include "transtick/partition.h"
@@ -27,12 +27,7 @@ absl::Status Datasets::Validate(const v1::Job& job) const {
   if (job.balance_grid() < 0 || job.balance_grid() > 256) {
     return absl::InvalidArgumentError("job: balance_grid must be in [0, 256]");
   }
-  auto balance_mode = [](const std::string& where, const std::string& mode) {
-    absl::Status s = CheckBalanceMode(mode);
-    return s.ok() ? s : absl::InvalidArgumentError(absl::StrCat(where, ": ", s.message()));
-  };
-  if (auto s = balance_mode("job", job.balance()); !s.ok()) return s;
-  if (auto r = ParseBalanceRule(job.balance_rule()); !r.ok()) {
+  if (auto r = ToBalanceRule(job.balance_rule()); !r.ok()) {
     return absl::InvalidArgumentError(absl::StrCat("job: ", r.status().message()));
   }
   int views = 0;
@@ -87,7 +82,9 @@ absl::Status Datasets::Validate(const v1::Job& job) const {
       if (auto c = ToCameraSpec(view); !c.ok()) {
         return absl::InvalidArgumentError(absl::StrCat(vw, ": ", c.status().message()));
       }
-      if (auto s = balance_mode(vw, view.balance()); !s.ok()) return s;
+      if (auto m = EffectiveBalance(job, view); !m.ok()) {
+        return absl::InvalidArgumentError(absl::StrCat(vw, ": ", m.status().message()));
+      }
       if (!view.output().empty() && !IsSupportedImagePath(view.output())) {
         return absl::InvalidArgumentError(absl::StrCat(vw, ": output '", view.output(),
                                                        "' is not one of ", SupportedImageList()));

@@ -88,10 +88,11 @@ absl::Status JobRunner::RunJob(Job& job) {
 absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data) {
   const int d = job.key(frame).dataset, v = job.key(frame).view;
   const v1::View& view = job.spec().datasets(d).views(v);
-  const std::string mode = view.balance().empty() ? job.spec().balance() : view.balance();
-  const BalanceRule rule = *ParseBalanceRule(job.spec().balance_rule());
-  auto balancer = MakeBalancer(mode, rule, job.spec().balance_grid());
-  if (!balancer.ok()) return balancer.status();
+  auto mode = EffectiveBalance(job.spec(), view);
+  if (!mode.ok()) return mode.status();
+  auto rule = ToBalanceRule(job.spec().balance_rule());
+  if (!rule.ok()) return rule.status();
+  std::unique_ptr<Balancer> balancer = MakeBalancer(*mode, *rule, job.spec().balance_grid());
   const int planes = data.scene.dims()[1];
   if (absl::Status s =
           CheckRenderSettings(ToRenderSettings(view), data.scene.mode(), data.scene.dims(),
@@ -120,7 +121,7 @@ absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data) {
     report.job_id = job.id();
     const auto balance_start = Clock::now();
     bool prerendered = false;
-    status = (*balancer)->Plan(
+    status = balancer->Plan(
         view, data.balance, layout,
         [&](const v1::View& test, Layout& probe) -> absl::StatusOr<FrameResult> {
           prerendered = true;
@@ -179,7 +180,7 @@ absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data) {
       spdlog::warn("{}: frame failed ({}); retrying", job.id(), std::string(status.message()));
       continue;
     }
-    (*balancer)->Learn(*result, layout, data.balance, &report);
+    balancer->Learn(*result, layout, data.balance, &report);
     if (!held) return absl::InternalError("frame ended without its image");
     return PublishStats(job, d, v, layout, *result, report, *std::move(held));
   }
@@ -233,7 +234,8 @@ absl::Status JobRunner::PublishStats(Job& job, int d, int v, const Layout& layou
       "frame {} ({} {}/{}): {}x{} in {:.1f} ms on {} workers in {} ring(s); {} rays traced; "
       "max/mean active {:.2f}; balance {}",
       frame.frame_id, job.id(), d, v, view.width(), view.height(), frame.frame_ms,
-      frame.workers.size(), layout.rings.size(), rays, fs.active_imbalance(), balance.mode);
+      frame.workers.size(), layout.rings.size(), rays, fs.active_imbalance(),
+      EnumName(balance.mode));
   const auto& o = queue_.options();
   return job.PublishImage(std::move(last_chunk), o.max_pending_image_bytes, o.image_wait);
 }

@@ -26,7 +26,6 @@ enum class BalanceRule {
   kPaper,
 };
 
-absl::StatusOr<BalanceRule> ParseBalanceRule(std::string_view name);
 
 // New cuts for the same number of slabs and planes, from the measured cost
 // of each slab under `cuts`. Returns `cuts` unchanged when the costs carry no
