@@ -259,6 +259,12 @@ absl::StatusOr<CameraSpec> ToCameraSpec(const v1::View& v) {
   return c;
 }
 
+absl::StatusOr<FrameRequest> ToFrameRequest(const v1::View& view) {
+  auto camera = ToCameraSpec(view);
+  if (!camera.ok()) return camera.status();
+  return FrameRequest{*camera, ToRenderSettings(view)};
+}
+
 RenderSettings ToRenderSettings(const v1::View& v) {
   RenderSettings s;
   s.shadows = !v.has_shadows() || v.shadows();

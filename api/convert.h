@@ -12,6 +12,7 @@
 #include "transtick/camera.h"
 #include "transtick/classification.h"
 #include "transtick/partition.h"
+#include "transtick/render.h"
 #include "transtick/tracer.h"
 
 namespace transtick {
@@ -35,6 +36,8 @@ absl::StatusOr<TransferFunction> LoadTransferFunction(const std::string& path);
 // does not: the projection name, vector lengths, finite numbers.
 absl::StatusOr<CameraSpec> ToCameraSpec(const v1::View& view);
 RenderSettings ToRenderSettings(const v1::View& view);
+// Both at once.
+absl::StatusOr<FrameRequest> ToFrameRequest(const v1::View& view);
 
 // A proto enum's value by name as job files and the command's flags spell
 // it, "test-rays" or "TEST_RAYS" ("" is the enum's 0, its default). Errors

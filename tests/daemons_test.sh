@@ -168,8 +168,13 @@ queued_t=$(grep -c "queued: 't'" "$dir/root.log")
 timeout 180 "$T" submit "$dir/job.json" --root 127.0.0.1:$rport --out-dir "$dir/out" \
   >"$dir/submit5b.log" 2>&1 &
 spid2=$!
-for _ in $(seq 600); do
-  (($(ls "$dir/out" | grep -c '^turn') >= 5 && $(grep -c "queued: 't'" "$dir/root.log") > queued_t)) && break
+for _ in $(seq 1200); do
+  (($(grep -c "queued: 't'" "$dir/root.log") > queued_t)) && break
+  sleep 0.05
+done
+(($(grep -c "queued: 't'" "$dir/root.log") > queued_t)) || fail "the second job was not queued within 60 s"
+for _ in $(seq 1200); do
+  (($(ls "$dir/out" | grep -c '^turn') >= 5)) && break
   sleep 0.05
 done
 turn_job=$(grep "queued: 'turn'" "$dir/root.log" | grep -o 'job-[0-9]*' | tail -1)
@@ -209,7 +214,8 @@ echo "root restart: $saved_before frames saved before the kill, $delivered recor
 if [[ -z $delivered ]] || ((delivered < 1 || rendered > 40 - delivered + 2 || delivered > saved_before)); then
   fail "resume after a root restart: $delivered of 40 delivered, $rendered rendered again"
 fi
-grep -q "recovered: 0 of 1 frames delivered" "$dir/root2.log" || fail "the queued job was not recovered"
+grep -q "recovered: 0 of 1 frames delivered" "$dir/root2.log" ||
+  fail "the queued job was not recovered: $(grep -h "queued\|recovered" "$dir/root.log" "$dir/root2.log" | tail -5)"
 
 # The display killed in the middle of a job and started again: the root
 # retries the frame with backoff until it is back, and the job completes.

@@ -32,6 +32,8 @@ v1::Job MakeJob(int views, int width = 32, int height = 24) {
   return job;
 }
 
+absl::StatusOr<JobPlan> AnyPlan(const v1::Job&) { return JobPlan{}; }
+
 std::string FreshDir(const std::string& name) {
   const std::string dir = testing::TempDir() + "/" + name;
   std::filesystem::remove_all(dir);
@@ -160,12 +162,12 @@ TEST(JobQueueTest, ARestartRunsUnfinishedJobsAndOnlyTheirUndeliveredFrames) {
     auto store = JobStore::Open(dir);
     ASSERT_TRUE(store.ok());
     JobQueue queue(JobQueueOptions{}, **store);
-    ASSERT_TRUE(queue.Recover().ok());
+    ASSERT_TRUE(queue.Recover(AnyPlan).ok());
     int position;
-    auto done = queue.Submit(MakeJob(2), "a", &position);
-    auto running = queue.Submit(MakeJob(4), "a", &position);
-    auto queued = queue.Submit(MakeJob(1), "a", &position);
-    auto cancelled = queue.Submit(MakeJob(3), "a", &position);
+    auto done = queue.Submit(MakeJob(2), {}, "a", &position);
+    auto running = queue.Submit(MakeJob(4), {}, "a", &position);
+    auto queued = queue.Submit(MakeJob(1), {}, "a", &position);
+    auto cancelled = queue.Submit(MakeJob(3), {}, "a", &position);
     ASSERT_TRUE(done.ok() && running.ok() && queued.ok() && cancelled.ok());
     EXPECT_EQ(position, 3);
     done_id = (*done)->id();
@@ -200,7 +202,7 @@ TEST(JobQueueTest, ARestartRunsUnfinishedJobsAndOnlyTheirUndeliveredFrames) {
   auto store = JobStore::Open(dir);
   ASSERT_TRUE(store.ok()) << store.status();
   JobQueue queue(JobQueueOptions{}, **store);
-  ASSERT_TRUE(queue.Recover().ok());
+  ASSERT_TRUE(queue.Recover(AnyPlan).ok());
   std::map<std::string, v1::JobState> states;
   for (const auto& s : queue.Summaries()) states[s.job_id()] = s.state();
   EXPECT_EQ(states[done_id], v1::DONE);
@@ -218,7 +220,7 @@ TEST(JobQueueTest, ARestartRunsUnfinishedJobsAndOnlyTheirUndeliveredFrames) {
   EXPECT_EQ(queue.Next()->id(), queued_id);
   // A new job gets a new id.
   int position;
-  auto fresh = queue.Submit(MakeJob(1), "a", &position);
+  auto fresh = queue.Submit(MakeJob(1), {}, "a", &position);
   ASSERT_TRUE(fresh.ok());
   for (const std::string& id : {done_id, running_id, queued_id, cancelled_id}) {
     EXPECT_NE((*fresh)->id(), id);
@@ -233,7 +235,7 @@ TEST(JobQueueTest, AStoppingRootLeavesItsJobsToTheNext) {
     ASSERT_TRUE(store.ok());
     JobQueue queue(JobQueueOptions{}, **store);
     int position;
-    auto job = queue.Submit(MakeJob(2), "a", &position);
+    auto job = queue.Submit(MakeJob(2), {}, "a", &position);
     ASSERT_TRUE(job.ok());
     id = (*job)->id();
     ASSERT_EQ(queue.Next(), *job);
@@ -247,11 +249,37 @@ TEST(JobQueueTest, AStoppingRootLeavesItsJobsToTheNext) {
   auto store = JobStore::Open(dir);
   ASSERT_TRUE(store.ok());
   JobQueue queue(JobQueueOptions{}, **store);
-  ASSERT_TRUE(queue.Recover().ok());
+  ASSERT_TRUE(queue.Recover(AnyPlan).ok());
   auto job = queue.Next();
   ASSERT_NE(job, nullptr);
   EXPECT_EQ(job->id(), id);
   EXPECT_EQ(job->NextFrame(), 0);
+}
+
+TEST(JobQueueTest, ARecoveredJobThatNoLongerPlansFailsSayingWhy) {
+  const std::string dir = FreshDir("queue_replan");
+  {
+    auto store = JobStore::Open(dir);
+    ASSERT_TRUE(store.ok());
+    JobQueue queue(JobQueueOptions{}, **store);
+    int position;
+    ASSERT_TRUE(queue.Submit(MakeJob(2), {}, "a", &position).ok());
+  }
+  auto store = JobStore::Open(dir);
+  ASSERT_TRUE(store.ok());
+  JobQueue queue(JobQueueOptions{}, **store);
+  ASSERT_TRUE(queue.Recover([](const v1::Job&) -> absl::StatusOr<JobPlan> {
+                     return absl::NotFoundError("datasets[0]: volume 'v.nrrd' not found");
+                   }).ok());
+  auto summaries = queue.Summaries();
+  ASSERT_EQ(summaries.size(), 1u);
+  EXPECT_EQ(summaries[0].state(), v1::FAILED);
+  EXPECT_NE(summaries[0].error().find("v.nrrd' not found"), std::string::npos)
+      << summaries[0].error();
+  // ... and that is what the store says now.
+  auto stored = (*store)->Load();
+  ASSERT_TRUE(stored.ok());
+  EXPECT_EQ((*stored)[0].state, v1::FAILED);
 }
 
 TEST(JobQueueTest, LimitsPerClientAndPerJob) {
@@ -263,22 +291,22 @@ TEST(JobQueueTest, LimitsPerClientAndPerJob) {
   o.max_job_pixels = 100 * 100 * 4;
   JobQueue queue(o, **store);
   int position;
-  ASSERT_TRUE(queue.Submit(MakeJob(1), "a", &position).ok());
-  ASSERT_TRUE(queue.Submit(MakeJob(1), "a", &position).ok());
-  auto third = queue.Submit(MakeJob(1), "a", &position);
+  ASSERT_TRUE(queue.Submit(MakeJob(1), {}, "a", &position).ok());
+  ASSERT_TRUE(queue.Submit(MakeJob(1), {}, "a", &position).ok());
+  auto third = queue.Submit(MakeJob(1), {}, "a", &position);
   EXPECT_EQ(third.status().code(), absl::StatusCode::kResourceExhausted);
   EXPECT_NE(third.status().message().find("you have 2 jobs queued or running"), std::string::npos)
       << third.status();
-  ASSERT_TRUE(queue.Submit(MakeJob(1), "b", &position).ok()) << "another client is not held up";
-  EXPECT_EQ(queue.Submit(MakeJob(1), "c", &position).status().code(),
+  ASSERT_TRUE(queue.Submit(MakeJob(1), {}, "b", &position).ok()) << "another client is not held up";
+  EXPECT_EQ(queue.Submit(MakeJob(1), {}, "c", &position).status().code(),
             absl::StatusCode::kResourceExhausted)
       << "the queue holds 3";
   // A finished job no longer counts against its client.
   auto first = queue.Next();
   RunAll(*first);
-  EXPECT_TRUE(queue.Submit(MakeJob(1), "a", &position).ok());
+  EXPECT_TRUE(queue.Submit(MakeJob(1), {}, "a", &position).ok());
 
-  auto big = queue.Submit(MakeJob(5, 100, 100), "d", &position);
+  auto big = queue.Submit(MakeJob(5, 100, 100), {}, "d", &position);
   EXPECT_EQ(big.status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(big.status().message().find("50000 pixels"), std::string::npos) << big.status();
   EXPECT_NE(big.status().message().find("at most 40000"), std::string::npos) << big.status();
@@ -289,7 +317,7 @@ TEST(JobQueueTest, AResumingWatcherGetsTheFramesItLacksRenderedAgain) {
   ASSERT_TRUE(store.ok());
   JobQueue queue(JobQueueOptions{}, **store);
   int position;
-  auto job = queue.Submit(MakeJob(3), "a", &position);
+  auto job = queue.Submit(MakeJob(3), {}, "a", &position);
   ASSERT_TRUE(job.ok());
   ASSERT_EQ(queue.Next(), *job);
   RunAll(**job);
@@ -310,7 +338,7 @@ TEST(JobQueueTest, AResumingWatcherGetsTheFramesItLacksRenderedAgain) {
   EXPECT_EQ(Watch(**job, {0, 2}), (std::set<int>{1}));
   // While a job runs, a frame it lacks becomes pending again and the
   // runner's turn does not end before it is rendered.
-  auto second = queue.Submit(MakeJob(2), "a", &position);
+  auto second = queue.Submit(MakeJob(2), {}, "a", &position);
   ASSERT_TRUE(second.ok());
   ASSERT_EQ(queue.Next(), *second);
   while (auto f = (*second)->NextFrame()) {

@@ -22,19 +22,23 @@ namespace {
 namespace fs = std::filesystem;
 }  // namespace
 
-absl::Status Datasets::Validate(const v1::Job& job) const {
+absl::StatusOr<JobPlan> Datasets::Plan(const v1::Job& job) const {
   if (job.datasets_size() == 0) return absl::InvalidArgumentError("job: no datasets");
   if (job.balance_grid() < 0 || job.balance_grid() > 256) {
     return absl::InvalidArgumentError("job: balance_grid must be in [0, 256]");
   }
+  JobPlan plan;
   if (auto r = ToBalanceRule(job.balance_rule()); !r.ok()) {
     return absl::InvalidArgumentError(absl::StrCat("job: ", r.status().message()));
+  } else {
+    plan.rule = *r;
   }
   int views = 0;
   std::error_code ec;
   const fs::path root = fs::weakly_canonical(data_dir_, ec);
   for (int d = 0; d < job.datasets_size(); ++d) {
     const v1::Dataset& ds = job.datasets(d);
+    DatasetPlan& dp = plan.datasets.emplace_back();
     const std::string where = absl::StrCat("datasets[", d, "]");
     if (ds.volume().empty()) return absl::InvalidArgumentError(where + ": no volume given");
     fs::path rel(ds.volume());
@@ -57,13 +61,17 @@ absl::Status Datasets::Validate(const v1::Job& job) const {
           where + ": materials_file and transfer_file are read by the client; send them inline");
     }
     if (ds.has_materials()) {
-      if (auto c = ToClassification(ds.materials()); !c.ok()) {
+      auto c = ToClassification(ds.materials());
+      if (!c.ok()) {
         return absl::InvalidArgumentError(absl::StrCat(where, ": ", c.status().message()));
       }
+      dp.classification = *std::move(c);
     } else if (ds.has_transfer()) {
-      if (auto t = ToTransferFunction(ds.transfer()); !t.ok()) {
+      auto t = ToTransferFunction(ds.transfer());
+      if (!t.ok()) {
         return absl::InvalidArgumentError(absl::StrCat(where, ": ", t.status().message()));
       }
+      dp.classification = *std::move(t);
     } else {
       return absl::InvalidArgumentError(where + ": needs materials or a transfer function");
     }
@@ -71,20 +79,32 @@ absl::Status Datasets::Validate(const v1::Job& job) const {
       if (ds.raw().dims_size() != 3) {
         return absl::InvalidArgumentError(where + ": raw.dims needs 3 sizes");
       }
-      if (auto t = ParseScalarType(ds.raw().type()); !t.ok()) {
+      auto t = ParseScalarType(ds.raw().type());
+      if (!t.ok()) {
         return absl::InvalidArgumentError(absl::StrCat(where, ": raw: ", t.status().message()));
       }
+      RawSpec& spec = dp.raw.emplace();
+      for (int a = 0; a < 3; ++a) spec.dims[a] = ds.raw().dims(a);
+      spec.type = *t;
+      spec.byte_order = ds.raw().big_endian() ? ByteOrder::kBig : ByteOrder::kLittle;
+      for (int a = 0; a < 3 && a < ds.raw().spacing_size(); ++a)
+        spec.spacing[a] = ds.raw().spacing(a);
+      spec.header_bytes = ds.raw().header_bytes();
     }
     if (ds.views_size() == 0) return absl::InvalidArgumentError(where + ": no views");
     for (int v = 0; v < ds.views_size(); ++v) {
       const v1::View& view = ds.views(v);
       const std::string vw = absl::StrCat(where, ".views[", v, "]");
-      if (auto c = ToCameraSpec(view); !c.ok()) {
-        return absl::InvalidArgumentError(absl::StrCat(vw, ": ", c.status().message()));
+      auto request = ToFrameRequest(view);
+      if (!request.ok()) {
+        return absl::InvalidArgumentError(absl::StrCat(vw, ": ", request.status().message()));
       }
-      if (auto m = EffectiveBalance(job, view); !m.ok()) {
-        return absl::InvalidArgumentError(absl::StrCat(vw, ": ", m.status().message()));
+      dp.views.push_back(*std::move(request));
+      auto mode = EffectiveBalance(job, view);
+      if (!mode.ok()) {
+        return absl::InvalidArgumentError(absl::StrCat(vw, ": ", mode.status().message()));
       }
+      dp.balance.push_back(*mode);
       if (!view.output().empty() && !IsSupportedImagePath(view.output())) {
         return absl::InvalidArgumentError(absl::StrCat(vw, ": output '", view.output(),
                                                        "' is not one of ", SupportedImageList()));
@@ -93,10 +113,11 @@ absl::Status Datasets::Validate(const v1::Job& job) const {
     }
   }
   if (views > 10000) return absl::InvalidArgumentError("job: more than 10000 views");
-  return absl::OkStatus();
+  return plan;
 }
 
-absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset& ds) {
+absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset& ds,
+                                                               const DatasetPlan& plan) {
   const fs::path path = fs::path(data_dir_) / ds.volume();
   struct stat st {};
   if (stat(path.c_str(), &st) != 0) {
@@ -113,15 +134,8 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
   ReadOptions ro;
   ro.max_bytes = max_volume_bytes_;
   absl::StatusOr<Volume> volume;
-  if (ds.has_raw()) {
-    RawSpec spec;
-    for (int a = 0; a < 3; ++a) spec.dims[a] = ds.raw().dims(a);
-    spec.type = *ParseScalarType(ds.raw().type());
-    spec.byte_order = ds.raw().big_endian() ? ByteOrder::kBig : ByteOrder::kLittle;
-    for (int a = 0; a < 3 && a < ds.raw().spacing_size(); ++a)
-      spec.spacing[a] = ds.raw().spacing(a);
-    spec.header_bytes = ds.raw().header_bytes();
-    volume = ReadRaw(path.string(), spec, ro);
+  if (plan.raw) {
+    volume = ReadRaw(path.string(), *plan.raw, ro);
   } else {
     volume = ReadVolume(path.string(), ro);
   }
@@ -130,12 +144,12 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
   data->key = key;
   data->spec = identity;
   absl::StatusOr<Scene> scene;
-  if (ds.has_materials()) {
+  if (const auto* c = std::get_if<Classification>(&plan.classification)) {
     data->mode = "surfaces";
-    scene = Scene::ForSurfaces(*volume, *ToClassification(ds.materials()));
+    scene = Scene::ForSurfaces(*volume, *c);
   } else {
     data->mode = "dvr";
-    scene = Scene::ForDvr(*volume, *ToTransferFunction(ds.transfer()));
+    scene = Scene::ForDvr(*volume, std::get<TransferFunction>(plan.classification));
   }
   if (!scene.ok())
     return absl::Status(scene.status().code(),

@@ -1,18 +1,24 @@
 // Datasets on the root: validating a job's datasets against the data
 // directory, loading a volume, classifying it and encoding its sticks, and
 // keeping the last one loaded for the next job. Not thread-safe: the runner
-// thread alone uses a Datasets (Validate is const and may run anywhere).
+// thread alone uses a Datasets (Plan is const and may run anywhere).
 #ifndef TRANSTICK_SERVICES_ROOT_DATASETS_H_
 #define TRANSTICK_SERVICES_ROOT_DATASETS_H_
 
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
+#include <variant>
 #include <vector>
 
 #include "absl/status/statusor.h"
 #include "cluster.pb.h"
+#include "transtick/classification.h"
+#include "transtick/partition.h"
+#include "transtick/render.h"
 #include "transtick/scene.h"
+#include "transtick/volume_io.h"
 
 namespace transtick {
 
@@ -25,6 +31,19 @@ struct BalanceMemory {
   std::vector<std::vector<int>> next_cuts;
   // "test-rays" cuts by view (ViewKey), reused without a new prerender.
   std::map<std::string, std::vector<std::vector<int>>> view_cuts;
+};
+
+// A job converted from the API once, when it is accepted (Datasets::Plan),
+// and kept with it: what the runner needs in core types.
+struct DatasetPlan {
+  std::optional<RawSpec> raw;  // a headerless raw file's layout
+  std::variant<Classification, TransferFunction> classification;
+  std::vector<FrameRequest> views;
+  std::vector<v1::BalanceMode> balance;  // by view: its own or else its job's
+};
+struct JobPlan {
+  std::vector<DatasetPlan> datasets;
+  BalanceRule rule = BalanceRule::kCost;
 };
 
 // A dataset ready to be cut into slabs.
@@ -42,15 +61,16 @@ class Datasets {
   Datasets(std::string data_dir, uint64_t max_volume_bytes)
       : data_dir_(std::move(data_dir)), max_volume_bytes_(max_volume_bytes) {}
 
-  // Checks a job against the data directory and its own consistency:
-  // relative volume paths that stay inside the data directory and exist,
-  // materials or a transfer function that convert, views that convert,
-  // balance modes, outputs. Errors name the dataset and view.
-  absl::Status Validate(const v1::Job& job) const;
+  // Checks a job against the data directory and its own consistency, and
+  // converts it: relative volume paths that stay inside the data directory
+  // and exist, materials or a transfer function that convert, views that
+  // convert, balance modes, outputs. Errors name the dataset and view.
+  absl::StatusOr<JobPlan> Plan(const v1::Job& job) const;
 
-  // The dataset, loaded and classified, or the cached one when the file
-  // and its classification are unchanged.
-  absl::StatusOr<std::shared_ptr<LoadedDataset>> Load(const v1::Dataset& dataset);
+  // Dataset `dataset` of `plan`'s job, loaded and classified, or the
+  // cached one when the file and its classification are unchanged.
+  absl::StatusOr<std::shared_ptr<LoadedDataset>> Load(const v1::Dataset& dataset,
+                                                      const DatasetPlan& plan);
 
  private:
   const std::string data_dir_;

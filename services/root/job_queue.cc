@@ -28,11 +28,12 @@ std::vector<FrameKey> FrameKeys(const v1::Job& spec) {
   return keys;
 }
 
-Job::Job(const StoredJob& stored, JobStore& store)
+Job::Job(const StoredJob& stored, JobPlan plan, JobStore& store)
     : id_(JobId(stored.seq)),
       seq_(stored.seq),
       owner_(stored.owner),
       spec_(stored.spec),
+      plan_(std::move(plan)),
       keys_(FrameKeys(stored.spec)),
       submitted_unix_(stored.submitted_unix),
       store_(store) {
@@ -293,17 +294,24 @@ bool Job::Stream(const std::function<bool(const v1::JobEvent&)>& write,
   }
 }
 
-absl::Status JobQueue::Recover() {
+absl::Status JobQueue::Recover(const Planner& planner) {
   auto stored = store_.Load();
   if (!stored.ok()) return stored.status();
   absl::MutexLock lock(&mu_);
   int queued = 0;
   for (const StoredJob& s : *stored) {
-    auto job = std::make_shared<Job>(s, store_);
+    const bool unfinished = s.state == v1::QUEUED || s.state == v1::RUNNING;
+    absl::StatusOr<JobPlan> plan = unfinished ? planner(s.spec) : JobPlan{};
+    auto job = std::make_shared<Job>(s, plan.ok() ? *std::move(plan) : JobPlan{}, store_);
     jobs_.push_back(job);
     if (!job->active()) continue;
     if (s.cancel) {
       job->Complete(absl::CancelledError("cancelled"));
+      continue;
+    }
+    if (!plan.ok()) {
+      spdlog::warn("{} recovered but cannot run: {}", job->id(), std::string(plan.status().message()));
+      job->Complete(plan.status());
       continue;
     }
     queue_.push_back(job);
@@ -335,7 +343,7 @@ void JobQueue::TrimHistory() {
   }
 }
 
-absl::StatusOr<std::shared_ptr<Job>> JobQueue::Submit(const v1::Job& spec,
+absl::StatusOr<std::shared_ptr<Job>> JobQueue::Submit(const v1::Job& spec, JobPlan plan,
                                                       const std::string& owner,
                                                       int* queue_position) {
   StoredJob stored;
@@ -370,7 +378,7 @@ absl::StatusOr<std::shared_ptr<Job>> JobQueue::Submit(const v1::Job& spec,
   auto seq = store_.Insert(stored);
   if (!seq.ok()) return absl::UnavailableError(seq.status().message());
   stored.seq = *seq;
-  auto job = std::make_shared<Job>(stored, store_);
+  auto job = std::make_shared<Job>(stored, std::move(plan), store_);
   *queue_position = static_cast<int>(queue_.size());
   queue_.push_back(job);
   jobs_.push_back(job);

@@ -27,6 +27,7 @@
 #include "absl/status/statusor.h"
 #include "absl/synchronization/mutex.h"
 #include "cluster.pb.h"
+#include "datasets.h"
 #include "job_store.h"
 
 namespace transtick {
@@ -63,8 +64,9 @@ class Job {
  public:
   static constexpr size_t kMaxEvents = 4096;
 
-  // REQUIRES: `store` outlives this.
-  Job(const StoredJob& stored, JobStore& store);
+  // `plan` is the spec converted (Datasets::Plan); empty for a finished
+  // job. REQUIRES: `store` outlives this.
+  Job(const StoredJob& stored, JobPlan plan, JobStore& store);
   Job(const Job&) = delete;
   Job& operator=(const Job&) = delete;
 
@@ -72,6 +74,7 @@ class Job {
   int64_t seq() const { return seq_; }
   const std::string& owner() const { return owner_; }
   const v1::Job& spec() const { return spec_; }
+  const JobPlan& plan() const { return plan_; }
   int frames_total() const { return static_cast<int>(keys_.size()); }
   const FrameKey& key(int frame) const { return keys_[frame]; }
   // Cancelled by a client, or the root is stopping.
@@ -130,6 +133,7 @@ class Job {
   const int64_t seq_;
   const std::string owner_;
   const v1::Job spec_;
+  const JobPlan plan_;
   const std::vector<FrameKey> keys_;
   const double submitted_unix_;
   JobStore& store_;
@@ -155,15 +159,17 @@ class JobQueue {
   // REQUIRES: `store` outlives this.
   JobQueue(JobQueueOptions options, JobStore& store) : options_(options), store_(store) {}
 
-  // Takes up the jobs recorded in the store: unfinished ones are queued
-  // again in submission order, finished ones are history. Call once,
-  // before the runner starts.
-  absl::Status Recover();
-  // Queues a validated job from `owner`. Fails when the queue, the owner's
-  // share of it or the job's pixels are over their limits, or the root is
-  // stopping, or the store cannot record it.
-  absl::StatusOr<std::shared_ptr<Job>> Submit(const v1::Job& spec, const std::string& owner,
-                                               int* queue_position);
+  using Planner = std::function<absl::StatusOr<JobPlan>(const v1::Job&)>;
+  // Takes up the jobs recorded in the store: unfinished ones are planned
+  // again and queued in submission order (one that no longer plans, say
+  // its volume is gone, fails with the reason), finished ones are history.
+  // Call once, before the runner starts.
+  absl::Status Recover(const Planner& plan);
+  // Queues a job from `owner` with its plan. Fails when the queue, the
+  // owner's share of it or the job's pixels are over their limits, or the
+  // root is stopping, or the store cannot record it.
+  absl::StatusOr<std::shared_ptr<Job>> Submit(const v1::Job& spec, JobPlan plan,
+                                               const std::string& owner, int* queue_position);
   // Queues a finished job again (Job::Resume said so).
   void Requeue(std::shared_ptr<Job> job);
   // The next job to run; null once stopping.

@@ -74,7 +74,7 @@ absl::Status JobRunner::RunJob(Job& job) {
     if (job.cancelled()) return absl::CancelledError("cancelled");
     const FrameKey key = job.key(*frame);
     if (key.dataset != loaded) {
-      auto d = datasets_.Load(job.spec().datasets(key.dataset));
+      auto d = datasets_.Load(job.spec().datasets(key.dataset), job.plan().datasets[key.dataset]);
       if (!d.ok()) return d.status();
       data = *std::move(d);
       loaded = key.dataset;
@@ -87,16 +87,17 @@ absl::Status JobRunner::RunJob(Job& job) {
 
 absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data) {
   const int d = job.key(frame).dataset, v = job.key(frame).view;
+  // The view goes to the workers as the client wrote it; the root's own
+  // checks use the plan made when the job was accepted.
   const v1::View& view = job.spec().datasets(d).views(v);
-  auto mode = EffectiveBalance(job.spec(), view);
-  if (!mode.ok()) return mode.status();
-  auto rule = ToBalanceRule(job.spec().balance_rule());
-  if (!rule.ok()) return rule.status();
-  std::unique_ptr<Balancer> balancer = MakeBalancer(*mode, *rule, job.spec().balance_grid());
+  const DatasetPlan& plan = job.plan().datasets[d];
+  const FrameRequest& request = plan.views[v];
+  std::unique_ptr<Balancer> balancer =
+      MakeBalancer(plan.balance[v], job.plan().rule, job.spec().balance_grid());
   const int planes = data.scene.dims()[1];
-  if (absl::Status s =
-          CheckRenderSettings(ToRenderSettings(view), data.scene.mode(), data.scene.dims(),
-                              data.scene.spacing(), int64_t{view.width()} * view.height());
+  if (absl::Status s = CheckRenderSettings(
+          request.settings, data.scene.mode(), data.scene.dims(), data.scene.spacing(),
+          int64_t{request.camera.width} * request.camera.height);
       !s.ok()) {
     return absl::InvalidArgumentError(absl::StrCat("dataset ", d, " view ", v, ": ", s.message()));
   }

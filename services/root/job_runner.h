@@ -37,7 +37,8 @@ class JobRunner {
   JobRunner(const JobRunner&) = delete;
   JobRunner& operator=(const JobRunner&) = delete;
 
-  absl::Status Validate(const v1::Job& job) const { return datasets_.Validate(job); }
+  // Checks and converts a job (Datasets::Plan). Thread-safe.
+  absl::StatusOr<JobPlan> Plan(const v1::Job& job) const { return datasets_.Plan(job); }
   // Starts the runner's thread. Call once.
   void Start();
   // Stops the queue (cancelling its jobs) and joins the runner. Idempotent.

@@ -21,7 +21,11 @@ absl::StatusOr<std::unique_ptr<RootService>> RootService::Create(const RootOptio
   auto store = JobStore::Open(options.state_dir);
   if (!store.ok()) return store.status();
   auto service = std::unique_ptr<RootService>(new RootService(options, *std::move(store)));
-  if (absl::Status s = service->queue_.Recover(); !s.ok()) return s;
+  RootService& r = *service;
+  if (absl::Status s = r.queue_.Recover([&r](const v1::Job& job) { return r.runner_.Plan(job); });
+      !s.ok()) {
+    return s;
+  }
   service->runner_.Start();
   return service;
 }
@@ -38,9 +42,10 @@ void RootService::Stop() { runner_.Stop(); }
 
 grpc::Status RootService::Submit(grpc::ServerContext* ctx, const v1::Job* job,
                                  v1::SubmitReply* reply) {
-  if (auto s = runner_.Validate(*job); !s.ok()) return ToGrpc(s);
+  auto plan = runner_.Plan(*job);
+  if (!plan.ok()) return ToGrpc(plan.status());
   int position = 0;
-  auto record = queue_.Submit(*job, PeerHost(ctx->peer()), &position);
+  auto record = queue_.Submit(*job, *std::move(plan), PeerHost(ctx->peer()), &position);
   if (!record.ok()) return ToGrpc(record.status());
   reply->set_job_id((*record)->id());
   reply->set_frames((*record)->frames_total());

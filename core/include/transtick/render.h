@@ -14,6 +14,14 @@
 
 namespace transtick {
 
+// One frame asked of the renderer: where the camera is and how to render.
+// The services convert a view from the API into this once, at each edge
+// (api/convert.h, ToFrameRequest), and pass it on.
+struct FrameRequest {
+  CameraSpec camera;
+  RenderSettings settings;
+};
+
 struct RenderStats {
   double frame_ms = 0;
   int threads = 0;
