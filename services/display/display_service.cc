@@ -6,6 +6,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "rpc_status.h"
 #include "transtick/ray_codec.h"
 
@@ -15,9 +16,30 @@ namespace {
 // Image rows per chunk: keeps messages near 1 MB whatever the width.
 int RowsPerChunk(int width) { return std::max(1, (1 << 20) / (width * 12)); }
 
+double Mb(uint64_t bytes) { return bytes / 1048576.0; }
+double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
+
 }  // namespace
 
-DisplayService::DisplayService(uint64_t max_frame_pixels) : max_frame_pixels_(max_frame_pixels) {}
+DisplayService::DisplayService(DisplayOptions options)
+    : options_(options), sweeper_(SweepPeriod(options.idle), [this] { ExpireIdle(); }) {}
+
+size_t DisplayService::open_frames() {
+  std::lock_guard<std::mutex> lock(mu_);
+  return frames_.size();
+}
+
+uint64_t DisplayService::framebuffer_bytes() {
+  std::lock_guard<std::mutex> lock(mu_);
+  return OpenBytesLocked() +
+         (spare_ ? Framebuffer::MemoryBytes(spare_->width(), spare_->height()) : 0);
+}
+
+uint64_t DisplayService::OpenBytesLocked() {
+  uint64_t bytes = 0;
+  for (const auto& [id, f] : frames_) bytes += f->bytes;
+  return bytes;
+}
 
 std::shared_ptr<DisplayService::FrameState> DisplayService::Find(uint64_t id) {
   std::lock_guard<std::mutex> lock(mu_);
@@ -34,25 +56,70 @@ grpc::ServerUnaryReactor* DisplayService::BeginFrame(grpc::CallbackServerContext
 
 grpc::Status DisplayService::Begin(const v1::DisplayFrame& req) {
   if (req.width() < 1 || req.height() < 1 ||
-      static_cast<uint64_t>(req.width()) * req.height() > max_frame_pixels_) {
+      static_cast<uint64_t>(req.width()) * req.height() > options_.max_frame_pixels) {
     return ToGrpc(absl::InvalidArgumentError(
         absl::StrCat("display: frame size ", req.width(), "x", req.height(), " is out of range")));
   }
-  std::lock_guard<std::mutex> lock(mu_);
-  if (frames_.count(req.frame_id())) {
-    return ToGrpc(absl::AlreadyExistsError(
-        absl::StrCat("display: frame ", req.frame_id(), " already begun")));
+  const uint64_t bytes = Framebuffer::MemoryBytes(req.width(), req.height());
+  std::shared_ptr<FrameState> evicted;
+  std::string why;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (frames_.count(req.frame_id())) {
+      return ToGrpc(absl::AlreadyExistsError(
+          absl::StrCat("display: frame ", req.frame_id(), " already begun")));
+    }
+    // Past the count limit the least recently active frame goes, and the
+    // byte limit is checked without it.
+    auto victim = frames_.end();
+    Clock::time_point victim_at = Clock::time_point::max();
+    if (frames_.size() >= options_.max_frames) {
+      for (auto it = frames_.begin(); it != frames_.end(); ++it) {
+        std::lock_guard<std::mutex> frame_lock(it->second->mu);
+        if (it->second->last_activity < victim_at) {
+          victim = it;
+          victim_at = it->second->last_activity;
+        }
+      }
+    }
+    const bool evict = victim != frames_.end();
+    const uint64_t open = OpenBytesLocked() - (evict ? victim->second->bytes : 0);
+    if (open + bytes > options_.max_bytes) {
+      return ToGrpc(absl::ResourceExhaustedError(absl::StrFormat(
+          "display: frame %d needs %.1f MB for its %dx%d framebuffer; %d open frame(s) hold "
+          "%.1f MB of the %.1f MB allowed (--max-framebuffer-mb)",
+          req.frame_id(), Mb(bytes), req.width(), req.height(), frames_.size() - evict, Mb(open),
+          Mb(options_.max_bytes))));
+    }
+    if (evict) {
+      evicted = victim->second;
+      why = absl::StrFormat(
+          "evicted: the display holds at most %d frames, frame %d began, and this one had "
+          "been idle longest (%.1f s)",
+          options_.max_frames, req.frame_id(), Seconds(Clock::now() - victim_at));
+      frames_.erase(victim);
+      aborted_.Remember(evicted->id, why);
+    }
+    // A framebuffer of a finished frame of the same size is cleared and used
+    // again: faulting in fresh pages for every frame costs more. A spare of
+    // another size goes when keeping it would pass the limit.
+    std::unique_ptr<Framebuffer> fb;
+    if (spare_ && spare_->width() == req.width() && spare_->height() == req.height()) {
+      fb = std::move(spare_);
+      fb->Clear();
+    } else {
+      if (spare_ && open + bytes + Framebuffer::MemoryBytes(spare_->width(), spare_->height()) >
+                        options_.max_bytes) {
+        spare_.reset();
+      }
+      fb = std::make_unique<Framebuffer>(req.width(), req.height());
+    }
+    frames_[req.frame_id()] = std::make_shared<FrameState>(req.frame_id(), std::move(fb));
   }
-  // A framebuffer of a finished frame of the same size is cleared and used
-  // again: faulting in fresh pages for every frame costs more.
-  std::unique_ptr<Framebuffer> fb;
-  if (spare_ && spare_->width() == req.width() && spare_->height() == req.height()) {
-    fb = std::move(spare_);
-    fb->Clear();
-  } else {
-    fb = std::make_unique<Framebuffer>(req.width(), req.height());
+  if (evicted) {
+    spdlog::warn("display: frame {} {}", evicted->id, why);
+    MarkAborted(*evicted, why);
   }
-  frames_[req.frame_id()] = std::make_shared<FrameState>(req.frame_id(), std::move(fb));
   return grpc::Status::OK;
 }
 
@@ -105,16 +172,28 @@ grpc::Status DisplayService::Accumulate(const v1::DepositBatch& batch,
   if (!frame || batch.frame_id() != frame->id) frame = Find(batch.frame_id());
   // A worker's first message names its frame and carries nothing: it may
   // come after the other workers have completed the frame.
-  if (batch.deposits().empty()) return grpc::Status::OK;
+  if (batch.deposits().empty()) {
+    if (frame) {
+      std::lock_guard<std::mutex> lock(frame->mu);
+      frame->last_activity = Clock::now();
+    }
+    return grpc::Status::OK;
+  }
   if (!frame) {
     return ToGrpc(
         absl::NotFoundError(absl::StrCat("display: frame ", batch.frame_id(), " was not begun")));
   }
   std::lock_guard<std::mutex> lock(frame->mu);
+  if (frame->aborted) {
+    return ToGrpc(absl::FailedPreconditionError(absl::StrCat("display: frame ", frame->id,
+                                                             " was aborted (", frame->abort_reason,
+                                                             "); its deposits are refused")));
+  }
   if (!frame->fb) {
     return ToGrpc(absl::FailedPreconditionError(
         absl::StrCat("display: frame ", frame->id, " is complete; deposits after it are refused")));
   }
+  frame->last_activity = Clock::now();
   const uint32_t limit =
       static_cast<uint32_t>(frame->fb->width()) * static_cast<uint32_t>(frame->fb->height());
   auto deposits = DecodeDeposits(batch.deposits(), limit);
@@ -134,22 +213,33 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
   std::shared_ptr<FrameState> frame = Find(req->frame_id());
   if (!frame) {
     std::lock_guard<std::mutex> lock(mu_);
-    if (auto it = aborted_.find(req->frame_id()); it != aborted_.end()) {
-      return ToGrpc(
-          absl::AbortedError(absl::StrCat("display: frame ", req->frame_id(), " was aborted",
-                                          it->second.empty() ? "" : ": ", it->second)));
+    if (const std::string* why = aborted_.Find(req->frame_id())) {
+      return ToGrpc(absl::AbortedError(absl::StrCat(
+          "display: frame ", req->frame_id(), " was aborted", why->empty() ? "" : ": ", *why)));
     }
     return ToGrpc(
         absl::NotFoundError(absl::StrCat("display: frame ", req->frame_id(), " was not begun")));
   }
-  const uint64_t total = static_cast<uint64_t>(frame->fb->width()) * frame->fb->height();
+  const uint64_t total = static_cast<uint64_t>(frame->width) * frame->height;
   Image image;
   {
     std::unique_lock<std::mutex> lock(frame->mu);
-    while (!frame->fb->Complete() && !frame->aborted) {
+    // While a root waits for the frame it does not expire: the root's own
+    // deadline and watchdog govern it.
+    struct Waiting {
+      explicit Waiting(FrameState& state) : f(state) { ++f.waiters; }
+      ~Waiting() {
+        --f.waiters;
+        f.last_activity = Clock::now();
+      }
+      FrameState& f;
+    } waiting(*frame);  // destroyed before `lock`
+    // fb is null here only when another AwaitFrame took the image.
+    auto over = [&] { return frame->aborted || !frame->fb || frame->fb->Complete(); };
+    while (!over()) {
       frame->cv.wait_for(lock, std::chrono::milliseconds(250));
       if (ctx->IsCancelled()) return ToGrpc(absl::CancelledError("cancelled"));
-      if (frame->fb->Complete() || frame->aborted) break;
+      if (over()) break;
       v1::FrameProgress p;
       p.set_pixels_done(frame->fb->complete_pixels());
       p.set_pixels_total(total);
@@ -161,6 +251,10 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
       return ToGrpc(absl::AbortedError(
           absl::StrCat("display: frame ", req->frame_id(), " was aborted",
                        frame->abort_reason.empty() ? "" : ": ", frame->abort_reason)));
+    }
+    if (!frame->fb) {
+      return ToGrpc(absl::FailedPreconditionError(absl::StrCat(
+          "display: frame ", req->frame_id(), " was complete and its image already sent")));
     }
     // Every deposit is in: the root hears it before the image is resolved,
     // so the workers end the frame while the image is made and sent.
@@ -181,6 +275,7 @@ grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::Fram
     // every deposit is in, so none will touch it again.
     std::lock_guard<std::mutex> frame_lock(frame->mu);
     spare_ = std::move(frame->fb);
+    spare_since_ = Clock::now();
   }
   if (req->no_image()) return grpc::Status::OK;
   const int rows = RowsPerChunk(image.width);
@@ -211,22 +306,24 @@ grpc::ServerUnaryReactor* DisplayService::AbortFrame(grpc::CallbackServerContext
 }
 
 void DisplayService::AbortIncomplete(FrameState& frame, const std::string& why) {
-  {
-    std::lock_guard<std::mutex> lock(frame.mu);
-    if (!frame.fb || frame.fb->Complete() || frame.aborted) return;
-    frame.aborted = true;
-    frame.abort_reason = why;
-    frame.cv.notify_all();
-  }
+  if (!MarkAborted(frame, why, /*unless_complete=*/true)) return;
   spdlog::warn("display: frame {} aborted: {}", frame.id, why);
   std::lock_guard<std::mutex> lock(mu_);
-  frames_.erase(frame.id);
-  RememberAbort(frame.id, why);
+  if (auto it = frames_.find(frame.id); it != frames_.end() && it->second.get() == &frame) {
+    frames_.erase(it);
+  }
+  aborted_.Remember(frame.id, why);
 }
 
-void DisplayService::RememberAbort(uint64_t id, const std::string& reason) {
-  aborted_[id] = reason;
-  while (aborted_.size() > kMaxAborted) aborted_.erase(aborted_.begin());
+bool DisplayService::MarkAborted(FrameState& frame, const std::string& why, bool unless_complete) {
+  std::lock_guard<std::mutex> lock(frame.mu);
+  if (frame.aborted || (unless_complete && (!frame.fb || frame.fb->Complete()))) return false;
+  frame.aborted = true;
+  frame.abort_reason = why;
+  // Deposit streams may hold the frame for a while; its memory goes now.
+  frame.fb.reset();
+  frame.cv.notify_all();
+  return true;
 }
 
 void DisplayService::Abort(uint64_t id, const std::string& reason) {
@@ -237,13 +334,41 @@ void DisplayService::Abort(uint64_t id, const std::string& reason) {
     if (it == frames_.end()) return;
     frame = it->second;
     frames_.erase(it);
-    RememberAbort(id, reason);
+    aborted_.Remember(id, reason);
   }
   if (!reason.empty()) spdlog::warn("display: frame {} aborted: {}", id, reason);
-  std::lock_guard<std::mutex> lock(frame->mu);
-  frame->aborted = true;
-  frame->abort_reason = reason;
-  frame->cv.notify_all();
+  MarkAborted(*frame, reason);
+}
+
+void DisplayService::ExpireIdle() {
+  const auto now = Clock::now();
+  std::vector<std::pair<std::shared_ptr<FrameState>, std::string>> expired;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (auto it = frames_.begin(); it != frames_.end();) {
+      Clock::duration idle;
+      {
+        std::lock_guard<std::mutex> frame_lock(it->second->mu);
+        idle = it->second->waiters > 0 ? Clock::duration::zero() : now - it->second->last_activity;
+      }
+      if (idle <= options_.idle) {
+        ++it;
+        continue;
+      }
+      std::string why = absl::StrFormat(
+          "expired: no deposit and no call for %.1f s (the display's limit is %.1f s)",
+          Seconds(idle), Seconds(options_.idle));
+      aborted_.Remember(it->first, why);
+      expired.emplace_back(std::move(it->second), std::move(why));
+      it = frames_.erase(it);
+    }
+    if (spare_ && now - spare_since_ > options_.idle) spare_.reset();
+  }
+  for (auto& [frame, why] : expired) {
+    spdlog::warn("display: frame {} {}; its {:.1f} MB framebuffer is freed", frame->id, why,
+                 Mb(frame->bytes));
+    MarkAborted(*frame, why);
+  }
 }
 
 }  // namespace transtick

@@ -323,8 +323,8 @@ class Frame::DisplayStream : public grpc::ClientWriteReactor<v1::DepositBatch>,
 // itself when done.
 class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch> {
  public:
-  explicit LeftStream(std::function<std::shared_ptr<Frame>(uint64_t)> find)
-      : find_(std::move(find)) {
+  LeftStream(grpc::CallbackServerContext* ctx, std::function<std::shared_ptr<Frame>(uint64_t)> find)
+      : ctx_(ctx), find_(std::move(find)) {
     StartRead(&in_);
   }
 
@@ -341,7 +341,7 @@ class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBa
             absl::StrCat("Rays: frame ", in_.frame_id(), " is not prepared here"))));
         return;
       }
-      if (!frame_->AttachLeft()) {
+      if (!frame_->AttachLeft(ctx_)) {
         Finish(ToGrpc(absl::AlreadyExistsError(absl::StrCat(
             "Rays: frame ", in_.frame_id(), " already has a stream from its left neighbour"))));
         frame_ = nullptr;
@@ -369,7 +369,10 @@ class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBa
     StartRead(&in_);
   }
   void OnWriteDone(bool ok) override { frame_->left_->outbox.WriteDone(ok); }
-  void OnDone() override { delete this; }
+  void OnDone() override {
+    if (frame_) frame_->DetachLeft();
+    delete this;
+  }
 
  private:
   // Reading and writing each release the stream once; the second finishes.
@@ -377,11 +380,14 @@ class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBa
     if (--holds_ == 0) Finish(grpc::Status::OK);
   }
 
+  grpc::CallbackServerContext* const ctx_;
   const std::function<std::shared_ptr<Frame>(uint64_t)> find_;
   std::shared_ptr<Frame> frame_;  // set by the first read only
   v1::RayBatch in_, out_;
   std::atomic<int> holds_{2};
 };
+
+std::atomic<int64_t> Frame::alive_{0};
 
 Frame::Frame(const v1::FrameSpec& spec, std::shared_ptr<const Scene> scene, Camera camera,
              const FrameOptions& options)
@@ -400,11 +406,15 @@ Frame::Frame(const v1::FrameSpec& spec, std::shared_ptr<const Scene> scene, Came
       left_(std::make_unique<Link>(options)),
       right_(std::make_unique<Link>(options)),
       deposits_(kDepositRecordBytes, options.deposit_batch, options.deposit_linger),
-      thread_stats_(options.threads) {}
+      last_activity_(Clock::now().time_since_epoch().count()),
+      thread_stats_(options.threads) {
+  ++alive_;
+}
 
 Frame::~Frame() {
   // Tracer threads hold the frame, so none runs now: this ends at once.
   if (!end_requested_) End(/*cancel=*/true);
+  --alive_;
 }
 
 void Frame::Start(std::function<void(absl::Status)> started) {
@@ -421,6 +431,7 @@ void Frame::Start(std::function<void(absl::Status)> started) {
     running_tracers_ = options_.threads;
   }
   run_start_ = Clock::now();
+  Touch(run_start_);
   // Tracing starts at once; the outboxes hold what it produces until the
   // streams below are open. Each tracer holds the frame until it stops, and
   // the last one to stop ends the frame (EndAsync): nothing ever joins a
@@ -444,17 +455,29 @@ void Frame::Start(std::function<void(absl::Status)> started) {
 }
 
 grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* Frame::NewLeftStream(
-    std::function<std::shared_ptr<Frame>(uint64_t)> find) {
-  return new LeftStream(std::move(find));
+    grpc::CallbackServerContext* ctx, std::function<std::shared_ptr<Frame>(uint64_t)> find) {
+  return new LeftStream(ctx, std::move(find));
 }
 
-bool Frame::AttachLeft() { return !left_attached_.exchange(true); }
+bool Frame::AttachLeft(grpc::CallbackServerContext* ctx) {
+  if (left_attached_.exchange(true)) return false;
+  std::lock_guard<std::mutex> lock(left_mu_);
+  left_ctx_ = ctx;
+  if (left_cancelled_) ctx->TryCancel();
+  return true;
+}
+
+void Frame::DetachLeft() {
+  std::lock_guard<std::mutex> lock(left_mu_);
+  left_ctx_ = nullptr;
+}
 
 void Frame::ReceiveBatch(const v1::RayBatch& batch, Link& from) {
   if (batch.frame_id() != id()) {
     spdlog::warn("frame {}: dropped a batch of frame {}", id(), batch.frame_id());
     return;
   }
+  Touch(Clock::now());
   const char* side = &from == left_.get() ? "left" : "right";
   auto rays = DecodeRays(batch.rays(), pixel_limit_);
   size_t rejected = 0;
@@ -581,6 +604,7 @@ void Frame::TraceLoop(int thread_index) {
       st.idle_ms += MsBetween(t0, Clock::now());
       continue;
     }
+    Touch(t0);
     Deposit deposit;
     // Every Trace call is bounded (Tracer::max_segments), so a frame that
     // ends stops its tracers within one ray.
@@ -646,7 +670,14 @@ v1::WorkerFrameStats Frame::Finish(bool cancel) {
   // written (when the frame is complete, nothing is left to write). The
   // streams then wind down on their own: the frame's statistics do not
   // wait for the display's and the neighbours' replies.
-  if (cancel) cancelled_ = true;
+  if (cancel) {
+    cancelled_ = true;
+    // The left neighbour's stream holds this frame until it ends: a peer
+    // that never closes its side must not keep a cancelled frame alive.
+    std::lock_guard<std::mutex> lock(left_mu_);
+    left_cancelled_ = true;
+    if (left_ctx_) left_ctx_->TryCancel();
+  }
   left_->outbox.Close();
   right_->outbox.Close();
   deposits_.Close();

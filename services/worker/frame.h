@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "absl/status/status.h"
+#include "clock.h"
 #include "cluster.grpc.pb.h"
 #include "transtick/camera.h"
 #include "transtick/ray.h"
@@ -135,6 +136,16 @@ class Frame : public std::enable_shared_from_this<Frame> {
   Frame& operator=(const Frame&) = delete;
 
   uint64_t id() const { return spec_.frame_id(); }
+  // Whether Start was called.
+  bool running() const { return started_; }
+  // When the frame last saw a call, a ray batch from a neighbour or a unit
+  // of traced work: what the worker's expiry of idle frames looks at.
+  Clock::time_point last_activity() const {
+    return Clock::time_point(Clock::duration(last_activity_.load(std::memory_order_relaxed)));
+  }
+  // Frame objects alive in this process. An ended frame is destroyed once
+  // its tracer threads have stopped and its streams have let go of it.
+  static int64_t alive() { return alive_; }
 
   // Starts tracing, and opens the streams to the display and to the right
   // neighbour; `started` is called once the stream to the neighbour has
@@ -144,13 +155,14 @@ class Frame : public std::enable_shared_from_this<Frame> {
   // The server side of a Rays stream opened by a left neighbour: its first
   // batch names the frame, which `find` looks up.
   static grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* NewLeftStream(
-      std::function<std::shared_ptr<Frame>(uint64_t)> find);
+      grpc::CallbackServerContext* ctx, std::function<std::shared_ptr<Frame>(uint64_t)> find);
 
   // Stops tracing, closes the streams and calls `done` with this frame's
   // statistics: at once when no tracer runs, else from the last tracer
   // thread to stop, within one ray (every ray is bounded). Never blocks, so
   // a gRPC reaction may call it. With `cancel`, rays still in flight are
-  // dropped and streams cancelled. REQUIRES: called once, End included.
+  // dropped and every stream cancelled, the left neighbour's included.
+  // REQUIRES: called once, End included.
   void EndAsync(bool cancel, std::function<void(v1::WorkerFrameStats)> done);
   // EndAsync, waiting for the statistics. Not from a gRPC reaction.
   v1::WorkerFrameStats End(bool cancel);
@@ -176,9 +188,15 @@ class Frame : public std::enable_shared_from_this<Frame> {
   // Counts `count` invalid records from the `side` neighbour; the first
   // time, logs why and aborts the frame at the display.
   void Reject(uint64_t count, const char* side, const std::string& why);
-  // Claims the left link for a neighbour's stream: false when this frame
-  // already has one.
-  bool AttachLeft();
+  // Claims the left link for a neighbour's stream, whose server context is
+  // `ctx`: false when this frame already has one. A frame cancelled by then
+  // cancels the stream at once.
+  bool AttachLeft(grpc::CallbackServerContext* ctx);
+  // The left neighbour's stream is done: its context goes away.
+  void DetachLeft();
+  void Touch(Clock::time_point now) {
+    last_activity_.store(now.time_since_epoch().count(), std::memory_order_relaxed);
+  }
 
   const v1::FrameSpec spec_;
   const std::shared_ptr<const Scene> scene_;
@@ -203,6 +221,14 @@ class Frame : public std::enable_shared_from_this<Frame> {
   std::atomic<uint64_t> rejected_{0};
   std::atomic<bool> reject_reported_{false};
   std::atomic<bool> left_attached_{false};
+  // Written by tracers once per work unit: a line of its own.
+  alignas(64) std::atomic<Clock::rep> last_activity_;
+  static std::atomic<int64_t> alive_;
+
+  std::mutex left_mu_;
+  // State below is protected by left_mu_.
+  grpc::CallbackServerContext* left_ctx_ = nullptr;  // while the left stream is open
+  bool left_cancelled_ = false;
 
   // Streams this worker opened. Each owns itself until its OnDone.
   std::weak_ptr<RightStream> right_stream_;

@@ -30,7 +30,11 @@ absl::StatusOr<std::unique_ptr<WorkerNode>> WorkerNode::Start(const WorkerNodeOp
   node->threads_ = options.threads > 0
                        ? options.threads
                        : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  node->service_ = std::make_unique<WorkerService>(WorkerOptions{node->id_, "", node->threads_});
+  WorkerOptions wo;
+  wo.id = node->id_;
+  wo.threads = node->threads_;
+  wo.frames = options.frames;
+  node->service_ = std::make_unique<WorkerService>(std::move(wo));
   auto server = Server::Start(options.listen, {node->service_.get()});
   if (!server.ok()) return server.status();
   node->server_ = *std::move(server);

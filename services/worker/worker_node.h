@@ -23,6 +23,7 @@ struct WorkerNodeOptions {
   std::string advertise;  // empty: this host's name and the bound port
   int threads = 0;        // 0: one per core
   std::chrono::milliseconds heartbeat{1000};
+  FrameLimits frames;
 };
 
 class WorkerNode {

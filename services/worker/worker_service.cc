@@ -67,7 +67,15 @@ absl::StatusOr<std::shared_ptr<const Scene>> AssembleSlab(const v1::SlabHeader& 
 
 }  // namespace
 
-WorkerService::WorkerService(WorkerOptions options) : options_(std::move(options)) {}
+WorkerService::WorkerService(WorkerOptions options)
+    : options_(std::move(options)),
+      frames_(options_.frames),
+      sweeper_(SweepPeriod(std::min(options_.frames.prepared_idle, options_.frames.running_idle)),
+               [this] {
+                 for (FrameTable::Dropped& d : frames_.TakeExpired(Clock::now())) {
+                   Drop(std::move(d));
+                 }
+               }) {}
 
 WorkerService::~WorkerService() { CancelAll(); }
 
@@ -77,12 +85,19 @@ void WorkerService::set_address(const std::string& address) {
 }
 
 void WorkerService::CancelAll() {
-  std::map<uint64_t, std::shared_ptr<Frame>> frames;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    frames.swap(frames_);
-  }
-  for (auto& [id, f] : frames) f->End(/*cancel=*/true);
+  for (auto& f : frames_.TakeAll()) f->End(/*cancel=*/true);
+}
+
+void WorkerService::Drop(FrameTable::Dropped dropped) {
+  spdlog::warn("frame {} {}; its tracers stop and its streams are cancelled", dropped.frame->id(),
+               dropped.why);
+  // Never blocks: the tracers stop within one ray, and the frame is freed
+  // when the last of them and of its streams lets go of it.
+  dropped.frame->EndAsync(/*cancel=*/true, [](v1::WorkerFrameStats) {});
+}
+
+grpc::Status WorkerService::NotHere(uint64_t id, const char* what) const {
+  return ToGrpc(absl::NotFoundError(absl::StrCat("frame ", id, " ", what, frames_.WhyGone(id))));
 }
 
 grpc::Status WorkerService::LoadSlab(grpc::ServerContext* ctx,
@@ -337,10 +352,10 @@ grpc::Status WorkerService::Prepare(const v1::FrameSpec& spec) {
           absl::StrCat("dataset ", spec.dataset_key(), " is not loaded here")));
     }
     scene = it->second;
-    if (frames_.count(spec.frame_id())) {
-      return ToGrpc(absl::AlreadyExistsError(
-          absl::StrCat("frame ", spec.frame_id(), " is already prepared")));
-    }
+  }
+  if (frames_.Find(spec.frame_id())) {
+    return ToGrpc(
+        absl::AlreadyExistsError(absl::StrCat("frame ", spec.frame_id(), " is already prepared")));
   }
   const int n = spec.cuts_size() - 1;
   const std::vector<int> cuts(spec.cuts().begin(), spec.cuts().end());
@@ -372,18 +387,16 @@ grpc::Status WorkerService::Prepare(const v1::FrameSpec& spec) {
   }
   FrameOptions fo;
   fo.threads = options_.threads;
-  auto frame = std::make_shared<Frame>(spec, std::move(scene), *std::move(camera), fo);
-  std::lock_guard<std::mutex> lock(mu_);
-  frames_[spec.frame_id()] = std::move(frame);
+  auto added = frames_.Add(std::make_shared<Frame>(spec, std::move(scene), *std::move(camera), fo));
+  if (!added.ok()) return ToGrpc(added.status());
+  if (*added) Drop(**std::move(added));
   return grpc::Status::OK;
 }
 
 std::shared_ptr<Frame> WorkerService::FindFrame(uint64_t id) {
   // The root prepares a frame on every worker before it starts any, so a
   // neighbour's stream never comes before its frame.
-  std::lock_guard<std::mutex> lock(mu_);
-  auto it = frames_.find(id);
-  return it == frames_.end() ? nullptr : it->second;
+  return frames_.Find(id);
 }
 
 grpc::ServerUnaryReactor* WorkerService::RunFrame(grpc::CallbackServerContext* ctx,
@@ -391,8 +404,7 @@ grpc::ServerUnaryReactor* WorkerService::RunFrame(grpc::CallbackServerContext* c
   grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
   std::shared_ptr<Frame> frame = FindFrame(req->frame_id());
   if (!frame) {
-    reactor->Finish(
-        ToGrpc(absl::NotFoundError(absl::StrCat("frame ", req->frame_id(), " was not prepared"))));
+    reactor->Finish(NotHere(req->frame_id(), "was not prepared"));
     return reactor;
   }
   // The reply goes once the stream to the right neighbour is open.
@@ -404,18 +416,14 @@ grpc::ServerUnaryReactor* WorkerService::EndFrame(grpc::CallbackServerContext* c
                                                   const v1::FrameRef* req,
                                                   v1::WorkerFrameStats* reply) {
   grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
-  std::shared_ptr<Frame> frame;
+  std::shared_ptr<Frame> frame = frames_.Take(req->frame_id());
+  if (!frame) {
+    reactor->Finish(NotHere(req->frame_id(), "is not running here"));
+    return reactor;
+  }
   std::string id, address;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    auto it = frames_.find(req->frame_id());
-    if (it == frames_.end()) {
-      reactor->Finish(ToGrpc(
-          absl::NotFoundError(absl::StrCat("frame ", req->frame_id(), " is not running here"))));
-      return reactor;
-    }
-    frame = it->second;
-    frames_.erase(it);
     id = options_.id;
     address = options_.address;
   }
@@ -431,8 +439,8 @@ grpc::ServerUnaryReactor* WorkerService::EndFrame(grpc::CallbackServerContext* c
 }
 
 grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* WorkerService::Rays(
-    grpc::CallbackServerContext*) {
-  return Frame::NewLeftStream([this](uint64_t id) { return FindFrame(id); });
+    grpc::CallbackServerContext* ctx) {
+  return Frame::NewLeftStream(ctx, [this](uint64_t id) { return FindFrame(id); });
 }
 
 }  // namespace transtick
