@@ -7,7 +7,6 @@
 #include <grpcpp/grpcpp.h>
 
 #include <chrono>
-#include <functional>
 #include <string>
 #include <thread>
 
@@ -22,16 +21,7 @@ namespace {
 
 using std::chrono::milliseconds;
 using Clock = std::chrono::steady_clock;
-
-// Polls `done` until it holds or `patience` has passed.
-bool Eventually(const std::function<bool()>& done, milliseconds patience = milliseconds(10000)) {
-  const auto give_up = Clock::now() + patience;
-  while (!done()) {
-    if (Clock::now() > give_up) return false;
-    std::this_thread::sleep_for(milliseconds(10));
-  }
-  return true;
-}
+using testing::Eventually;
 
 constexpr milliseconds kPreparedIdle(300), kRunningIdle(800), kDisplayIdle(300);
 

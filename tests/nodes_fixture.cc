@@ -1,6 +1,7 @@
 #include "nodes_fixture.h"
 
 #include <chrono>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -10,6 +11,15 @@
 #include "transtick/tracer.h"
 
 namespace transtick::testing {
+
+bool Eventually(const std::function<bool()>& done, std::chrono::milliseconds patience) {
+  const auto give_up = std::chrono::steady_clock::now() + patience;
+  while (!done()) {
+    if (std::chrono::steady_clock::now() > give_up) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return true;
+}
 
 WorkerOptions NodesTest::worker_options() const {
   WorkerOptions o;

@@ -8,6 +8,8 @@
 #include <grpcpp/grpcpp.h>
 
 #include <array>
+#include <chrono>
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -21,6 +23,10 @@
 #include "worker_service.h"
 
 namespace transtick::testing {
+
+// Polls `done` every 10 ms until it holds (true) or `patience` has passed.
+bool Eventually(const std::function<bool()>& done,
+                std::chrono::milliseconds patience = std::chrono::seconds(10));
 
 class NodesTest : public ::testing::Test {
  protected:

@@ -21,6 +21,11 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const std::string& address
   builder.AddListeningPort(address, grpc::InsecureServerCredentials(), &server->port_);
   builder.SetMaxReceiveMessageSize(kMaxMessageBytes);
   builder.SetMaxSendMessageSize(kMaxMessageBytes);
+  // A client whose host vanished is noticed (its streams fail), and the
+  // clients' own pings are accepted.
+  for (const auto& [name, value] : KeepaliveArguments(/*server=*/true)) {
+    builder.AddChannelArgument(name, value);
+  }
   // Long-lived ray streams each hold a thread of the synchronous server.
   builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::MAX_POLLERS, 4);
   for (grpc::Service* s : services) builder.RegisterService(s);
