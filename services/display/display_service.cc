@@ -7,6 +7,7 @@
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/time/time.h"
 #include "rpc_status.h"
 #include "transtick/ray_codec.h"
 
@@ -24,25 +25,25 @@ double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).coun
 DisplayService::DisplayService(DisplayOptions options)
     : options_(options), sweeper_(SweepPeriod(options.idle), [this] { ExpireIdle(); }) {}
 
-size_t DisplayService::open_frames() {
-  std::lock_guard<std::mutex> lock(mu_);
+size_t DisplayService::open_frames() const {
+  absl::MutexLock lock(&mu_);
   return frames_.size();
 }
 
-uint64_t DisplayService::framebuffer_bytes() {
-  std::lock_guard<std::mutex> lock(mu_);
+uint64_t DisplayService::framebuffer_bytes() const {
+  absl::MutexLock lock(&mu_);
   return OpenBytesLocked() +
          (spare_ ? Framebuffer::MemoryBytes(spare_->width(), spare_->height()) : 0);
 }
 
-uint64_t DisplayService::OpenBytesLocked() {
+uint64_t DisplayService::OpenBytesLocked() const {
   uint64_t bytes = 0;
   for (const auto& [id, f] : frames_) bytes += f->bytes;
   return bytes;
 }
 
 std::shared_ptr<DisplayService::FrameState> DisplayService::Find(uint64_t id) {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   auto it = frames_.find(id);
   return it == frames_.end() ? nullptr : it->second;
 }
@@ -64,21 +65,21 @@ grpc::Status DisplayService::Begin(const v1::DisplayFrame& req) {
   std::shared_ptr<FrameState> evicted;
   std::string why;
   {
-    std::lock_guard<std::mutex> lock(mu_);
+    absl::MutexLock lock(&mu_);
     if (frames_.count(req.frame_id())) {
       return ToGrpc(absl::AlreadyExistsError(
           absl::StrCat("display: frame ", req.frame_id(), " already begun")));
     }
     // Past the count limit the least recently active frame goes, and the
     // byte limit is checked without it.
+    const auto now = Clock::now();
     auto victim = frames_.end();
     Clock::time_point victim_at = Clock::time_point::max();
     if (frames_.size() >= options_.max_frames) {
       for (auto it = frames_.begin(); it != frames_.end(); ++it) {
-        std::lock_guard<std::mutex> frame_lock(it->second->mu);
-        if (it->second->last_activity < victim_at) {
+        if (const auto at = LastActive(*it->second, now); at < victim_at) {
           victim = it;
-          victim_at = it->second->last_activity;
+          victim_at = at;
         }
       }
     }
@@ -96,7 +97,7 @@ grpc::Status DisplayService::Begin(const v1::DisplayFrame& req) {
       why = absl::StrFormat(
           "evicted: the display holds at most %d frames, frame %d began, and this one had "
           "been idle longest (%.1f s)",
-          options_.max_frames, req.frame_id(), Seconds(Clock::now() - victim_at));
+          options_.max_frames, req.frame_id(), Seconds(now - victim_at));
       frames_.erase(victim);
       aborted_.Remember(evicted->id, why);
     }
@@ -174,7 +175,7 @@ grpc::Status DisplayService::Accumulate(const v1::DepositBatch& batch,
   // come after the other workers have completed the frame.
   if (batch.deposits().empty()) {
     if (frame) {
-      std::lock_guard<std::mutex> lock(frame->mu);
+      absl::MutexLock lock(&frame->mu);
       frame->last_activity = Clock::now();
     }
     return grpc::Status::OK;
@@ -183,98 +184,111 @@ grpc::Status DisplayService::Accumulate(const v1::DepositBatch& batch,
     return ToGrpc(
         absl::NotFoundError(absl::StrCat("display: frame ", batch.frame_id(), " was not begun")));
   }
-  std::lock_guard<std::mutex> lock(frame->mu);
-  if (frame->aborted) {
-    return ToGrpc(absl::FailedPreconditionError(absl::StrCat("display: frame ", frame->id,
-                                                             " was aborted (", frame->abort_reason,
-                                                             "); its deposits are refused")));
+  FrameState& f = *frame;
+  // An AwaitFrame waiting for completion looks again when this unlocks.
+  absl::MutexLock lock(&f.mu);
+  if (f.aborted) {
+    return ToGrpc(absl::FailedPreconditionError(absl::StrCat(
+        "display: frame ", f.id, " was aborted (", f.abort_reason, "); its deposits are refused")));
   }
-  if (!frame->fb) {
+  if (!f.fb) {
     return ToGrpc(absl::FailedPreconditionError(
-        absl::StrCat("display: frame ", frame->id, " is complete; deposits after it are refused")));
+        absl::StrCat("display: frame ", f.id, " is complete; deposits after it are refused")));
   }
-  frame->last_activity = Clock::now();
+  f.last_activity = Clock::now();
   const uint32_t limit =
-      static_cast<uint32_t>(frame->fb->width()) * static_cast<uint32_t>(frame->fb->height());
+      static_cast<uint32_t>(f.fb->width()) * static_cast<uint32_t>(f.fb->height());
   auto deposits = DecodeDeposits(batch.deposits(), limit);
   if (!deposits.ok()) {
     return ToGrpc(
         absl::InvalidArgumentError(absl::StrCat("display: ", deposits.status().message())));
   }
-  bool completed = false;
-  for (const Deposit& d : *deposits) completed |= frame->fb->Add(d);
-  frame->deposits += deposits->size();
-  if (completed && frame->fb->Complete()) frame->cv.notify_all();
+  for (const Deposit& d : *deposits) f.fb->Add(d);
+  f.deposits += deposits->size();
   return grpc::Status::OK;
+}
+
+namespace {
+
+grpc::Status Aborted(uint64_t id, const std::string& why) {
+  return ToGrpc(absl::AbortedError(
+      absl::StrCat("display: frame ", id, " was aborted", why.empty() ? "" : ": ", why)));
+}
+
+}  // namespace
+
+grpc::Status DisplayService::ImageStatus(const FrameState& f) {
+  if (f.aborted) return Aborted(f.id, f.abort_reason);
+  if (!f.fb) {
+    return ToGrpc(absl::FailedPreconditionError(
+        absl::StrCat("display: frame ", f.id, " was complete and its image already sent")));
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status DisplayService::WaitUntilOver(FrameState& f, grpc::ServerContext& ctx,
+                                           grpc::ServerWriter<v1::FrameProgress>& writer) {
+  // fb is null here only when the frame was aborted or another AwaitFrame
+  // took the image.
+  auto over = [&f]() ABSL_EXCLUSIVE_LOCKS_REQUIRED(f.mu) {
+    return f.aborted || !f.fb || f.fb->Complete();
+  };
+  while (!f.mu.AwaitWithTimeout(absl::Condition(&over), absl::Milliseconds(250))) {
+    if (ctx.IsCancelled()) return ToGrpc(absl::CancelledError("cancelled"));
+    v1::FrameProgress p;
+    p.set_pixels_done(f.fb->complete_pixels());
+    p.set_pixels_total(static_cast<uint64_t>(f.width) * f.height);
+    f.mu.Unlock();
+    writer.Write(p);
+    f.mu.Lock();
+  }
+  return ImageStatus(f);
 }
 
 grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::FrameRef* req,
                                         grpc::ServerWriter<v1::FrameProgress>* writer) {
   std::shared_ptr<FrameState> frame = Find(req->frame_id());
   if (!frame) {
-    std::lock_guard<std::mutex> lock(mu_);
+    absl::MutexLock lock(&mu_);
     if (const std::string* why = aborted_.Find(req->frame_id())) {
-      return ToGrpc(absl::AbortedError(absl::StrCat(
-          "display: frame ", req->frame_id(), " was aborted", why->empty() ? "" : ": ", *why)));
+      return Aborted(req->frame_id(), *why);
     }
     return ToGrpc(
         absl::NotFoundError(absl::StrCat("display: frame ", req->frame_id(), " was not begun")));
   }
-  const uint64_t total = static_cast<uint64_t>(frame->width) * frame->height;
+  FrameState& f = *frame;
+  const uint64_t total = static_cast<uint64_t>(f.width) * f.height;
   Image image;
   {
-    std::unique_lock<std::mutex> lock(frame->mu);
+    absl::MutexLock lock(&f.mu);
     // While a root waits for the frame it does not expire: the root's own
     // deadline and watchdog govern it.
-    struct Waiting {
-      explicit Waiting(FrameState& state) : f(state) { ++f.waiters; }
-      ~Waiting() {
-        --f.waiters;
-        f.last_activity = Clock::now();
-      }
-      FrameState& f;
-    } waiting(*frame);  // destroyed before `lock`
-    // fb is null here only when another AwaitFrame took the image.
-    auto over = [&] { return frame->aborted || !frame->fb || frame->fb->Complete(); };
-    while (!over()) {
-      frame->cv.wait_for(lock, std::chrono::milliseconds(250));
-      if (ctx->IsCancelled()) return ToGrpc(absl::CancelledError("cancelled"));
-      if (over()) break;
-      v1::FrameProgress p;
-      p.set_pixels_done(frame->fb->complete_pixels());
-      p.set_pixels_total(total);
-      lock.unlock();
-      writer->Write(p);
-      lock.lock();
-    }
-    if (frame->aborted) {
-      return ToGrpc(absl::AbortedError(
-          absl::StrCat("display: frame ", req->frame_id(), " was aborted",
-                       frame->abort_reason.empty() ? "" : ": ", frame->abort_reason)));
-    }
-    if (!frame->fb) {
-      return ToGrpc(absl::FailedPreconditionError(absl::StrCat(
-          "display: frame ", req->frame_id(), " was complete and its image already sent")));
-    }
+    ++f.waiters;
+    grpc::Status waited = WaitUntilOver(f, *ctx, *writer);
+    --f.waiters;
+    f.last_activity = Clock::now();
+    if (!waited.ok()) return waited;
     // Every deposit is in: the root hears it before the image is resolved,
     // so the workers end the frame while the image is made and sent.
     v1::FrameProgress done;
     done.set_pixels_done(total);
     done.set_pixels_total(total);
     done.set_complete(true);
-    lock.unlock();
+    f.mu.Unlock();
     writer->Write(done);
-    lock.lock();
+    f.mu.Lock();
+    // The frame may have been aborted, and its framebuffer freed, meanwhile.
+    if (grpc::Status s = ImageStatus(f); !s.ok()) return s;
     // A balancing prerender wants to know the frame is done, not its image.
-    if (!req->no_image()) image = frame->fb->Resolve();
+    if (!req->no_image()) image = f.fb->Resolve();
   }
   {
-    std::lock_guard<std::mutex> lock(mu_);
+    absl::MutexLock lock(&mu_);
     frames_.erase(req->frame_id());
     // Workers' deposit streams hold the frame state, not the framebuffer:
     // every deposit is in, so none will touch it again.
-    std::lock_guard<std::mutex> frame_lock(frame->mu);
-    spare_ = std::move(frame->fb);
+    absl::MutexLock frame_lock(&f.mu);
+    spare_ = std::move(f.fb);
     spare_since_ = Clock::now();
   }
   if (req->no_image()) return grpc::Status::OK;
@@ -308,7 +322,7 @@ grpc::ServerUnaryReactor* DisplayService::AbortFrame(grpc::CallbackServerContext
 void DisplayService::AbortIncomplete(FrameState& frame, const std::string& why) {
   if (!MarkAborted(frame, why, /*unless_complete=*/true)) return;
   spdlog::warn("display: frame {} aborted: {}", frame.id, why);
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   if (auto it = frames_.find(frame.id); it != frames_.end() && it->second.get() == &frame) {
     frames_.erase(it);
   }
@@ -316,20 +330,24 @@ void DisplayService::AbortIncomplete(FrameState& frame, const std::string& why) 
 }
 
 bool DisplayService::MarkAborted(FrameState& frame, const std::string& why, bool unless_complete) {
-  std::lock_guard<std::mutex> lock(frame.mu);
+  absl::MutexLock lock(&frame.mu);  // an AwaitFrame waiting looks again when this unlocks
   if (frame.aborted || (unless_complete && (!frame.fb || frame.fb->Complete()))) return false;
   frame.aborted = true;
   frame.abort_reason = why;
   // Deposit streams may hold the frame for a while; its memory goes now.
   frame.fb.reset();
-  frame.cv.notify_all();
   return true;
+}
+
+Clock::time_point DisplayService::LastActive(FrameState& frame, Clock::time_point now) {
+  absl::MutexLock lock(&frame.mu);
+  return frame.waiters > 0 ? now : frame.last_activity;
 }
 
 void DisplayService::Abort(uint64_t id, const std::string& reason) {
   std::shared_ptr<FrameState> frame;
   {
-    std::lock_guard<std::mutex> lock(mu_);
+    absl::MutexLock lock(&mu_);
     auto it = frames_.find(id);
     if (it == frames_.end()) return;
     frame = it->second;
@@ -344,13 +362,9 @@ void DisplayService::ExpireIdle() {
   const auto now = Clock::now();
   std::vector<std::pair<std::shared_ptr<FrameState>, std::string>> expired;
   {
-    std::lock_guard<std::mutex> lock(mu_);
+    absl::MutexLock lock(&mu_);
     for (auto it = frames_.begin(); it != frames_.end();) {
-      Clock::duration idle;
-      {
-        std::lock_guard<std::mutex> frame_lock(it->second->mu);
-        idle = it->second->waiters > 0 ? Clock::duration::zero() : now - it->second->last_activity;
-      }
+      const Clock::duration idle = now - LastActive(*it->second, now);
       if (idle <= options_.idle) {
         ++it;
         continue;

@@ -10,6 +10,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "absl/time/time.h"
 #include "clock.h"
 #include "convert.h"
 #include "daemon.h"
@@ -42,15 +43,14 @@ constexpr auto kCloseWait = std::chrono::seconds(10);
 
 void Inbox::Push(std::vector<RayDescriptor> rays) {
   if (rays.empty()) return;
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);  // wakes a Wait (its condition is checked on unlock)
   size_ += rays.size();
   high_water_ = std::max(high_water_, size_);
   batches_.push_back(std::move(rays));
-  cv_.notify_one();
 }
 
 bool Inbox::TryPop(size_t max, std::vector<RayDescriptor>* out) {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   size_t taken = 0;
   while (taken < max && !batches_.empty()) {
     auto& front = batches_.front();
@@ -68,72 +68,79 @@ bool Inbox::TryPop(size_t max, std::vector<RayDescriptor>* out) {
 }
 
 void Inbox::Wait(std::chrono::milliseconds timeout) {
-  std::unique_lock<std::mutex> lock(mu_);
-  cv_.wait_for(lock, timeout, [this] { return size_ > 0 || woken_; });
+  absl::MutexLock lock(&mu_);
+  auto ready = [this]() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) { return size_ > 0 || woken_; };
+  mu_.AwaitWithTimeout(absl::Condition(&ready), absl::FromChrono(timeout));
 }
 
 void Inbox::Wake() {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   woken_ = true;
-  cv_.notify_all();
 }
 
 size_t Inbox::high_water() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   return high_water_;
 }
 
 void Outbox::Attach(StartWrite write, std::function<void()> done, bool busy) {
-  std::unique_lock<std::mutex> lock(mu_);
+  mu_.Lock();
   write_ = std::move(write);
   done_ = std::move(done);
   in_flight_ = busy;
-  Pump(lock);
+  Pump();
 }
 
 void Outbox::WriteDone(bool ok) {
-  std::unique_lock<std::mutex> lock(mu_);
+  mu_.Lock();
   in_flight_ = false;
   if (!ok && !failed_) {
     failed_ = true;
     dropped_ += pending_.size() / record_bytes_;
     pending_.clear();
   }
-  Pump(lock);
+  Pump();
 }
 
 void Outbox::Append(const std::string& records) {
   if (records.empty()) return;
-  std::unique_lock<std::mutex> lock(mu_);
+  mu_.Lock();
   if (failed_ || closed_) {
     dropped_ += records.size() / record_bytes_;
+    mu_.Unlock();
     return;
   }
   if (pending_.empty()) first_pending_ = Clock::now();
   pending_ += records;
-  Pump(lock);
+  Pump();
 }
 
 void Outbox::Flush() {
-  std::unique_lock<std::mutex> lock(mu_);
-  if (pending_.empty()) return;
+  mu_.Lock();
+  if (pending_.empty()) {
+    mu_.Unlock();
+    return;
+  }
   flush_ = true;
-  Pump(lock);
+  Pump();
 }
 
 void Outbox::Close() {
-  std::unique_lock<std::mutex> lock(mu_);
+  mu_.Lock();
   closed_ = true;
-  Pump(lock);
+  Pump();
 }
 
 uint64_t Outbox::dropped() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   return dropped_;
 }
 
-void Outbox::Pump(std::unique_lock<std::mutex>& lock) {
-  if (!write_ || in_flight_) return;
+void Outbox::Pump() {
+  if (!write_ || in_flight_) {
+    mu_.Unlock();
+    return;
+  }
   const size_t limit = batch_records_ * record_bytes_;
   const bool due =
       pending_.size() >= limit ||
@@ -153,15 +160,14 @@ void Outbox::Pump(std::unique_lock<std::mutex>& lock) {
       first_pending_ = Clock::now();
     }
     in_flight_ = true;
-    lock.unlock();
+    mu_.Unlock();
     write_(std::move(batch));
     return;
   }
-  if ((closed_ || failed_) && pending_.empty() && !done_called_) {
-    done_called_ = true;
-    lock.unlock();
-    done_();
-  }
+  const bool finished = (closed_ || failed_) && pending_.empty() && !done_called_;
+  if (finished) done_called_ = true;
+  mu_.Unlock();
+  if (finished) done_();
 }
 
 struct Frame::Link {
@@ -423,7 +429,7 @@ void Frame::Start(std::function<void(absl::Status)> started) {
     return;
   }
   {
-    std::lock_guard<std::mutex> lock(end_mu_);
+    absl::MutexLock lock(&end_mu_);
     if (end_requested_) {
       started(absl::FailedPreconditionError("frame already ended"));
       return;
@@ -461,14 +467,14 @@ grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* Frame::NewLeftStream(
 
 bool Frame::AttachLeft(grpc::CallbackServerContext* ctx) {
   if (left_attached_.exchange(true)) return false;
-  std::lock_guard<std::mutex> lock(left_mu_);
+  absl::MutexLock lock(&left_mu_);
   left_ctx_ = ctx;
   if (left_cancelled_) ctx->TryCancel();
   return true;
 }
 
 void Frame::DetachLeft() {
-  std::lock_guard<std::mutex> lock(left_mu_);
+  absl::MutexLock lock(&left_mu_);
   left_ctx_ = nullptr;
 }
 
@@ -632,7 +638,7 @@ void Frame::EndAsync(bool cancel, std::function<void(v1::WorkerFrameStats)> done
   stop_ = true;
   inbox_.Wake();
   {
-    std::lock_guard<std::mutex> lock(end_mu_);
+    absl::MutexLock lock(&end_mu_);
     if (end_requested_) return;  // REQUIRES says once; a second call is ignored
     end_requested_ = true;
     end_cancel_ = cancel;
@@ -648,7 +654,7 @@ void Frame::TracerStopped() {
   std::function<void(v1::WorkerFrameStats)> done;
   bool cancel;
   {
-    std::lock_guard<std::mutex> lock(end_mu_);
+    absl::MutexLock lock(&end_mu_);
     if (--running_tracers_ > 0 || !end_done_) return;
     done = std::move(end_done_);
     end_done_ = nullptr;
@@ -674,7 +680,7 @@ v1::WorkerFrameStats Frame::Finish(bool cancel) {
     cancelled_ = true;
     // The left neighbour's stream holds this frame until it ends: a peer
     // that never closes its side must not keep a cancelled frame alive.
-    std::lock_guard<std::mutex> lock(left_mu_);
+    absl::MutexLock lock(&left_mu_);
     left_cancelled_ = true;
     if (left_ctx_) left_ctx_->TryCancel();
   }

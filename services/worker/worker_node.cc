@@ -8,6 +8,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/time/time.h"
 
 namespace transtick {
 namespace {
@@ -60,7 +61,11 @@ void WorkerNode::RegisterLoop() {
   const std::chrono::milliseconds first_backoff(100), max_backoff(3000);
   std::chrono::milliseconds backoff = first_backoff;
   bool warned = false;
-  while (!stopping_) {
+  while (true) {
+    {
+      absl::MutexLock lock(&mu_);
+      if (stopping_) return;
+    }
     grpc::ClientContext ctx;
     ctx.set_deadline(Deadline(5));
     v1::RegisterRequest req;
@@ -88,16 +93,16 @@ void WorkerNode::RegisterLoop() {
       wait = backoff;
       backoff = std::min(backoff * 2, max_backoff);
     }
-    std::unique_lock<std::mutex> lock(mu_);
-    cv_.wait_for(lock, wait, [this] { return stopping_.load(); });
+    absl::MutexLock lock(&mu_);  // until the next heartbeat, or Stop
+    mu_.AwaitWithTimeout(absl::Condition(&stopping_), absl::FromChrono(wait));
   }
 }
 
 void WorkerNode::Stop(std::chrono::milliseconds grace) {
-  if (stopping_.exchange(true)) return;
   {
-    std::lock_guard<std::mutex> lock(mu_);
-    cv_.notify_all();
+    absl::MutexLock lock(&mu_);
+    if (stopping_) return;
+    stopping_ = true;
   }
   if (registrar_.joinable()) registrar_.join();
   if (registered_) {

@@ -69,6 +69,7 @@ absl::StatusOr<std::shared_ptr<const Scene>> AssembleSlab(const v1::SlabHeader& 
 
 WorkerService::WorkerService(WorkerOptions options)
     : options_(std::move(options)),
+      address_(options_.address),
       frames_(options_.frames),
       sweeper_(SweepPeriod(std::min(options_.frames.prepared_idle, options_.frames.running_idle)),
                [this] {
@@ -80,8 +81,8 @@ WorkerService::WorkerService(WorkerOptions options)
 WorkerService::~WorkerService() { CancelAll(); }
 
 void WorkerService::set_address(const std::string& address) {
-  std::lock_guard<std::mutex> lock(mu_);
-  options_.address = address;
+  absl::MutexLock lock(&mu_);
+  address_ = address;
 }
 
 void WorkerService::CancelAll() {
@@ -133,7 +134,7 @@ grpc::Status WorkerService::LoadSlab(grpc::ServerContext* ctx,
   reply->set_memory_bytes((*scene)->MemoryBytes());
   spdlog::info("loaded {} slab [{}, {}): {:.1f} MB", header.dataset_key(), header.y_begin(),
                header.y_end(), (*scene)->MemoryBytes() / 1e6);
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   datasets_[header.dataset_key()] = *std::move(scene);
   return grpc::Status::OK;
 }
@@ -144,7 +145,7 @@ grpc::Status WorkerService::Evict(grpc::ServerContext*, const v1::DatasetRef* re
   if (req->dataset_key().empty()) {
     return ToGrpc(absl::InvalidArgumentError("Evict: a dataset_key is required"));
   }
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   if (datasets_.erase(req->dataset_key()) == 0) {
     return ToGrpc(absl::NotFoundError(
         absl::StrCat("Evict: dataset ", req->dataset_key(), " is not loaded here")));
@@ -153,7 +154,7 @@ grpc::Status WorkerService::Evict(grpc::ServerContext*, const v1::DatasetRef* re
 }
 
 std::shared_ptr<const Scene> WorkerService::FindDataset(const std::string& key) {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   auto it = datasets_.find(key);
   return it == datasets_.end() ? nullptr : it->second;
 }
@@ -330,7 +331,7 @@ grpc::Status WorkerService::Reslab(grpc::ServerContext*, const v1::ReslabRequest
   reply->set_memory_bytes(scene->MemoryBytes());
   spdlog::info("re-slabbed {} [{}, {}) -> [{}, {}) with planes from {} neighbour fetch(es)",
                req->new_key(), old->y_begin(), old->y_end(), y0, y1, fetches.size());
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   datasets_[req->new_key()] = std::make_shared<const Scene>(*std::move(scene));
   return grpc::Status::OK;
 }
@@ -345,7 +346,7 @@ grpc::ServerUnaryReactor* WorkerService::PrepareFrame(grpc::CallbackServerContex
 grpc::Status WorkerService::Prepare(const v1::FrameSpec& spec) {
   std::shared_ptr<const Scene> scene;
   {
-    std::lock_guard<std::mutex> lock(mu_);
+    absl::MutexLock lock(&mu_);
     auto it = datasets_.find(spec.dataset_key());
     if (it == datasets_.end()) {
       return ToGrpc(absl::FailedPreconditionError(
@@ -421,11 +422,11 @@ grpc::ServerUnaryReactor* WorkerService::EndFrame(grpc::CallbackServerContext* c
     reactor->Finish(NotHere(req->frame_id(), "is not running here"));
     return reactor;
   }
-  std::string id, address;
+  const std::string id = options_.id;
+  std::string address;
   {
-    std::lock_guard<std::mutex> lock(mu_);
-    id = options_.id;
-    address = options_.address;
+    absl::MutexLock lock(&mu_);
+    address = address_;
   }
   // The reply goes when the tracers have stopped (within one ray), from
   // the last of them; the streams wind down after it.

@@ -5,9 +5,10 @@
 
 #include <map>
 #include <memory>
-#include <mutex>
 #include <string>
 
+#include "absl/base/thread_annotations.h"
+#include "absl/synchronization/mutex.h"
 #include "cluster.grpc.pb.h"
 #include "expiry.h"
 #include "frame.h"
@@ -17,7 +18,7 @@ namespace transtick {
 
 struct WorkerOptions {
   std::string id;       // unique per process
-  std::string address;  // as registered with the root
+  std::string address;  // as registered with the root (set_address changes it)
   int threads = 1;
   uint64_t max_slab_bytes = uint64_t{8} << 30;
   FrameLimits frames;  // how many frames, and how long idle ones are kept
@@ -67,10 +68,11 @@ class WorkerService final
   grpc::Status NotHere(uint64_t id, const char* what) const;
   std::shared_ptr<const Scene> FindDataset(const std::string& key);
 
-  WorkerOptions options_;  // options_.address guarded by mu_, the rest constant
-  std::mutex mu_;
-  std::map<std::string, std::shared_ptr<const Scene>> datasets_;  // guarded by mu_
-  FrameTable frames_;                                             // thread-safe by itself
+  const WorkerOptions options_;  // options_.address is only the first address_
+  absl::Mutex mu_;
+  std::string address_ ABSL_GUARDED_BY(mu_);
+  std::map<std::string, std::shared_ptr<const Scene>> datasets_ ABSL_GUARDED_BY(mu_);
+  FrameTable frames_;  // thread-safe by itself
   // Sweeps frames_ for idle frames; declared last, so that it stops first.
   Ticker sweeper_;
 };
