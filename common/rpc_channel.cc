@@ -11,6 +11,47 @@
 #include "absl/strings/str_cat.h"
 
 namespace transtick {
+namespace {
+
+std::mutex keepalive_mu;
+Keepalive keepalive;  // guarded by keepalive_mu
+
+}  // namespace
+
+void SetKeepalive(const Keepalive& k) {
+  std::lock_guard<std::mutex> lock(keepalive_mu);
+  keepalive = k;
+}
+
+Keepalive CurrentKeepalive() {
+  std::lock_guard<std::mutex> lock(keepalive_mu);
+  return keepalive;
+}
+
+std::vector<std::pair<std::string, int>> KeepaliveArguments(bool server) {
+  const Keepalive k = CurrentKeepalive();
+  std::vector<std::pair<std::string, int>> args = {
+      {GRPC_ARG_KEEPALIVE_TIME_MS, static_cast<int>(k.time.count())},
+      {GRPC_ARG_KEEPALIVE_TIMEOUT_MS, static_cast<int>(k.timeout.count())},
+      // Pings also between frames, when a shared channel carries no call:
+      // a peer that vanished then is noticed before the next frame needs it.
+      {GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1},
+      // Keep pinging a stream that sends nothing for long (a deposit stream
+      // while its worker traces, an AwaitFrame): by default a channel stops
+      // after two pings without data.
+      {GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0},
+  };
+  if (server) {
+    // A ping that comes sooner than this after the last one, while the
+    // server sends nothing, is a strike; the third strike is answered with
+    // GOAWAY ("too_many_pings"). The clients ping every `time`, so half of
+    // it leaves room for timer jitter and keeps the strikes for real floods.
+    args.push_back({GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS,
+                    static_cast<int>(k.time.count() / 2)});
+    args.push_back({GRPC_ARG_HTTP2_MAX_PING_STRIKES, 2});
+  }
+  return args;
+}
 
 std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address) {
   grpc::ChannelArguments args;
@@ -19,6 +60,7 @@ std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address) {
   // Each channel gets its own connection: ray streams must not queue behind
   // slab transfers to the same peer.
   args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
+  for (const auto& [name, value] : KeepaliveArguments(/*server=*/false)) args.SetInt(name, value);
   return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
 }
 

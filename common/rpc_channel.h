@@ -9,6 +9,8 @@
 #include <chrono>
 #include <memory>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace transtick {
 
@@ -16,7 +18,28 @@ namespace transtick {
 // receives, on both ends.
 inline constexpr int kMaxMessageBytes = 64 << 20;
 
-// A channel with the cluster's message limits and a connection of its own.
+// How the cluster's channels and servers watch a connection that carries
+// nothing: each end pings the other after `time` without activity, and
+// closes the connection when a ping is not answered within `timeout`. The
+// streams on it then fail, as when the peer's process dies, though a host
+// that vanishes (powered off, partitioned) sends no reset. The defaults notice
+// it within 15-20 s, and cost one small ping frame every 10 s on an idle
+// connection (docs/design.md, "Connections").
+struct Keepalive {
+  std::chrono::milliseconds time = std::chrono::seconds(10);
+  std::chrono::milliseconds timeout = std::chrono::seconds(5);
+};
+// Sets the keepalive of channels and servers made after the call (tests
+// shorten it). Thread-safe.
+void SetKeepalive(const Keepalive& keepalive);
+Keepalive CurrentKeepalive();
+// The gRPC channel arguments of the current keepalive, for a client channel
+// or, with `server`, for a server, which must also accept the clients' pings
+// (else it counts them as abuse and sends GOAWAY).
+std::vector<std::pair<std::string, int>> KeepaliveArguments(bool server);
+
+// A channel with the cluster's message limits and keepalive, and a
+// connection of its own.
 std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address);
 
 // A channel to `address` kept for the life of the process and shared by

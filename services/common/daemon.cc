@@ -5,8 +5,10 @@
 #include <signal.h>
 #include <spdlog/spdlog.h>
 
+#include <cmath>
 #include <cstdlib>
 
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 
 namespace transtick {
@@ -19,6 +21,11 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const std::string& address
   builder.AddListeningPort(address, grpc::InsecureServerCredentials(), &server->port_);
   builder.SetMaxReceiveMessageSize(kMaxMessageBytes);
   builder.SetMaxSendMessageSize(kMaxMessageBytes);
+  // A client whose host vanished is noticed (its streams fail), and the
+  // clients' own pings are accepted.
+  for (const auto& [name, value] : KeepaliveArguments(/*server=*/true)) {
+    builder.AddChannelArgument(name, value);
+  }
   // Long-lived ray streams each hold a thread of the synchronous server.
   builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::MAX_POLLERS, 4);
   for (grpc::Service* s : services) builder.RegisterService(s);
@@ -67,6 +74,42 @@ std::string Setting(const Flags& flags, const std::string& flag, const char* env
   if (flags.Has(flag)) return flags.Get(flag);
   if (const char* v = std::getenv(env); v != nullptr && *v != '\0') return v;
   return fallback;
+}
+
+namespace {
+
+// The setting as a number no smaller than `min` (`fallback` when unset);
+// `whole` asks for an integer.
+absl::StatusOr<double> Number(const Flags& flags, const std::string& flag, const char* env,
+                              double fallback, double min, bool whole) {
+  const std::string text = Setting(flags, flag, env, "");
+  const std::string name = absl::StrCat("--", flag, " (or ", env, ")");
+  double v = fallback;
+  if (!text.empty() &&
+      (!absl::SimpleAtod(text, &v) || !std::isfinite(v) || (whole && v != std::floor(v)))) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(name, ": '", text, "' is not ", whole ? "a whole number" : "a number"));
+  }
+  if (v < min) return absl::InvalidArgumentError(absl::StrCat(name, ": ", v, " is below ", min));
+  return v;
+}
+
+}  // namespace
+
+absl::StatusOr<int64_t> IntSetting(const Flags& flags, const std::string& flag, const char* env,
+                                   int64_t fallback, int64_t min) {
+  auto v = Number(flags, flag, env, static_cast<double>(fallback), static_cast<double>(min),
+                  /*whole=*/true);
+  if (!v.ok()) return v.status();
+  return static_cast<int64_t>(*v);
+}
+
+absl::StatusOr<std::chrono::milliseconds> SecondsSetting(const Flags& flags,
+                                                         const std::string& flag, const char* env,
+                                                         std::chrono::milliseconds fallback) {
+  auto v = Number(flags, flag, env, fallback.count() / 1e3, 0.01, /*whole=*/false);
+  if (!v.ok()) return v.status();
+  return std::chrono::milliseconds(static_cast<int64_t>(*v * 1e3));
 }
 
 void ReturnLargeBlocksToTheSystem() { mallopt(M_MMAP_THRESHOLD, 1 << 20); }

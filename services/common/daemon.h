@@ -11,6 +11,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include <chrono>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -53,6 +54,14 @@ int WaitForSignal();
 // The value of --flag, else $ENV, else `fallback`.
 std::string Setting(const Flags& flags, const std::string& flag, const char* env,
                     const std::string& fallback);
+// Setting, as a whole number no smaller than `min`; fails INVALID_ARGUMENT
+// naming the flag and the environment variable.
+absl::StatusOr<int64_t> IntSetting(const Flags& flags, const std::string& flag, const char* env,
+                                   int64_t fallback, int64_t min);
+// Setting, in seconds (fractions allowed), as a duration of at least 10 ms.
+absl::StatusOr<std::chrono::milliseconds> SecondsSetting(const Flags& flags,
+                                                         const std::string& flag, const char* env,
+                                                         std::chrono::milliseconds fallback);
 
 // Sets up spdlog's default logger: "[time] [level] [name] message".
 void InitLogging(const std::string& name);

@@ -2,9 +2,10 @@
 
 namespace transtick {
 
-absl::StatusOr<std::unique_ptr<DisplayNode>> DisplayNode::Start(const std::string& listen) {
+absl::StatusOr<std::unique_ptr<DisplayNode>> DisplayNode::Start(const std::string& listen,
+                                                                const DisplayOptions& options) {
   auto node = std::unique_ptr<DisplayNode>(new DisplayNode());
-  node->service_ = std::make_unique<DisplayService>();
+  node->service_ = std::make_unique<DisplayService>(options);
   auto server = Server::Start(listen, {node->service_.get()});
   if (!server.ok()) return server.status();
   node->server_ = *std::move(server);

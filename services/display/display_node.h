@@ -16,7 +16,8 @@ namespace transtick {
 class DisplayNode {
  public:
   // Serves a DisplayService on `listen` ("host:port"; port 0 picks one).
-  static absl::StatusOr<std::unique_ptr<DisplayNode>> Start(const std::string& listen);
+  static absl::StatusOr<std::unique_ptr<DisplayNode>> Start(const std::string& listen,
+                                                            const DisplayOptions& options = {});
   // Stops serving at once if Stop was not called.
   ~DisplayNode();
 

@@ -4,16 +4,39 @@
 #ifndef TRANSTICK_SERVICES_DISPLAY_DISPLAY_SERVICE_H_
 #define TRANSTICK_SERVICES_DISPLAY_DISPLAY_SERVICE_H_
 
-#include <condition_variable>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <string>
 
+#include "absl/base/thread_annotations.h"
+#include "absl/synchronization/mutex.h"
+#include "clock.h"
 #include "cluster.grpc.pb.h"
+#include "expiry.h"
 #include "transtick/framebuffer.h"
 
 namespace transtick {
+
+// How much the display holds for frames that the root began. A framebuffer
+// takes 32 bytes a pixel (2 GiB at the largest size), so a root that begins
+// frames and never finishes them, crashed or hostile, must not make the
+// display hold them for ever.
+struct DisplayOptions {
+  // Frames larger than this are refused.
+  uint64_t max_frame_pixels = uint64_t{8192} * 8192;
+  // Open framebuffers. Beginning one more evicts (aborts) the least recently
+  // active: the root runs one frame at a time, so that one was abandoned.
+  size_t max_frames = 4;
+  // Bytes of open framebuffers. A BeginFrame that would pass it is refused
+  // with RESOURCE_EXHAUSTED naming the sizes. Two frames of the largest size.
+  uint64_t max_bytes = uint64_t{4} << 30;
+  // A frame with no deposit and no call for this long (and no AwaitFrame
+  // waiting for it: the root's deadline governs that) is aborted and its
+  // framebuffer freed. Workers flush deposits within milliseconds of
+  // tracing them, so a live frame is never this quiet. The spare
+  // framebuffer kept for reuse is freed after as long unused.
+  std::chrono::milliseconds idle = std::chrono::seconds(60);
+};
 
 // BeginFrame, AbortFrame and Deposits, the stream every worker sends its
 // finished rays on, use gRPC's callback API. AwaitFrame, which waits for a
@@ -22,8 +45,12 @@ class DisplayService final
     : public v1::Display::WithCallbackMethod_BeginFrame<v1::Display::WithCallbackMethod_AbortFrame<
           v1::Display::WithCallbackMethod_Deposits<v1::Display::Service>>> {
  public:
-  // Frames larger than `max_frame_pixels` are refused.
-  explicit DisplayService(uint64_t max_frame_pixels = uint64_t{8192} * 8192);
+  explicit DisplayService(DisplayOptions options = {});
+
+  // Frames begun and neither finished nor aborted.
+  size_t open_frames() const;
+  // Bytes of framebuffers held: the open frames' and the spare one's.
+  uint64_t framebuffer_bytes() const;
 
   grpc::ServerUnaryReactor* BeginFrame(grpc::CallbackServerContext* ctx,
                                        const v1::DisplayFrame* req, v1::FrameAck* reply) override;
@@ -37,33 +64,64 @@ class DisplayService final
  private:
   class DepositStream;
   struct FrameState {
-    FrameState(uint64_t i, std::unique_ptr<Framebuffer> f) : id(i), fb(std::move(f)) {}
+    FrameState(uint64_t i, std::unique_ptr<Framebuffer> f)
+        : id(i),
+          width(f->width()),
+          height(f->height()),
+          bytes(Framebuffer::MemoryBytes(width, height)),
+          fb(std::move(f)) {}
+    // Constant after construction.
     const uint64_t id;
-    std::mutex mu;
-    std::condition_variable cv;
-    std::unique_ptr<Framebuffer> fb;  // guarded by mu; null once the image is out
-    bool aborted = false;             // guarded by mu
-    std::string abort_reason;         // guarded by mu
-    uint64_t deposits = 0;            // guarded by mu
+    const int width, height;
+    const uint64_t bytes;  // of the framebuffer
+
+    // Taken after the service's mu_ when both are held.
+    absl::Mutex mu;
+    // Null once the image is out or the frame aborted.
+    std::unique_ptr<Framebuffer> fb ABSL_GUARDED_BY(mu);
+    bool aborted ABSL_GUARDED_BY(mu) = false;
+    std::string abort_reason ABSL_GUARDED_BY(mu);
+    uint64_t deposits ABSL_GUARDED_BY(mu) = 0;
+    int waiters ABSL_GUARDED_BY(mu) = 0;  // AwaitFrame calls in progress
+    Clock::time_point last_activity ABSL_GUARDED_BY(mu) = Clock::now();
   };
-  std::shared_ptr<FrameState> Find(uint64_t id);
-  grpc::Status Begin(const v1::DisplayFrame& req);
-  void Abort(uint64_t id, const std::string& reason);
+  std::shared_ptr<FrameState> Find(uint64_t id) ABSL_LOCKS_EXCLUDED(mu_);
+  grpc::Status Begin(const v1::DisplayFrame& req) ABSL_LOCKS_EXCLUDED(mu_);
+  void Abort(uint64_t id, const std::string& reason) ABSL_LOCKS_EXCLUDED(mu_);
   // Aborts `frame` unless it is complete (or aborted) already.
-  void AbortIncomplete(FrameState& frame, const std::string& why);
+  void AbortIncomplete(FrameState& frame, const std::string& why) ABSL_LOCKS_EXCLUDED(mu_);
+  // Marks `frame` aborted and frees its framebuffer; with `unless_complete`,
+  // not a frame whose deposits are all in. False when it did nothing.
+  static bool MarkAborted(FrameState& frame, const std::string& why, bool unless_complete = false)
+      ABSL_LOCKS_EXCLUDED(frame.mu);
+  // When `frame` was last active: now while a root awaits it.
+  static Clock::time_point LastActive(FrameState& frame, Clock::time_point now)
+      ABSL_LOCKS_EXCLUDED(frame.mu);
+  // OK when the frame's framebuffer is still here; else why it is not.
+  static grpc::Status ImageStatus(const FrameState& frame) ABSL_EXCLUSIVE_LOCKS_REQUIRED(frame.mu);
+  // Waits until `frame` is complete or aborted, sending progress every
+  // 250 ms. OK when it is complete and its framebuffer is still here.
+  static grpc::Status WaitUntilOver(FrameState& frame, grpc::ServerContext& ctx,
+                                    grpc::ServerWriter<v1::FrameProgress>& writer)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(frame.mu);
+  // Aborts frames idle beyond the limit; frees a spare unused as long.
+  void ExpireIdle() ABSL_LOCKS_EXCLUDED(mu_);
+  uint64_t OpenBytesLocked() const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
   // Adds a batch's deposits to its frame; `frame` caches the frame of the
   // stream's last batch.
   grpc::Status Accumulate(const v1::DepositBatch& batch, std::shared_ptr<FrameState>* frame);
 
-  const uint64_t max_frame_pixels_;
-  std::mutex mu_;
-  std::map<uint64_t, std::shared_ptr<FrameState>> frames_;  // guarded by mu_
-  std::unique_ptr<Framebuffer> spare_;  // guarded by mu_: a finished frame's, for reuse
+  const DisplayOptions options_;
+  mutable absl::Mutex mu_;
+  std::map<uint64_t, std::shared_ptr<FrameState>> frames_ ABSL_GUARDED_BY(mu_);
+  // A finished frame's framebuffer, for reuse, and since when.
+  std::unique_ptr<Framebuffer> spare_ ABSL_GUARDED_BY(mu_);
+  Clock::time_point spare_since_ ABSL_GUARDED_BY(mu_);
   // Why recently aborted frames were aborted, for an AwaitFrame that comes
-  // after the abort; the newest kMaxAborted only.
-  static constexpr size_t kMaxAborted = 256;
-  std::map<uint64_t, std::string> aborted_;                    // guarded by mu_
-  void RememberAbort(uint64_t id, const std::string& reason);  // REQUIRES: mu_ held
+  // after the abort.
+  RecentReasons aborted_ ABSL_GUARDED_BY(mu_);
+  // Sweeps frames_ for idle frames; declared last, so that it stops first.
+  Ticker sweeper_;
 };
 
 }  // namespace transtick

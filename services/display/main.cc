@@ -11,14 +11,32 @@ int main(int argc, char** argv) {
   BlockTerminationSignals();
   ReturnLargeBlocksToTheSystem();
   InitLogging("display");
-  auto flags = Flags::Parse(argc, argv, 1, {"listen"}, {"help"});
+  auto flags = Flags::Parse(
+      argc, argv, 1, {"listen", "max-frames", "max-framebuffer-mb", "frame-idle-s"}, {"help"});
   if (!flags.ok() || flags->Has("help")) {
     if (!flags.ok()) std::cerr << "transtick-display: " << flags.status().message() << "\n";
-    std::cerr << "usage: transtick-display [--listen ADDR]  (environment: TRANSTICK_LISTEN)\n";
+    std::cerr << "usage: transtick-display [--listen ADDR] [--max-frames N] "
+                 "[--max-framebuffer-mb N] [--frame-idle-s S]\n(environment: TRANSTICK_LISTEN, "
+                 "TRANSTICK_MAX_FRAMES, TRANSTICK_MAX_FRAMEBUFFER_MB, TRANSTICK_FRAME_IDLE_S)\n";
     return flags.ok() ? 0 : 2;
   }
   const std::string listen = Setting(*flags, "listen", "TRANSTICK_LISTEN", "0.0.0.0:7002");
-  auto node = DisplayNode::Start(listen);
+  DisplayOptions o;
+  auto max_frames = IntSetting(*flags, "max-frames", "TRANSTICK_MAX_FRAMES",
+                               static_cast<int64_t>(o.max_frames), 1);
+  auto max_mb = IntSetting(*flags, "max-framebuffer-mb", "TRANSTICK_MAX_FRAMEBUFFER_MB",
+                           static_cast<int64_t>(o.max_bytes >> 20), 1);
+  auto idle = SecondsSetting(*flags, "frame-idle-s", "TRANSTICK_FRAME_IDLE_S", o.idle);
+  for (const absl::Status& s : {max_frames.status(), max_mb.status(), idle.status()}) {
+    if (!s.ok()) {
+      std::cerr << "transtick-display: " << s.message() << "\n";
+      return 2;
+    }
+  }
+  o.max_frames = static_cast<size_t>(*max_frames);
+  o.max_bytes = static_cast<uint64_t>(*max_mb) << 20;
+  o.idle = *idle;
+  auto node = DisplayNode::Start(listen, o);
   if (!node.ok()) {
     spdlog::error("{}", std::string(node.status().message()));
     return 1;

@@ -10,6 +10,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "absl/time/time.h"
 #include "clock.h"
 #include "convert.h"
 #include "daemon.h"
@@ -42,15 +43,14 @@ constexpr auto kCloseWait = std::chrono::seconds(10);
 
 void Inbox::Push(std::vector<RayDescriptor> rays) {
   if (rays.empty()) return;
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);  // wakes a Wait (its condition is checked on unlock)
   size_ += rays.size();
   high_water_ = std::max(high_water_, size_);
   batches_.push_back(std::move(rays));
-  cv_.notify_one();
 }
 
 bool Inbox::TryPop(size_t max, std::vector<RayDescriptor>* out) {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   size_t taken = 0;
   while (taken < max && !batches_.empty()) {
     auto& front = batches_.front();
@@ -68,72 +68,79 @@ bool Inbox::TryPop(size_t max, std::vector<RayDescriptor>* out) {
 }
 
 void Inbox::Wait(std::chrono::milliseconds timeout) {
-  std::unique_lock<std::mutex> lock(mu_);
-  cv_.wait_for(lock, timeout, [this] { return size_ > 0 || woken_; });
+  absl::MutexLock lock(&mu_);
+  auto ready = [this]() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) { return size_ > 0 || woken_; };
+  mu_.AwaitWithTimeout(absl::Condition(&ready), absl::FromChrono(timeout));
 }
 
 void Inbox::Wake() {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   woken_ = true;
-  cv_.notify_all();
 }
 
 size_t Inbox::high_water() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   return high_water_;
 }
 
 void Outbox::Attach(StartWrite write, std::function<void()> done, bool busy) {
-  std::unique_lock<std::mutex> lock(mu_);
+  mu_.Lock();
   write_ = std::move(write);
   done_ = std::move(done);
   in_flight_ = busy;
-  Pump(lock);
+  Pump();
 }
 
 void Outbox::WriteDone(bool ok) {
-  std::unique_lock<std::mutex> lock(mu_);
+  mu_.Lock();
   in_flight_ = false;
   if (!ok && !failed_) {
     failed_ = true;
     dropped_ += pending_.size() / record_bytes_;
     pending_.clear();
   }
-  Pump(lock);
+  Pump();
 }
 
 void Outbox::Append(const std::string& records) {
   if (records.empty()) return;
-  std::unique_lock<std::mutex> lock(mu_);
+  mu_.Lock();
   if (failed_ || closed_) {
     dropped_ += records.size() / record_bytes_;
+    mu_.Unlock();
     return;
   }
   if (pending_.empty()) first_pending_ = Clock::now();
   pending_ += records;
-  Pump(lock);
+  Pump();
 }
 
 void Outbox::Flush() {
-  std::unique_lock<std::mutex> lock(mu_);
-  if (pending_.empty()) return;
+  mu_.Lock();
+  if (pending_.empty()) {
+    mu_.Unlock();
+    return;
+  }
   flush_ = true;
-  Pump(lock);
+  Pump();
 }
 
 void Outbox::Close() {
-  std::unique_lock<std::mutex> lock(mu_);
+  mu_.Lock();
   closed_ = true;
-  Pump(lock);
+  Pump();
 }
 
 uint64_t Outbox::dropped() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   return dropped_;
 }
 
-void Outbox::Pump(std::unique_lock<std::mutex>& lock) {
-  if (!write_ || in_flight_) return;
+void Outbox::Pump() {
+  if (!write_ || in_flight_) {
+    mu_.Unlock();
+    return;
+  }
   const size_t limit = batch_records_ * record_bytes_;
   const bool due =
       pending_.size() >= limit ||
@@ -153,15 +160,14 @@ void Outbox::Pump(std::unique_lock<std::mutex>& lock) {
       first_pending_ = Clock::now();
     }
     in_flight_ = true;
-    lock.unlock();
+    mu_.Unlock();
     write_(std::move(batch));
     return;
   }
-  if ((closed_ || failed_) && pending_.empty() && !done_called_) {
-    done_called_ = true;
-    lock.unlock();
-    done_();
-  }
+  const bool finished = (closed_ || failed_) && pending_.empty() && !done_called_;
+  if (finished) done_called_ = true;
+  mu_.Unlock();
+  if (finished) done_();
 }
 
 struct Frame::Link {
@@ -323,8 +329,8 @@ class Frame::DisplayStream : public grpc::ClientWriteReactor<v1::DepositBatch>,
 // itself when done.
 class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch> {
  public:
-  explicit LeftStream(std::function<std::shared_ptr<Frame>(uint64_t)> find)
-      : find_(std::move(find)) {
+  LeftStream(grpc::CallbackServerContext* ctx, std::function<std::shared_ptr<Frame>(uint64_t)> find)
+      : ctx_(ctx), find_(std::move(find)) {
     StartRead(&in_);
   }
 
@@ -341,7 +347,7 @@ class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBa
             absl::StrCat("Rays: frame ", in_.frame_id(), " is not prepared here"))));
         return;
       }
-      if (!frame_->AttachLeft()) {
+      if (!frame_->AttachLeft(ctx_)) {
         Finish(ToGrpc(absl::AlreadyExistsError(absl::StrCat(
             "Rays: frame ", in_.frame_id(), " already has a stream from its left neighbour"))));
         frame_ = nullptr;
@@ -369,7 +375,10 @@ class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBa
     StartRead(&in_);
   }
   void OnWriteDone(bool ok) override { frame_->left_->outbox.WriteDone(ok); }
-  void OnDone() override { delete this; }
+  void OnDone() override {
+    if (frame_) frame_->DetachLeft();
+    delete this;
+  }
 
  private:
   // Reading and writing each release the stream once; the second finishes.
@@ -377,11 +386,14 @@ class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBa
     if (--holds_ == 0) Finish(grpc::Status::OK);
   }
 
+  grpc::CallbackServerContext* const ctx_;
   const std::function<std::shared_ptr<Frame>(uint64_t)> find_;
   std::shared_ptr<Frame> frame_;  // set by the first read only
   v1::RayBatch in_, out_;
   std::atomic<int> holds_{2};
 };
+
+std::atomic<int64_t> Frame::alive_{0};
 
 Frame::Frame(const v1::FrameSpec& spec, std::shared_ptr<const Scene> scene, Camera camera,
              const FrameOptions& options)
@@ -400,11 +412,15 @@ Frame::Frame(const v1::FrameSpec& spec, std::shared_ptr<const Scene> scene, Came
       left_(std::make_unique<Link>(options)),
       right_(std::make_unique<Link>(options)),
       deposits_(kDepositRecordBytes, options.deposit_batch, options.deposit_linger),
-      thread_stats_(options.threads) {}
+      last_activity_(Clock::now().time_since_epoch().count()),
+      thread_stats_(options.threads) {
+  ++alive_;
+}
 
 Frame::~Frame() {
   // Tracer threads hold the frame, so none runs now: this ends at once.
   if (!end_requested_) End(/*cancel=*/true);
+  --alive_;
 }
 
 void Frame::Start(std::function<void(absl::Status)> started) {
@@ -413,7 +429,7 @@ void Frame::Start(std::function<void(absl::Status)> started) {
     return;
   }
   {
-    std::lock_guard<std::mutex> lock(end_mu_);
+    absl::MutexLock lock(&end_mu_);
     if (end_requested_) {
       started(absl::FailedPreconditionError("frame already ended"));
       return;
@@ -421,6 +437,7 @@ void Frame::Start(std::function<void(absl::Status)> started) {
     running_tracers_ = options_.threads;
   }
   run_start_ = Clock::now();
+  Touch(run_start_);
   // Tracing starts at once; the outboxes hold what it produces until the
   // streams below are open. Each tracer holds the frame until it stops, and
   // the last one to stop ends the frame (EndAsync): nothing ever joins a
@@ -444,17 +461,29 @@ void Frame::Start(std::function<void(absl::Status)> started) {
 }
 
 grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* Frame::NewLeftStream(
-    std::function<std::shared_ptr<Frame>(uint64_t)> find) {
-  return new LeftStream(std::move(find));
+    grpc::CallbackServerContext* ctx, std::function<std::shared_ptr<Frame>(uint64_t)> find) {
+  return new LeftStream(ctx, std::move(find));
 }
 
-bool Frame::AttachLeft() { return !left_attached_.exchange(true); }
+bool Frame::AttachLeft(grpc::CallbackServerContext* ctx) {
+  if (left_attached_.exchange(true)) return false;
+  absl::MutexLock lock(&left_mu_);
+  left_ctx_ = ctx;
+  if (left_cancelled_) ctx->TryCancel();
+  return true;
+}
+
+void Frame::DetachLeft() {
+  absl::MutexLock lock(&left_mu_);
+  left_ctx_ = nullptr;
+}
 
 void Frame::ReceiveBatch(const v1::RayBatch& batch, Link& from) {
   if (batch.frame_id() != id()) {
     spdlog::warn("frame {}: dropped a batch of frame {}", id(), batch.frame_id());
     return;
   }
+  Touch(Clock::now());
   const char* side = &from == left_.get() ? "left" : "right";
   auto rays = DecodeRays(batch.rays(), pixel_limit_);
   size_t rejected = 0;
@@ -581,6 +610,7 @@ void Frame::TraceLoop(int thread_index) {
       st.idle_ms += MsBetween(t0, Clock::now());
       continue;
     }
+    Touch(t0);
     Deposit deposit;
     // Every Trace call is bounded (Tracer::max_segments), so a frame that
     // ends stops its tracers within one ray.
@@ -608,7 +638,7 @@ void Frame::EndAsync(bool cancel, std::function<void(v1::WorkerFrameStats)> done
   stop_ = true;
   inbox_.Wake();
   {
-    std::lock_guard<std::mutex> lock(end_mu_);
+    absl::MutexLock lock(&end_mu_);
     if (end_requested_) return;  // REQUIRES says once; a second call is ignored
     end_requested_ = true;
     end_cancel_ = cancel;
@@ -624,7 +654,7 @@ void Frame::TracerStopped() {
   std::function<void(v1::WorkerFrameStats)> done;
   bool cancel;
   {
-    std::lock_guard<std::mutex> lock(end_mu_);
+    absl::MutexLock lock(&end_mu_);
     if (--running_tracers_ > 0 || !end_done_) return;
     done = std::move(end_done_);
     end_done_ = nullptr;
@@ -646,7 +676,14 @@ v1::WorkerFrameStats Frame::Finish(bool cancel) {
   // written (when the frame is complete, nothing is left to write). The
   // streams then wind down on their own: the frame's statistics do not
   // wait for the display's and the neighbours' replies.
-  if (cancel) cancelled_ = true;
+  if (cancel) {
+    cancelled_ = true;
+    // The left neighbour's stream holds this frame until it ends: a peer
+    // that never closes its side must not keep a cancelled frame alive.
+    absl::MutexLock lock(&left_mu_);
+    left_cancelled_ = true;
+    if (left_ctx_) left_ctx_->TryCancel();
+  }
   left_->outbox.Close();
   right_->outbox.Close();
   deposits_.Close();

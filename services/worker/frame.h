@@ -11,16 +11,17 @@
 
 #include <atomic>
 #include <chrono>
-#include <condition_variable>
 #include <deque>
 #include <functional>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "absl/base/thread_annotations.h"
 #include "absl/status/status.h"
+#include "absl/synchronization/mutex.h"
+#include "clock.h"
 #include "cluster.grpc.pb.h"
 #include "transtick/camera.h"
 #include "transtick/ray.h"
@@ -42,13 +43,12 @@ class Inbox {
   size_t high_water() const;
 
  private:
-  mutable std::mutex mu_;
-  std::condition_variable cv_;
-  std::deque<std::vector<RayDescriptor>> batches_;  // guarded by mu_
-  size_t front_used_ = 0;                           // guarded by mu_
-  size_t size_ = 0;                                 // guarded by mu_
-  size_t high_water_ = 0;                           // guarded by mu_
-  bool woken_ = false;                              // guarded by mu_
+  mutable absl::Mutex mu_;
+  std::deque<std::vector<RayDescriptor>> batches_ ABSL_GUARDED_BY(mu_);
+  size_t front_used_ ABSL_GUARDED_BY(mu_) = 0;  // rays of batches_.front() taken
+  size_t size_ ABSL_GUARDED_BY(mu_) = 0;        // rays in batches_, less front_used_
+  size_t high_water_ ABSL_GUARDED_BY(mu_) = 0;
+  bool woken_ ABSL_GUARDED_BY(mu_) = false;
 };
 
 // Encoded records waiting to go out on one stream, with at most one write
@@ -85,22 +85,25 @@ class Outbox {
   uint64_t dropped() const;
 
  private:
-  // Starts the next write, or the half-close, if one is due. Releases `lock`.
-  void Pump(std::unique_lock<std::mutex>& lock);
+  // Starts the next write, or the half-close, if one is due, and releases
+  // mu_ before it calls the stream.
+  void Pump() ABSL_UNLOCK_FUNCTION(mu_);
 
   const size_t record_bytes_;
   const size_t batch_records_;
   const std::chrono::microseconds linger_;
-  mutable std::mutex mu_;
-  std::string pending_;                                  // guarded by mu_
-  std::chrono::steady_clock::time_point first_pending_;  // guarded by mu_
-  bool flush_ = false;                                   // guarded by mu_
-  bool closed_ = false;                                  // guarded by mu_
-  bool in_flight_ = false;                               // guarded by mu_
-  bool failed_ = false;                                  // guarded by mu_
-  bool done_called_ = false;                             // guarded by mu_
-  uint64_t dropped_ = 0;                                 // guarded by mu_
-  // Set once by Attach, under mu_, and never changed: called without mu_.
+  mutable absl::Mutex mu_;
+  std::string pending_ ABSL_GUARDED_BY(mu_);
+  Clock::time_point first_pending_ ABSL_GUARDED_BY(mu_);
+  bool flush_ ABSL_GUARDED_BY(mu_) = false;
+  bool closed_ ABSL_GUARDED_BY(mu_) = false;
+  bool in_flight_ ABSL_GUARDED_BY(mu_) = false;
+  bool failed_ ABSL_GUARDED_BY(mu_) = false;
+  bool done_called_ ABSL_GUARDED_BY(mu_) = false;
+  uint64_t dropped_ ABSL_GUARDED_BY(mu_) = 0;
+  // Empty until Attach sets them, under mu_, once; then never changed, and
+  // called without mu_ (Pump calls them only once it saw them set, under
+  // mu_). Not annotated: the compiler cannot express "written once".
   StartWrite write_;
   std::function<void()> done_;
 };
@@ -135,6 +138,16 @@ class Frame : public std::enable_shared_from_this<Frame> {
   Frame& operator=(const Frame&) = delete;
 
   uint64_t id() const { return spec_.frame_id(); }
+  // Whether Start was called.
+  bool running() const { return started_; }
+  // When the frame last saw a call, a ray batch from a neighbour or a unit
+  // of traced work: what the worker's expiry of idle frames looks at.
+  Clock::time_point last_activity() const {
+    return Clock::time_point(Clock::duration(last_activity_.load(std::memory_order_relaxed)));
+  }
+  // Frame objects alive in this process. An ended frame is destroyed once
+  // its tracer threads have stopped and its streams have let go of it.
+  static int64_t alive() { return alive_; }
 
   // Starts tracing, and opens the streams to the display and to the right
   // neighbour; `started` is called once the stream to the neighbour has
@@ -144,13 +157,14 @@ class Frame : public std::enable_shared_from_this<Frame> {
   // The server side of a Rays stream opened by a left neighbour: its first
   // batch names the frame, which `find` looks up.
   static grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* NewLeftStream(
-      std::function<std::shared_ptr<Frame>(uint64_t)> find);
+      grpc::CallbackServerContext* ctx, std::function<std::shared_ptr<Frame>(uint64_t)> find);
 
   // Stops tracing, closes the streams and calls `done` with this frame's
   // statistics: at once when no tracer runs, else from the last tracer
   // thread to stop, within one ray (every ray is bounded). Never blocks, so
   // a gRPC reaction may call it. With `cancel`, rays still in flight are
-  // dropped and streams cancelled. REQUIRES: called once, End included.
+  // dropped and every stream cancelled, the left neighbour's included.
+  // REQUIRES: called once, End included.
   void EndAsync(bool cancel, std::function<void(v1::WorkerFrameStats)> done);
   // EndAsync, waiting for the statistics. Not from a gRPC reaction.
   v1::WorkerFrameStats End(bool cancel);
@@ -176,9 +190,15 @@ class Frame : public std::enable_shared_from_this<Frame> {
   // Counts `count` invalid records from the `side` neighbour; the first
   // time, logs why and aborts the frame at the display.
   void Reject(uint64_t count, const char* side, const std::string& why);
-  // Claims the left link for a neighbour's stream: false when this frame
-  // already has one.
-  bool AttachLeft();
+  // Claims the left link for a neighbour's stream, whose server context is
+  // `ctx`: false when this frame already has one. A frame cancelled by then
+  // cancels the stream at once.
+  bool AttachLeft(grpc::CallbackServerContext* ctx);
+  // The left neighbour's stream is done: its context goes away.
+  void DetachLeft();
+  void Touch(Clock::time_point now) {
+    last_activity_.store(now.time_since_epoch().count(), std::memory_order_relaxed);
+  }
 
   const v1::FrameSpec spec_;
   const std::shared_ptr<const Scene> scene_;
@@ -203,19 +223,28 @@ class Frame : public std::enable_shared_from_this<Frame> {
   std::atomic<uint64_t> rejected_{0};
   std::atomic<bool> reject_reported_{false};
   std::atomic<bool> left_attached_{false};
+  // Written by tracers once per work unit: a line of its own.
+  alignas(64) std::atomic<Clock::rep> last_activity_;
+  static std::atomic<int64_t> alive_;
+
+  absl::Mutex left_mu_;
+  // The left neighbour's stream, while it is open.
+  grpc::CallbackServerContext* left_ctx_ ABSL_GUARDED_BY(left_mu_) = nullptr;
+  bool left_cancelled_ ABSL_GUARDED_BY(left_mu_) = false;
 
   // Streams this worker opened. Each owns itself until its OnDone.
   std::weak_ptr<RightStream> right_stream_;
   std::weak_ptr<DisplayStream> display_stream_;
 
-  std::mutex end_mu_;
-  // State below is protected by end_mu_.
-  int running_tracers_ = 0;
-  bool end_requested_ = false;
-  bool end_cancel_ = false;
-  std::function<void(v1::WorkerFrameStats)> end_done_;
+  // How the frame ends: the last tracer to stop calls end_done_.
+  absl::Mutex end_mu_;
+  int running_tracers_ ABSL_GUARDED_BY(end_mu_) = 0;
+  bool end_requested_ ABSL_GUARDED_BY(end_mu_) = false;
+  bool end_cancel_ ABSL_GUARDED_BY(end_mu_) = false;
+  std::function<void(v1::WorkerFrameStats)> end_done_ ABSL_GUARDED_BY(end_mu_);
 
-  std::chrono::steady_clock::time_point run_start_;
+  // Written by Start before the tracers start; read by Finish after them.
+  Clock::time_point run_start_;
   // Per tracer thread, written by that thread only until joined.
   struct ThreadStats {
     double idle_ms = 0;

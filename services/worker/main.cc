@@ -1,6 +1,7 @@
 // transtick-worker: holds slabs and traces rays in a ring of workers.
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <iostream>
 
 #include "daemon.h"
@@ -11,24 +12,42 @@ int main(int argc, char** argv) {
   BlockTerminationSignals();
   ReturnLargeBlocksToTheSystem();
   InitLogging("worker");
-  auto flags = Flags::Parse(argc, argv, 1, {"listen", "root", "advertise", "threads"}, {"help"});
+  auto flags = Flags::Parse(argc, argv, 1,
+                            {"listen", "root", "advertise", "threads", "max-frames", "frame-idle-s",
+                             "running-frame-idle-s"},
+                            {"help"});
   if (!flags.ok() || flags->Has("help")) {
     if (!flags.ok()) std::cerr << "transtick-worker: " << flags.status().message() << "\n";
     std::cerr << "usage: transtick-worker --root HOST:PORT [--listen ADDR] [--advertise ADDR] "
-                 "[--threads N]\n(environment: TRANSTICK_ROOT, TRANSTICK_LISTEN, "
-                 "TRANSTICK_ADVERTISE, TRANSTICK_THREADS)\n";
+                 "[--threads N] [--max-frames N] [--frame-idle-s S] [--running-frame-idle-s S]\n"
+                 "(environment: TRANSTICK_ROOT, TRANSTICK_LISTEN, TRANSTICK_ADVERTISE, "
+                 "TRANSTICK_THREADS, TRANSTICK_MAX_FRAMES, TRANSTICK_FRAME_IDLE_S, "
+                 "TRANSTICK_RUNNING_FRAME_IDLE_S)\n";
     return flags.ok() ? 0 : 2;
   }
   WorkerNodeOptions o;
   o.listen = Setting(*flags, "listen", "TRANSTICK_LISTEN", "0.0.0.0:7001");
   o.root = Setting(*flags, "root", "TRANSTICK_ROOT", "");
   o.advertise = Setting(*flags, "advertise", "TRANSTICK_ADVERTISE", "");
-  try {
-    o.threads = std::stoi(Setting(*flags, "threads", "TRANSTICK_THREADS", "0"));
-  } catch (...) {
-    std::cerr << "transtick-worker: --threads must be an integer\n";
-    return 2;
+  const FrameLimits defaults;
+  auto threads = IntSetting(*flags, "threads", "TRANSTICK_THREADS", 0, 0);
+  auto max_frames = IntSetting(*flags, "max-frames", "TRANSTICK_MAX_FRAMES",
+                               static_cast<int64_t>(defaults.max_frames), 1);
+  auto prepared_idle =
+      SecondsSetting(*flags, "frame-idle-s", "TRANSTICK_FRAME_IDLE_S", defaults.prepared_idle);
+  auto running_idle = SecondsSetting(*flags, "running-frame-idle-s",
+                                     "TRANSTICK_RUNNING_FRAME_IDLE_S", defaults.running_idle);
+  for (const absl::Status& s :
+       {threads.status(), max_frames.status(), prepared_idle.status(), running_idle.status()}) {
+    if (!s.ok()) {
+      std::cerr << "transtick-worker: " << s.message() << "\n";
+      return 2;
+    }
   }
+  o.threads = static_cast<int>(std::min<int64_t>(*threads, 4096));
+  o.frames.max_frames = static_cast<size_t>(*max_frames);
+  o.frames.prepared_idle = *prepared_idle;
+  o.frames.running_idle = *running_idle;
   auto node = WorkerNode::Start(o);
   if (!node.ok()) {
     spdlog::error("{}", std::string(node.status().message()));

@@ -8,6 +8,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/time/time.h"
 
 namespace transtick {
 namespace {
@@ -30,7 +31,11 @@ absl::StatusOr<std::unique_ptr<WorkerNode>> WorkerNode::Start(const WorkerNodeOp
   node->threads_ = options.threads > 0
                        ? options.threads
                        : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  node->service_ = std::make_unique<WorkerService>(WorkerOptions{node->id_, "", node->threads_});
+  WorkerOptions wo;
+  wo.id = node->id_;
+  wo.threads = node->threads_;
+  wo.frames = options.frames;
+  node->service_ = std::make_unique<WorkerService>(std::move(wo));
   auto server = Server::Start(options.listen, {node->service_.get()});
   if (!server.ok()) return server.status();
   node->server_ = *std::move(server);
@@ -56,7 +61,11 @@ void WorkerNode::RegisterLoop() {
   const std::chrono::milliseconds first_backoff(100), max_backoff(3000);
   std::chrono::milliseconds backoff = first_backoff;
   bool warned = false;
-  while (!stopping_) {
+  while (true) {
+    {
+      absl::MutexLock lock(&mu_);
+      if (stopping_) return;
+    }
     grpc::ClientContext ctx;
     ctx.set_deadline(Deadline(5));
     v1::RegisterRequest req;
@@ -84,16 +93,16 @@ void WorkerNode::RegisterLoop() {
       wait = backoff;
       backoff = std::min(backoff * 2, max_backoff);
     }
-    std::unique_lock<std::mutex> lock(mu_);
-    cv_.wait_for(lock, wait, [this] { return stopping_.load(); });
+    absl::MutexLock lock(&mu_);  // until the next heartbeat, or Stop
+    mu_.AwaitWithTimeout(absl::Condition(&stopping_), absl::FromChrono(wait));
   }
 }
 
 void WorkerNode::Stop(std::chrono::milliseconds grace) {
-  if (stopping_.exchange(true)) return;
   {
-    std::lock_guard<std::mutex> lock(mu_);
-    cv_.notify_all();
+    absl::MutexLock lock(&mu_);
+    if (stopping_) return;
+    stopping_ = true;
   }
   if (registrar_.joinable()) registrar_.join();
   if (registered_) {

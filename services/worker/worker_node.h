@@ -11,7 +11,9 @@
 #include <string>
 #include <thread>
 
+#include "absl/base/thread_annotations.h"
 #include "absl/status/statusor.h"
+#include "absl/synchronization/mutex.h"
 #include "daemon.h"
 #include "worker_service.h"
 
@@ -23,6 +25,7 @@ struct WorkerNodeOptions {
   std::string advertise;  // empty: this host's name and the bound port
   int threads = 0;        // 0: one per core
   std::chrono::milliseconds heartbeat{1000};
+  FrameLimits frames;
 };
 
 class WorkerNode {
@@ -41,16 +44,16 @@ class WorkerNode {
   WorkerNode() = default;
   void RegisterLoop();
 
+  // Set by Start, then constant.
   WorkerNodeOptions options_;
   std::string id_, address_;
   int threads_ = 1;
   std::unique_ptr<WorkerService> service_;
   std::unique_ptr<Server> server_;
   std::thread registrar_;
-  std::atomic<bool> stopping_{false};
   std::atomic<bool> registered_{false};
-  std::mutex mu_;
-  std::condition_variable cv_;
+  absl::Mutex mu_;
+  bool stopping_ ABSL_GUARDED_BY(mu_) = false;  // set once by Stop; ends the registrar's wait
 };
 
 }  // namespace transtick

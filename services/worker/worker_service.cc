@@ -67,22 +67,38 @@ absl::StatusOr<std::shared_ptr<const Scene>> AssembleSlab(const v1::SlabHeader& 
 
 }  // namespace
 
-WorkerService::WorkerService(WorkerOptions options) : options_(std::move(options)) {}
+WorkerService::WorkerService(WorkerOptions options)
+    : options_(std::move(options)),
+      address_(options_.address),
+      frames_(options_.frames),
+      sweeper_(SweepPeriod(std::min(options_.frames.prepared_idle, options_.frames.running_idle)),
+               [this] {
+                 for (FrameTable::Dropped& d : frames_.TakeExpired(Clock::now())) {
+                   Drop(std::move(d));
+                 }
+               }) {}
 
 WorkerService::~WorkerService() { CancelAll(); }
 
 void WorkerService::set_address(const std::string& address) {
-  std::lock_guard<std::mutex> lock(mu_);
-  options_.address = address;
+  absl::MutexLock lock(&mu_);
+  address_ = address;
 }
 
 void WorkerService::CancelAll() {
-  std::map<uint64_t, std::shared_ptr<Frame>> frames;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    frames.swap(frames_);
-  }
-  for (auto& [id, f] : frames) f->End(/*cancel=*/true);
+  for (auto& f : frames_.TakeAll()) f->End(/*cancel=*/true);
+}
+
+void WorkerService::Drop(FrameTable::Dropped dropped) {
+  spdlog::warn("frame {} {}; its tracers stop and its streams are cancelled", dropped.frame->id(),
+               dropped.why);
+  // Never blocks: the tracers stop within one ray, and the frame is freed
+  // when the last of them and of its streams lets go of it.
+  dropped.frame->EndAsync(/*cancel=*/true, [](v1::WorkerFrameStats) {});
+}
+
+grpc::Status WorkerService::NotHere(uint64_t id, const char* what) const {
+  return ToGrpc(absl::NotFoundError(absl::StrCat("frame ", id, " ", what, frames_.WhyGone(id))));
 }
 
 grpc::Status WorkerService::LoadSlab(grpc::ServerContext* ctx,
@@ -118,7 +134,7 @@ grpc::Status WorkerService::LoadSlab(grpc::ServerContext* ctx,
   reply->set_memory_bytes((*scene)->MemoryBytes());
   spdlog::info("loaded {} slab [{}, {}): {:.1f} MB", header.dataset_key(), header.y_begin(),
                header.y_end(), (*scene)->MemoryBytes() / 1e6);
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   datasets_[header.dataset_key()] = *std::move(scene);
   return grpc::Status::OK;
 }
@@ -129,7 +145,7 @@ grpc::Status WorkerService::Evict(grpc::ServerContext*, const v1::DatasetRef* re
   if (req->dataset_key().empty()) {
     return ToGrpc(absl::InvalidArgumentError("Evict: a dataset_key is required"));
   }
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   if (datasets_.erase(req->dataset_key()) == 0) {
     return ToGrpc(absl::NotFoundError(
         absl::StrCat("Evict: dataset ", req->dataset_key(), " is not loaded here")));
@@ -138,7 +154,7 @@ grpc::Status WorkerService::Evict(grpc::ServerContext*, const v1::DatasetRef* re
 }
 
 std::shared_ptr<const Scene> WorkerService::FindDataset(const std::string& key) {
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   auto it = datasets_.find(key);
   return it == datasets_.end() ? nullptr : it->second;
 }
@@ -315,7 +331,7 @@ grpc::Status WorkerService::Reslab(grpc::ServerContext*, const v1::ReslabRequest
   reply->set_memory_bytes(scene->MemoryBytes());
   spdlog::info("re-slabbed {} [{}, {}) -> [{}, {}) with planes from {} neighbour fetch(es)",
                req->new_key(), old->y_begin(), old->y_end(), y0, y1, fetches.size());
-  std::lock_guard<std::mutex> lock(mu_);
+  absl::MutexLock lock(&mu_);
   datasets_[req->new_key()] = std::make_shared<const Scene>(*std::move(scene));
   return grpc::Status::OK;
 }
@@ -330,17 +346,17 @@ grpc::ServerUnaryReactor* WorkerService::PrepareFrame(grpc::CallbackServerContex
 grpc::Status WorkerService::Prepare(const v1::FrameSpec& spec) {
   std::shared_ptr<const Scene> scene;
   {
-    std::lock_guard<std::mutex> lock(mu_);
+    absl::MutexLock lock(&mu_);
     auto it = datasets_.find(spec.dataset_key());
     if (it == datasets_.end()) {
       return ToGrpc(absl::FailedPreconditionError(
           absl::StrCat("dataset ", spec.dataset_key(), " is not loaded here")));
     }
     scene = it->second;
-    if (frames_.count(spec.frame_id())) {
-      return ToGrpc(absl::AlreadyExistsError(
-          absl::StrCat("frame ", spec.frame_id(), " is already prepared")));
-    }
+  }
+  if (frames_.Find(spec.frame_id())) {
+    return ToGrpc(
+        absl::AlreadyExistsError(absl::StrCat("frame ", spec.frame_id(), " is already prepared")));
   }
   const int n = spec.cuts_size() - 1;
   const std::vector<int> cuts(spec.cuts().begin(), spec.cuts().end());
@@ -372,18 +388,16 @@ grpc::Status WorkerService::Prepare(const v1::FrameSpec& spec) {
   }
   FrameOptions fo;
   fo.threads = options_.threads;
-  auto frame = std::make_shared<Frame>(spec, std::move(scene), *std::move(camera), fo);
-  std::lock_guard<std::mutex> lock(mu_);
-  frames_[spec.frame_id()] = std::move(frame);
+  auto added = frames_.Add(std::make_shared<Frame>(spec, std::move(scene), *std::move(camera), fo));
+  if (!added.ok()) return ToGrpc(added.status());
+  if (*added) Drop(**std::move(added));
   return grpc::Status::OK;
 }
 
 std::shared_ptr<Frame> WorkerService::FindFrame(uint64_t id) {
   // The root prepares a frame on every worker before it starts any, so a
   // neighbour's stream never comes before its frame.
-  std::lock_guard<std::mutex> lock(mu_);
-  auto it = frames_.find(id);
-  return it == frames_.end() ? nullptr : it->second;
+  return frames_.Find(id);
 }
 
 grpc::ServerUnaryReactor* WorkerService::RunFrame(grpc::CallbackServerContext* ctx,
@@ -391,8 +405,7 @@ grpc::ServerUnaryReactor* WorkerService::RunFrame(grpc::CallbackServerContext* c
   grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
   std::shared_ptr<Frame> frame = FindFrame(req->frame_id());
   if (!frame) {
-    reactor->Finish(
-        ToGrpc(absl::NotFoundError(absl::StrCat("frame ", req->frame_id(), " was not prepared"))));
+    reactor->Finish(NotHere(req->frame_id(), "was not prepared"));
     return reactor;
   }
   // The reply goes once the stream to the right neighbour is open.
@@ -404,20 +417,16 @@ grpc::ServerUnaryReactor* WorkerService::EndFrame(grpc::CallbackServerContext* c
                                                   const v1::FrameRef* req,
                                                   v1::WorkerFrameStats* reply) {
   grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
-  std::shared_ptr<Frame> frame;
-  std::string id, address;
+  std::shared_ptr<Frame> frame = frames_.Take(req->frame_id());
+  if (!frame) {
+    reactor->Finish(NotHere(req->frame_id(), "is not running here"));
+    return reactor;
+  }
+  const std::string id = options_.id;
+  std::string address;
   {
-    std::lock_guard<std::mutex> lock(mu_);
-    auto it = frames_.find(req->frame_id());
-    if (it == frames_.end()) {
-      reactor->Finish(ToGrpc(
-          absl::NotFoundError(absl::StrCat("frame ", req->frame_id(), " is not running here"))));
-      return reactor;
-    }
-    frame = it->second;
-    frames_.erase(it);
-    id = options_.id;
-    address = options_.address;
+    absl::MutexLock lock(&mu_);
+    address = address_;
   }
   // The reply goes when the tracers have stopped (within one ray), from
   // the last of them; the streams wind down after it.
@@ -431,8 +440,8 @@ grpc::ServerUnaryReactor* WorkerService::EndFrame(grpc::CallbackServerContext* c
 }
 
 grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* WorkerService::Rays(
-    grpc::CallbackServerContext*) {
-  return Frame::NewLeftStream([this](uint64_t id) { return FindFrame(id); });
+    grpc::CallbackServerContext* ctx) {
+  return Frame::NewLeftStream(ctx, [this](uint64_t id) { return FindFrame(id); });
 }
 
 }  // namespace transtick

@@ -5,19 +5,23 @@
 
 #include <map>
 #include <memory>
-#include <mutex>
 #include <string>
 
+#include "absl/base/thread_annotations.h"
+#include "absl/synchronization/mutex.h"
 #include "cluster.grpc.pb.h"
+#include "expiry.h"
 #include "frame.h"
+#include "frame_table.h"
 
 namespace transtick {
 
 struct WorkerOptions {
   std::string id;       // unique per process
-  std::string address;  // as registered with the root
+  std::string address;  // as registered with the root (set_address changes it)
   int threads = 1;
   uint64_t max_slab_bytes = uint64_t{8} << 30;
+  FrameLimits frames;  // how many frames, and how long idle ones are kept
 };
 
 // The frame's methods (PrepareFrame, RunFrame, EndFrame and the Rays
@@ -35,6 +39,8 @@ class WorkerService final
   void set_address(const std::string& address);
   // Cancels every frame in progress (on shutdown).
   void CancelAll();
+  // Frames prepared and not yet ended, expired or evicted.
+  size_t frames_held() const { return frames_.size(); }
 
   grpc::Status LoadSlab(grpc::ServerContext* ctx, grpc::ServerReader<v1::SlabChunk>* reader,
                         v1::LoadReply* reply) override;
@@ -56,12 +62,19 @@ class WorkerService final
  private:
   std::shared_ptr<Frame> FindFrame(uint64_t id);
   grpc::Status Prepare(const v1::FrameSpec& spec);
+  // Ends, cancelled, a frame a limit took out of the table, and says why.
+  static void Drop(FrameTable::Dropped dropped);
+  // A frame's NOT_FOUND, saying why it is gone when a limit dropped it.
+  grpc::Status NotHere(uint64_t id, const char* what) const;
   std::shared_ptr<const Scene> FindDataset(const std::string& key);
 
-  WorkerOptions options_;
-  std::mutex mu_;
-  std::map<std::string, std::shared_ptr<const Scene>> datasets_;  // guarded by mu_
-  std::map<uint64_t, std::shared_ptr<Frame>> frames_;             // guarded by mu_
+  const WorkerOptions options_;  // options_.address is only the first address_
+  absl::Mutex mu_;
+  std::string address_ ABSL_GUARDED_BY(mu_);
+  std::map<std::string, std::shared_ptr<const Scene>> datasets_ ABSL_GUARDED_BY(mu_);
+  FrameTable frames_;  // thread-safe by itself
+  // Sweeps frames_ for idle frames; declared last, so that it stops first.
+  Ticker sweeper_;
 };
 
 }  // namespace transtick

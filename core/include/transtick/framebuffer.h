@@ -30,6 +30,12 @@ class Framebuffer {
 
   Framebuffer(int width, int height);
 
+  // The memory a framebuffer of `width` x `height` holds: what the display
+  // counts against its limit before it makes one.
+  static uint64_t MemoryBytes(int width, int height) {
+    return static_cast<uint64_t>(width) * static_cast<uint64_t>(height) * sizeof(Pixel);
+  }
+
   // Back to no deposits, keeping the memory.
   void Clear();
 
