@@ -163,7 +163,10 @@ rm -f "$dir/out/a.png"
 timeout 180 "$T" submit "$dir/turn.json" --root 127.0.0.1:$rport --out-dir "$dir/out" \
   >"$dir/submit5.log" 2>&1 &
 spid=$!
-sleep 0.3
+for _ in $(seq 1200); do
+  grep -q "queued: 'turn'" "$dir/root.log" && break
+  sleep 0.05
+done
 queued_t=$(grep -c "queued: 't'" "$dir/root.log")
 timeout 180 "$T" submit "$dir/job.json" --root 127.0.0.1:$rport --out-dir "$dir/out" \
   >"$dir/submit5b.log" 2>&1 &

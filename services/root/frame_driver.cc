@@ -7,6 +7,7 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "absl/synchronization/notification.h"
 #include "clock.h"
 #include "daemon.h"
 #include "fanout.h"
@@ -174,20 +175,21 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
     // 250 ms), ends the wait within seconds; the frame is then retried on
     // the workers still alive.
     std::atomic<int64_t> last_message{Clock::now().time_since_epoch().count()};
-    std::atomic<bool> awaiting{true};
+    // It looks every 100 ms and is woken at once when the wait ends, so it
+    // adds nothing to a frame's time (it used to sleep its 100 ms out).
+    absl::Notification awaited;
     std::string stalled;  // written by the watchdog before it cancels
     std::thread watchdog([&] {
-      while (awaiting) {
-        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      while (!awaited.WaitForNotificationWithTimeout(absl::Milliseconds(100))) {
         for (const Member& m : members) {
-          if (awaiting && !registry_.Alive(m.worker->id)) {
+          if (!awaited.HasBeenNotified() && !registry_.Alive(m.worker->id)) {
             stalled = absl::StrCat("worker ", m.worker->address, " stopped answering");
             ctx.TryCancel();
             return;
           }
         }
         const auto silent = Clock::now() - Clock::time_point(Clock::duration(last_message.load()));
-        if (awaiting && silent > stall_timeout_) {
+        if (!awaited.HasBeenNotified() && silent > stall_timeout_) {
           stalled = absl::StrCat("the display sent nothing for ",
                                  std::chrono::duration<double>(silent).count(), " s");
           ctx.TryCancel();
@@ -234,7 +236,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
       }
     }
     grpc::Status st = reader->Finish();
-    awaiting = false;
+    awaited.Notify();
     watchdog.join();
     if (ender.joinable()) ender.join();
     if (cancelled()) return abort(absl::CancelledError("cancelled"));
