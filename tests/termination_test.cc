@@ -389,8 +389,18 @@ TEST(TerminationTest, ValidateRefusesHostileDescriptors) {
     refused([](RayDescriptor& r) { r.kind = static_cast<RayKind>(9); }, "kind");
     if (dvr) {
       refused([](RayDescriptor& r) { r.sample = 4000000000u; }, "sample index");
+      // A dvr scene has no materials: tracing a shadow ray there read
+      // materials[m - 1] of an empty list (found by batch_fuzzer).
+      refused([](RayDescriptor& r) { r.kind = RayKind::kShadow; }, "shadow ray");
     } else {
       refused([](RayDescriptor& r) { r.material = 3; }, "material");
+      RayDescriptor shadow = good;
+      shadow.kind = RayKind::kShadow;
+      EXPECT_TRUE(tracer.Validate(shadow).ok()) << tracer.Validate(shadow);
+      RenderSettings no_shadows;
+      no_shadows.shadows = false;
+      absl::Status s = Tracer(*scene, no_shadows, *camera).Validate(shadow);
+      EXPECT_NE(s.message().find("shadows off"), std::string::npos) << s;
     }
   }
 }

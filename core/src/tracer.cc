@@ -123,6 +123,13 @@ absl::Status Tracer::Validate(const RayDescriptor& r) const {
   if (r.kind != RayKind::kPrimary && r.kind != RayKind::kShadow) {
     return bad("unknown kind ", static_cast<int>(r.kind));
   }
+  // Only surfaces with shadows spawn shadow rays; a dvr scene has no
+  // materials for one to cross.
+  if (r.kind == RayKind::kShadow &&
+      (scene_.mode() != RenderMode::kSurfaces || !settings_.shadows)) {
+    return bad("a shadow ray, but this frame ",
+               scene_.mode() == RenderMode::kDvr ? "is dvr" : "has shadows off");
+  }
   // The world direction, direction * spacing, is a unit vector.
   const auto& sp = scene_.spacing();
   const double length =
