@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <numbers>
+#include <vector>
 
 #include "gtest/gtest.h"
 #include "testing.h"
@@ -309,6 +310,29 @@ TEST(FramebufferTest, CompletesPixelsInAnyOrder) {
   Image img = fb.Resolve();
   EXPECT_EQ(img.rgb[0], 1.0f);
   EXPECT_EQ(img.rgb[4], 0.625f);
+}
+
+// Deposits no renderer sends, as a hostile peer may (found by batch_fuzzer):
+// a pixel completed twice made complete_pixels() reach the image's size with
+// pixel 1 never deposited, and colours beyond 2^31 overflowed the int64 sums
+// (undefined behaviour). Sums now wrap, and still do not depend on order.
+TEST(FramebufferTest, HostileDepositsNeitherCountTwiceNorOverflow) {
+  Framebuffer fb(2, 1);
+  EXPECT_TRUE(fb.Add(Deposit{0, RayKind::kPrimary, 0, {0.5f, 0, 0}}));
+  EXPECT_FALSE(fb.Add(Deposit{0, RayKind::kShadow, 0, {0, 0, 0}}));
+  EXPECT_FALSE(fb.Add(Deposit{0, RayKind::kPrimary, 1, {0, 0, 0}}));
+  EXPECT_EQ(fb.complete_pixels(), 1u);
+  EXPECT_FALSE(fb.Complete());
+
+  const std::vector<Deposit> huge = {{1, RayKind::kPrimary, 0, {3e38f, -3e38f, 4e9f}},
+                                     {1, RayKind::kShadow, 0, {3e38f, -3e38f, 4e9f}},
+                                     {1, RayKind::kShadow, 0, {1, 1, 4e9f}}};
+  Framebuffer forward(2, 1), backward(2, 1);
+  for (size_t i = 0; i < huge.size(); ++i) {
+    forward.Add(huge[i]);
+    backward.Add(huge[huge.size() - 1 - i]);
+  }
+  EXPECT_EQ(forward.Resolve().rgb, backward.Resolve().rgb);
 }
 
 }  // namespace
