@@ -205,6 +205,42 @@ TEST(RenderTest, ThreadCountDoesNotChangeTheImage) {
   EXPECT_EQ(one.rgb, three.rgb);
 }
 
+// A float volume may hold values near +-FLT_MAX, infinities and NaN (found
+// by volume_fuzzer): the dvr table spanned hi - lo, which overflowed to
+// infinity and made the table NaN, so every deposit was NaN and the display
+// refused them; NaN samples reached an undefined float-to-int conversion.
+TEST(RenderTest, DvrOfExtremeValuesGivesAFiniteImage) {
+  std::array<int, 3> dims = {12, 10, 8};
+  Volume v = MakeNoisyPhantom(dims, 3);
+  for (size_t i = 0; i < v.values.size(); i += 7) v.values[i] = 3e38f;
+  for (size_t i = 3; i < v.values.size(); i += 11) v.values[i] = -3e38f;
+  v.values[5] = INFINITY;
+  v.values[6] = -INFINITY;
+  v.values[9] = NAN;
+  EXPECT_EQ(v.Range(), (std::array<float, 2>{-3e38f, 3e38f}));
+  TransferFunction tf;
+  tf.points = {{-3e38f, {0, 0, 0, 0}}, {0, {0.2f, 0.4f, 0.6f, 0.3f}}, {3e38f, {1, 1, 1, 0.9f}}};
+  auto scene = Scene::ForDvr(v, tf);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  const Camera cam = MakeCamera(dims, 24, 30, 20);
+  const Tracer tracer(*scene, RenderSettings{}, cam);
+  int traced = 0;
+  for (int py = 0; py < 24; ++py) {
+    for (int px = 0; px < 24; ++px) {
+      RayDescriptor ray;
+      if (!tracer.MakePrimary(cam.Generate(px, py), 0, &ray)) continue;
+      std::vector<RayDescriptor> spawned;
+      Deposit deposit;
+      TraceCounters counters;
+      ASSERT_EQ(tracer.Trace(ray, spawned, deposit, counters), Tracer::Outcome::kFinished);
+      // What the display's decoder accepts.
+      for (float c : deposit.color) ASSERT_TRUE(std::isfinite(c)) << px << "," << py;
+      ++traced;
+    }
+  }
+  EXPECT_GT(traced, 100);
+}
+
 TEST(CameraTest, FrontalViewLooksAlongMinusZ) {
   auto cam = Camera::Create(CameraSpec{}, Vec3{100, 100, 100});
   ASSERT_TRUE(cam.ok());

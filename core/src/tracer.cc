@@ -76,10 +76,18 @@ Tracer::Tracer(const Scene& scene, const RenderSettings& settings, const Camera&
     const float lo = scene.value_range()[0], hi = scene.value_range()[1];
     table_.resize(kTableSize);
     table_lo_ = lo;
-    table_scale_ = hi > lo ? (kTableSize - 1) / (hi - lo) : 0.0f;
+    // A range wider than a float holds (values near +-FLT_MAX: hi - lo
+    // overflows) is spanned in double; in float the table came out NaN.
+    const bool wide = !std::isfinite(hi - lo);
+    const double wide_span = static_cast<double>(hi) - lo;
+    table_scale_ = !(hi > lo) ? 0.0f
+                   : wide     ? static_cast<float>((kTableSize - 1) / wide_span)
+                              : (kTableSize - 1) / (hi - lo);
     const double exponent = step_ / tf.reference_step;
     for (int i = 0; i < kTableSize; ++i) {
-      float v = hi > lo ? lo + i * (hi - lo) / (kTableSize - 1) : lo;
+      float v = !(hi > lo) ? lo
+                : wide     ? static_cast<float>(lo + i * wide_span / (kTableSize - 1))
+                           : lo + i * (hi - lo) / (kTableSize - 1);
       auto rgba = tf.Evaluate(v);
       float a = static_cast<float>(1.0 - std::pow(1.0 - rgba[3], exponent));
       table_[i] = {{rgba[0], rgba[1], rgba[2]}, a};
@@ -391,8 +399,10 @@ Vec3f Tracer::Gradient(const Vec3& p) const {
 }
 
 const Tracer::TableEntry& Tracer::Lookup(float value) const {
-  int i = static_cast<int>((value - table_lo_) * table_scale_ + 0.5f);
-  return table_[std::clamp(i, 0, kTableSize - 1)];
+  // Clamped before the conversion, which is undefined for NaN (a sample
+  // next to a NaN voxel, or a value range wider than a float holds).
+  const float x = (value - table_lo_) * table_scale_ + 0.5f;
+  return table_[x >= kTableSize - 1 ? kTableSize - 1 : (x > 0 ? static_cast<int>(x) : 0)];
 }
 
 void Tracer::Light(const Vec3f& g, const Vec3& view_dir, float* diffuse, float* specular,
