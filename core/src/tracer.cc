@@ -20,6 +20,12 @@ Vec3 ClampToCell(Vec3 p, const std::array<int32_t, 3>& cell) {
   return p;
 }
 
+// Far-away numbers would lose the cell in rounding (and overflow the
+// traversal's integer cells): Validate refuses origins and t beyond this.
+constexpr double kFar = 1e9;
+// A primary ray whose origin or entry lies beyond this starts at its entry.
+constexpr double kRebase = kFar / 1000;
+
 }  // namespace
 
 absl::Status CheckRenderSettings(const RenderSettings& settings, RenderMode mode,
@@ -69,8 +75,13 @@ Tracer::Tracer(const Scene& scene, const RenderSettings& settings, const Camera&
   diagonal_ = Length(Vec3{d[0] * sp[0], d[1] * sp[1], d[2] * sp[2]});
   max_segments_ = Traversal::MaxSegments(d) + 1;
   // Sample positions from the ray's entry to its exit, plus the one past
-  // the end that each segment looks at.
-  max_samples_ = static_cast<int64_t>(std::ceil(diagonal_ / step_)) + 2 + max_segments_;
+  // the end that each segment looks at. Spacings many orders of magnitude
+  // apart (a file may say so) make that count overflow an integer; no frame
+  // may take more than kMaxFrameSamples (CheckRenderSettings), so no ray
+  // needs more either.
+  const double span = std::ceil(diagonal_ / step_);
+  max_samples_ =
+      static_cast<int64_t>(span <= kMaxFrameSamples ? span : kMaxFrameSamples) + 2 + max_segments_;
   if (scene.mode() == RenderMode::kDvr) {
     const TransferFunction& tf = scene.transfer();
     const float lo = scene.value_range()[0], hi = scene.value_range()[1];
@@ -102,11 +113,23 @@ bool Tracer::MakePrimary(const WorldRay& world, uint32_t pixel, RayDescriptor* r
   Vec3 d = world.direction * inv_spacing_;
   auto box = IntersectBox(o, d, dims);
   if (!box) return false;
+  double t = (*box)[0];
+  // An eye far from the volume (an explicit view may put it anywhere, and a
+  // tiny spacing puts it far in index space) gives an origin or t that a
+  // neighbour's Validate refuses, so every ray handed on was dropped and the
+  // frame aborted (found by job_fuzzer and volume_fuzzer). Such a ray starts
+  // where it enters instead: the same line, t counted from there. Ordinary
+  // views keep their origin, bit for bit.
+  if (!(std::abs(t) <= kRebase && std::abs(o.x) <= kRebase && std::abs(o.y) <= kRebase &&
+        std::abs(o.z) <= kRebase)) {
+    o = o + d * t;
+    t = 0;
+  }
   *ray = RayDescriptor{};
   ray->origin = o;
   ray->direction = d;
-  ray->t = (*box)[0];
-  ray->t_start = (*box)[0];
+  ray->t = t;
+  ray->t_start = t;
   ray->cell = CellAt(o, d, ray->t, dims);
   ray->pixel = pixel;
   ray->kind = RayKind::kPrimary;
@@ -121,9 +144,6 @@ absl::Status Tracer::Validate(const RayDescriptor& r) const {
              std::isfinite(r.color[a]);
   }
   if (!finite) return bad("non-finite origin, direction, t, colour or transmittance");
-  // Far-away numbers would lose the cell in rounding (and overflow the
-  // traversal's integer cells).
-  constexpr double kFar = 1e9;
   if (!(std::abs(r.t) <= kFar && std::abs(r.t_start) <= kFar && std::abs(r.origin.x) <= kFar &&
         std::abs(r.origin.y) <= kFar && std::abs(r.origin.z) <= kFar)) {
     return bad("origin or t further than ", kFar, " from the volume");
