@@ -241,6 +241,21 @@ TEST(RenderTest, DvrOfExtremeValuesGivesAFiniteImage) {
   EXPECT_GT(traced, 100);
 }
 
+// Transfer function points more than FLT_MAX apart: the interpolation
+// weight was (value - a) / (b - a) in float, inf / inf near the top, so
+// the dvr table and every deposit were NaN (found by volume_fuzzer).
+TEST(RenderTest, TransferFunctionPointsFarApartInterpolate) {
+  TransferFunction tf;
+  tf.points = {{-3e38f, {0, 0, 0, 0}}, {3.1e38f, {1, 1, 1, 1}}};
+  ASSERT_TRUE(tf.Validate().ok());
+  for (float v : {-3e38f, -1e38f, 0.0f, 2e38f, 3.09e38f, 3.1e38f}) {
+    for (float c : tf.Evaluate(v)) {
+      EXPECT_TRUE(c >= 0 && c <= 1) << v;
+    }
+  }
+  EXPECT_NEAR(tf.Evaluate(0)[3], 3e38 / 6.1e38, 1e-6);
+}
+
 TEST(CameraTest, FrontalViewLooksAlongMinusZ) {
   auto cam = Camera::Create(CameraSpec{}, Vec3{100, 100, 100});
   ASSERT_TRUE(cam.ok());

@@ -96,7 +96,11 @@ std::array<float, 4> TransferFunction::Evaluate(float value) const {
   while (points[i].value < value) ++i;
   const TransferPoint& a = points[i - 1];
   const TransferPoint& b = points[i];
-  float f = (value - a.value) / (b.value - a.value);
+  // Points more than FLT_MAX apart (b.value - a.value overflows, and
+  // value - a.value may too: inf / inf is NaN) are interpolated in double.
+  const float f = std::isfinite(b.value - a.value)
+                      ? (value - a.value) / (b.value - a.value)
+                      : static_cast<float>((double{value} - a.value) / (double{b.value} - a.value));
   std::array<float, 4> out;
   for (int c = 0; c < 4; ++c) out[c] = a.rgba[c] + f * (b.rgba[c] - a.rgba[c]);
   return out;
