@@ -112,5 +112,34 @@ TEST(ApiTest, TransferFunctions) {
   EXPECT_NE(bad.status().message().find("does not increase"), std::string::npos);
 }
 
+// The shading coefficients of a transfer function are bounded as a
+// material's are. Unchecked, a job with "shininess": "NaN" or ambient and
+// diffuse near FLT_MAX was accepted, and every frame then failed at the
+// display on NaN or infinite deposits (found by job_fuzzer).
+TEST(ApiTest, TransferFunctionShadingIsBounded) {
+  std::string dir = testing::TempDir();
+  const std::string points = R"("points":[{"value":0,"rgba":[0,0,0,0]},
+      {"value":100,"rgba":[1,0.5,0,0.5]}])";
+  struct Case {
+    const char* fields;
+    const char* expect;
+  } cases[] = {
+      {R"("shininess":"NaN")", "shininess nan"},
+      {R"("shininess":-50)", "shininess -50"},
+      {R"("ambient":3e38,"diffuse":3e38)", "shading coefficient 3e+38"},
+      {R"("specular":-1)", "shading coefficient -1"},
+  };
+  for (const Case& c : cases) {
+    auto tf = LoadTransferFunction(
+        Write(dir, "t.json", "{" + points + "," + std::string(c.fields) + "}"));
+    ASSERT_FALSE(tf.ok()) << c.fields;
+    EXPECT_NE(tf.status().message().find(c.expect), std::string::npos)
+        << c.fields << " -> " << tf.status().message();
+  }
+  auto shaded = LoadTransferFunction(Write(dir, "t.json", "{" + points + R"(,"ambient":4,
+      "diffuse":0,"specular":4,"shininess":1000})"));
+  EXPECT_TRUE(shaded.ok()) << shaded.status();
+}
+
 }  // namespace
 }  // namespace transtick

@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <numbers>
+#include <vector>
 
 #include "gtest/gtest.h"
 #include "testing.h"
@@ -204,6 +205,57 @@ TEST(RenderTest, ThreadCountDoesNotChangeTheImage) {
   EXPECT_EQ(one.rgb, three.rgb);
 }
 
+// A float volume may hold values near +-FLT_MAX, infinities and NaN (found
+// by volume_fuzzer): the dvr table spanned hi - lo, which overflowed to
+// infinity and made the table NaN, so every deposit was NaN and the display
+// refused them; NaN samples reached an undefined float-to-int conversion.
+TEST(RenderTest, DvrOfExtremeValuesGivesAFiniteImage) {
+  std::array<int, 3> dims = {12, 10, 8};
+  Volume v = MakeNoisyPhantom(dims, 3);
+  for (size_t i = 0; i < v.values.size(); i += 7) v.values[i] = 3e38f;
+  for (size_t i = 3; i < v.values.size(); i += 11) v.values[i] = -3e38f;
+  v.values[5] = INFINITY;
+  v.values[6] = -INFINITY;
+  v.values[9] = NAN;
+  EXPECT_EQ(v.Range(), (std::array<float, 2>{-3e38f, 3e38f}));
+  TransferFunction tf;
+  tf.points = {{-3e38f, {0, 0, 0, 0}}, {0, {0.2f, 0.4f, 0.6f, 0.3f}}, {3e38f, {1, 1, 1, 0.9f}}};
+  auto scene = Scene::ForDvr(v, tf);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  const Camera cam = MakeCamera(dims, 24, 30, 20);
+  const Tracer tracer(*scene, RenderSettings{}, cam);
+  int traced = 0;
+  for (int py = 0; py < 24; ++py) {
+    for (int px = 0; px < 24; ++px) {
+      RayDescriptor ray;
+      if (!tracer.MakePrimary(cam.Generate(px, py), 0, &ray)) continue;
+      std::vector<RayDescriptor> spawned;
+      Deposit deposit;
+      TraceCounters counters;
+      ASSERT_EQ(tracer.Trace(ray, spawned, deposit, counters), Tracer::Outcome::kFinished);
+      // What the display's decoder accepts.
+      for (float c : deposit.color) ASSERT_TRUE(std::isfinite(c)) << px << "," << py;
+      ++traced;
+    }
+  }
+  EXPECT_GT(traced, 100);
+}
+
+// Transfer function points more than FLT_MAX apart: the interpolation
+// weight was (value - a) / (b - a) in float, inf / inf near the top, so
+// the dvr table and every deposit were NaN (found by volume_fuzzer).
+TEST(RenderTest, TransferFunctionPointsFarApartInterpolate) {
+  TransferFunction tf;
+  tf.points = {{-3e38f, {0, 0, 0, 0}}, {3.1e38f, {1, 1, 1, 1}}};
+  ASSERT_TRUE(tf.Validate().ok());
+  for (float v : {-3e38f, -1e38f, 0.0f, 2e38f, 3.09e38f, 3.1e38f}) {
+    for (float c : tf.Evaluate(v)) {
+      EXPECT_TRUE(c >= 0 && c <= 1) << v;
+    }
+  }
+  EXPECT_NEAR(tf.Evaluate(0)[3], 3e38 / 6.1e38, 1e-6);
+}
+
 TEST(CameraTest, FrontalViewLooksAlongMinusZ) {
   auto cam = Camera::Create(CameraSpec{}, Vec3{100, 100, 100});
   ASSERT_TRUE(cam.ok());
@@ -309,6 +361,29 @@ TEST(FramebufferTest, CompletesPixelsInAnyOrder) {
   Image img = fb.Resolve();
   EXPECT_EQ(img.rgb[0], 1.0f);
   EXPECT_EQ(img.rgb[4], 0.625f);
+}
+
+// Deposits no renderer sends, as a hostile peer may (found by batch_fuzzer):
+// a pixel completed twice made complete_pixels() reach the image's size with
+// pixel 1 never deposited, and colours beyond 2^31 overflowed the int64 sums
+// (undefined behaviour). Sums now wrap, and still do not depend on order.
+TEST(FramebufferTest, HostileDepositsNeitherCountTwiceNorOverflow) {
+  Framebuffer fb(2, 1);
+  EXPECT_TRUE(fb.Add(Deposit{0, RayKind::kPrimary, 0, {0.5f, 0, 0}}));
+  EXPECT_FALSE(fb.Add(Deposit{0, RayKind::kShadow, 0, {0, 0, 0}}));
+  EXPECT_FALSE(fb.Add(Deposit{0, RayKind::kPrimary, 1, {0, 0, 0}}));
+  EXPECT_EQ(fb.complete_pixels(), 1u);
+  EXPECT_FALSE(fb.Complete());
+
+  const std::vector<Deposit> huge = {{1, RayKind::kPrimary, 0, {3e38f, -3e38f, 4e9f}},
+                                     {1, RayKind::kShadow, 0, {3e38f, -3e38f, 4e9f}},
+                                     {1, RayKind::kShadow, 0, {1, 1, 4e9f}}};
+  Framebuffer forward(2, 1), backward(2, 1);
+  for (size_t i = 0; i < huge.size(); ++i) {
+    forward.Add(huge[i]);
+    backward.Add(huge[huge.size() - 1 - i]);
+  }
+  EXPECT_EQ(forward.Resolve().rgb, backward.Resolve().rgb);
 }
 
 }  // namespace

@@ -389,9 +389,81 @@ TEST(TerminationTest, ValidateRefusesHostileDescriptors) {
     refused([](RayDescriptor& r) { r.kind = static_cast<RayKind>(9); }, "kind");
     if (dvr) {
       refused([](RayDescriptor& r) { r.sample = 4000000000u; }, "sample index");
+      // A dvr scene has no materials: tracing a shadow ray there read
+      // materials[m - 1] of an empty list (found by batch_fuzzer).
+      refused([](RayDescriptor& r) { r.kind = RayKind::kShadow; }, "shadow ray");
     } else {
       refused([](RayDescriptor& r) { r.material = 3; }, "material");
+      RayDescriptor shadow = good;
+      shadow.kind = RayKind::kShadow;
+      EXPECT_TRUE(tracer.Validate(shadow).ok()) << tracer.Validate(shadow);
+      RenderSettings no_shadows;
+      no_shadows.shadows = false;
+      absl::Status s = Tracer(*scene, no_shadows, *camera).Validate(shadow);
+      EXPECT_NE(s.message().find("shadows off"), std::string::npos) << s;
     }
+  }
+}
+
+// An eye far from the volume in index space, from an explicit view or from a
+// tiny spacing, gave primary rays whose origin and t Validate refuses as too
+// far: on a ring every ray handed on was dropped and the frame aborted
+// (found by job_fuzzer and volume_fuzzer). Such rays start at their entry
+// now; every hand-off is accepted (RenderSlabs checks) and the ring's image
+// is the single scene's.
+TEST(TerminationTest, FarEyesMakeRaysANeighbourAccepts) {
+  const std::array<int, 3> dims = {24, 20, 16};
+  for (int c = 0; c < 2; ++c) {
+    Volume v = BlobVolume(dims, 5);
+    CameraSpec spec;
+    spec.width = spec.height = 16;
+    if (c == 0) {
+      spec.projection = Projection::kOrthographic;
+      spec.view = ExplicitView{.eye = {4e10, 10, -60}, .target = {0, 0, 0}};
+    } else {
+      v.spacing = {1e-9, 1, 1};
+      spec.azimuth_deg = 30;
+      spec.elevation_deg = 10;
+    }
+    auto scene = Scene::ForSurfaces(v, TwoMaterials());
+    ASSERT_TRUE(scene.ok());
+    const Vec3 extent{dims[0] * v.spacing[0], dims[1] * v.spacing[1], dims[2] * v.spacing[2]};
+    auto camera = Camera::Create(spec, extent);
+    ASSERT_TRUE(camera.ok()) << camera.status();
+    const Tracer tracer(*scene, RenderSettings{}, *camera);
+    int made = 0;
+    for (int p = 0; p < 16 * 16; ++p) {
+      RayDescriptor ray;
+      if (!tracer.MakePrimary(camera->Generate(p % 16, p / 16), p, &ray)) continue;
+      ASSERT_TRUE(tracer.Validate(ray).ok()) << tracer.Validate(ray) << " case " << c;
+      ++made;
+    }
+    EXPECT_GT(made, 20) << "case " << c;
+    const Image ring = testing::RenderSlabs(*scene, {7, 13}, *camera, RenderSettings{});
+    EXPECT_EQ(ring.rgb, testing::RenderWhole(*scene, *camera, RenderSettings{}).rgb)
+        << "case " << c;
+  }
+}
+
+// A file may give spacings many orders of magnitude apart; the tracer's
+// per-ray bound on dvr samples then overflowed int64 (undefined, and
+// negative on x86, so every dvr ray was truncated at once; found by
+// volume_fuzzer). It is capped at the frame's budget instead.
+TEST(TerminationTest, BoundsStayPositiveForSpacingsFarApart) {
+  const std::array<int, 3> dims = {12, 10, 8};
+  Volume v = BlobVolume(dims, 2);
+  v.spacing = {1e-20, 1, 1e6};
+  for (bool dvr : {false, true}) {
+    auto scene = dvr ? Scene::ForDvr(v, Ramp()) : Scene::ForSurfaces(v, TwoMaterials());
+    ASSERT_TRUE(scene.ok());
+    CameraSpec spec;
+    spec.width = spec.height = 8;
+    auto camera = Camera::Create(spec, Vec3{12e-20, 10, 8e6});
+    ASSERT_TRUE(camera.ok()) << camera.status();
+    const Tracer tracer(*scene, RenderSettings{}, *camera);
+    EXPECT_GT(tracer.max_samples(), 0);
+    EXPECT_LE(tracer.max_samples(), kMaxFrameSamples + 2 + tracer.max_segments());
+    EXPECT_EQ(tracer.max_segments(), Traversal::MaxSegments(dims) + 1);
   }
 }
 

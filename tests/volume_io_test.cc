@@ -234,6 +234,11 @@ TEST(VolumeTest, Range) {
   volume.dims = {2, 2, 1};
   volume.values = {3.0f, -1.5f, NAN, 7.0f};
   EXPECT_EQ(volume.Range(), (std::array<float, 2>{-1.5f, 7.0f}));
+  // Infinities are left out as well: a range must have a finite width.
+  volume.values = {3.0f, -INFINITY, INFINITY, 7.0f};
+  EXPECT_EQ(volume.Range(), (std::array<float, 2>{3.0f, 7.0f}));
+  volume.values = {INFINITY, NAN, -INFINITY, INFINITY};
+  EXPECT_EQ(volume.Range(), (std::array<float, 2>{0.0f, 0.0f}));
 }
 
 // ---------------------------------------------------------------------------

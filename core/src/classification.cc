@@ -9,6 +9,24 @@ namespace {
 
 bool InUnit(float v) { return std::isfinite(v) && v >= 0.0f && v <= 1.0f; }
 
+// Phong coefficients, the same bounds for materials and transfer functions:
+// beyond them a colour is no longer finite for long (a NaN shininess, or
+// ambient + diffuse near FLT_MAX, gave deposits the display refuses).
+absl::Status CheckPhong(const std::string& where, float ambient, float diffuse, float specular,
+                        float shininess) {
+  for (float k : {ambient, diffuse, specular}) {
+    if (!std::isfinite(k) || k < 0 || k > 4) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, ": shading coefficient ", k, " is not in [0, 4]"));
+    }
+  }
+  if (!std::isfinite(shininess) || shininess < 1 || shininess > 1000) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(where, ": shininess ", shininess, " is not in [1, 1000]"));
+  }
+  return absl::OkStatus();
+}
+
 absl::Status CheckColor(const std::string& where, const float* c, int n) {
   for (int i = 0; i < n; ++i) {
     if (!InUnit(c[i])) {
@@ -41,15 +59,8 @@ absl::Status Classification::Validate() const {
       return absl::InvalidArgumentError(
           absl::StrCat(where, ": opacity ", m.opacity, " is not in [0, 1]"));
     }
-    for (float k : {m.ambient, m.diffuse, m.specular}) {
-      if (!std::isfinite(k) || k < 0 || k > 4) {
-        return absl::InvalidArgumentError(
-            absl::StrCat(where, ": shading coefficient ", k, " is not in [0, 4]"));
-      }
-    }
-    if (!std::isfinite(m.shininess) || m.shininess < 1 || m.shininess > 1000) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(where, ": shininess ", m.shininess, " is not in [1, 1000]"));
+    if (auto s = CheckPhong(where, m.ambient, m.diffuse, m.specular, m.shininess); !s.ok()) {
+      return s;
     }
   }
   return absl::OkStatus();
@@ -74,7 +85,7 @@ absl::Status TransferFunction::Validate() const {
   if (!std::isfinite(reference_step) || reference_step <= 0) {
     return absl::InvalidArgumentError("transfer function: reference_step must be positive");
   }
-  return absl::OkStatus();
+  return CheckPhong("transfer function", ambient, diffuse, specular, shininess);
 }
 
 std::array<float, 4> TransferFunction::Evaluate(float value) const {
@@ -85,7 +96,11 @@ std::array<float, 4> TransferFunction::Evaluate(float value) const {
   while (points[i].value < value) ++i;
   const TransferPoint& a = points[i - 1];
   const TransferPoint& b = points[i];
-  float f = (value - a.value) / (b.value - a.value);
+  // Points more than FLT_MAX apart (b.value - a.value overflows, and
+  // value - a.value may too: inf / inf is NaN) are interpolated in double.
+  const float f = std::isfinite(b.value - a.value)
+                      ? (value - a.value) / (b.value - a.value)
+                      : static_cast<float>((double{value} - a.value) / (double{b.value} - a.value));
   std::array<float, 4> out;
   for (int c = 0; c < 4; ++c) out[c] = a.rgba[c] + f * (b.rgba[c] - a.rgba[c]);
   return out;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 #include "transtick/check.h"
 
@@ -13,8 +14,25 @@ namespace {
 // adding 0.5 is exact while |c| < 2^20, and truncation then rounds.
 inline int64_t ToFixed(float c) {
   const double v = static_cast<double>(c) * Framebuffer::kScale;
-  if (!(std::fabs(v) < 0x1p52)) return std::llround(v);  // huge or NaN: the slow path
+  if (!(std::fabs(v) < 0x1p52)) {
+    // Huge or NaN: the slow path, which saturates what no int64 holds.
+    if (std::isnan(v)) return 0;
+    if (!(std::fabs(v) < 0x1p63)) return v < 0 ? INT64_MIN : INT64_MAX;
+    return std::llround(v);
+  }
   return static_cast<int64_t>(v < 0 ? v - 0.5 : v + 0.5);
+}
+
+// Sums wrap modulo 2^64 (and counts modulo 2^32) instead of overflowing,
+// which is undefined: deposits no renderer makes (a hostile peer's huge
+// colours, a pixel's primary sent again and again) can otherwise reach it.
+// Wrapping addition is still associative, so the order of arrival still
+// does not matter, and sums that fit are unchanged.
+inline int64_t WrappingAdd(int64_t a, int64_t b) {
+  return static_cast<int64_t>(static_cast<uint64_t>(a) + static_cast<uint64_t>(b));
+}
+inline int32_t WrappingAdd(int32_t a, int32_t b) {
+  return static_cast<int32_t>(static_cast<uint32_t>(a) + static_cast<uint32_t>(b));
 }
 
 }  // namespace
@@ -22,24 +40,28 @@ inline int64_t ToFixed(float c) {
 Framebuffer::Framebuffer(int width, int height)
     : width_(width),
       height_(height),
-      pixels_(static_cast<size_t>(width) * height, Pixel{{0, 0, 0}, 0, 0}) {}
+      pixels_(static_cast<size_t>(width) * height, Pixel{{0, 0, 0}, 0, 0, 0}) {}
 
 void Framebuffer::Clear() {
-  std::fill(pixels_.begin(), pixels_.end(), Pixel{{0, 0, 0}, 0, 0});
+  std::fill(pixels_.begin(), pixels_.end(), Pixel{{0, 0, 0}, 0, 0, 0});
   complete_.store(0, std::memory_order_relaxed);
 }
 
 bool Framebuffer::Add(const Deposit& d) {
   TRANSTICK_DCHECK_LT(d.pixel, pixels_.size());
   Pixel& p = pixels_[d.pixel];
-  for (int c = 0; c < 3; ++c) p.sum[c] += ToFixed(d.color[c]);
+  for (int c = 0; c < 3; ++c) p.sum[c] = WrappingAdd(p.sum[c], ToFixed(d.color[c]));
   if (d.kind == RayKind::kPrimary) {
     p.primary_seen = 1;
-    p.owed += d.spawned;
+    p.owed = WrappingAdd(p.owed, int32_t{d.spawned});
   } else {
-    p.owed -= 1;
+    p.owed = WrappingAdd(p.owed, int32_t{-1});
   }
-  if (p.primary_seen && p.owed == 0) {
+  // A pixel is counted once: deposits after its last one (which no
+  // renderer sends) must not count it again, or complete_pixels() could
+  // reach the image's size with pixels still missing.
+  if (p.primary_seen && p.owed == 0 && !p.counted) {
+    p.counted = 1;
     complete_.fetch_add(1, std::memory_order_relaxed);
     return true;
   }

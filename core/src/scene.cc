@@ -105,7 +105,11 @@ std::vector<uint8_t> DvrVisibility(const Volume& volume, const TransferFunction&
   constexpr int kBins = 8192;
   auto range = volume.Range();
   const float lo = range[0], hi = range[1];
-  const float width = hi > lo ? (hi - lo) / kBins : 1.0f;
+  // A range wider than a float holds (hi - lo overflows) is divided in
+  // double, as the tracer's table does.
+  const float width = !(hi > lo)               ? 1.0f
+                      : std::isfinite(hi - lo) ? (hi - lo) / kBins
+                                               : static_cast<float>((double{hi} - lo) / kBins);
   std::vector<uint32_t> prefix(kBins + 1, 0);
   for (int b = 0; b < kBins; ++b) {
     float v0 = lo + b * width, v1 = lo + (b + 1) * width;
@@ -116,8 +120,10 @@ std::vector<uint8_t> DvrVisibility(const Volume& volume, const TransferFunction&
     prefix[b + 1] = prefix[b] + (visible ? 1 : 0);
   }
   auto bin = [&](float v) {
-    int b = static_cast<int>((v - lo) / width);
-    return std::clamp(b, 0, kBins - 1);
+    // Clamped before the conversion, which is undefined for NaN (a NaN
+    // voxel, or a range wider than a float holds) and values out of range.
+    const float b = (v - lo) / width;
+    return b >= kBins - 1 ? kBins - 1 : (b > 0 ? static_cast<int>(b) : 0);
   };
   std::vector<float> mn = Filter3(volume, false), mx = Filter3(volume, true);
   std::vector<uint8_t> labels(volume.values.size());

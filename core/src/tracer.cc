@@ -20,6 +20,12 @@ Vec3 ClampToCell(Vec3 p, const std::array<int32_t, 3>& cell) {
   return p;
 }
 
+// Far-away numbers would lose the cell in rounding (and overflow the
+// traversal's integer cells): Validate refuses origins and t beyond this.
+constexpr double kFar = 1e9;
+// A primary ray whose origin or entry lies beyond this starts at its entry.
+constexpr double kRebase = kFar / 1000;
+
 }  // namespace
 
 absl::Status CheckRenderSettings(const RenderSettings& settings, RenderMode mode,
@@ -69,17 +75,30 @@ Tracer::Tracer(const Scene& scene, const RenderSettings& settings, const Camera&
   diagonal_ = Length(Vec3{d[0] * sp[0], d[1] * sp[1], d[2] * sp[2]});
   max_segments_ = Traversal::MaxSegments(d) + 1;
   // Sample positions from the ray's entry to its exit, plus the one past
-  // the end that each segment looks at.
-  max_samples_ = static_cast<int64_t>(std::ceil(diagonal_ / step_)) + 2 + max_segments_;
+  // the end that each segment looks at. Spacings many orders of magnitude
+  // apart (a file may say so) make that count overflow an integer; no frame
+  // may take more than kMaxFrameSamples (CheckRenderSettings), so no ray
+  // needs more either.
+  const double span = std::ceil(diagonal_ / step_);
+  max_samples_ =
+      static_cast<int64_t>(span <= kMaxFrameSamples ? span : kMaxFrameSamples) + 2 + max_segments_;
   if (scene.mode() == RenderMode::kDvr) {
     const TransferFunction& tf = scene.transfer();
     const float lo = scene.value_range()[0], hi = scene.value_range()[1];
     table_.resize(kTableSize);
     table_lo_ = lo;
-    table_scale_ = hi > lo ? (kTableSize - 1) / (hi - lo) : 0.0f;
+    // A range wider than a float holds (values near +-FLT_MAX: hi - lo
+    // overflows) is spanned in double; in float the table came out NaN.
+    const bool wide = !std::isfinite(hi - lo);
+    const double wide_span = static_cast<double>(hi) - lo;
+    table_scale_ = !(hi > lo) ? 0.0f
+                   : wide     ? static_cast<float>((kTableSize - 1) / wide_span)
+                              : (kTableSize - 1) / (hi - lo);
     const double exponent = step_ / tf.reference_step;
     for (int i = 0; i < kTableSize; ++i) {
-      float v = hi > lo ? lo + i * (hi - lo) / (kTableSize - 1) : lo;
+      float v = !(hi > lo) ? lo
+                : wide     ? static_cast<float>(lo + i * wide_span / (kTableSize - 1))
+                           : lo + i * (hi - lo) / (kTableSize - 1);
       auto rgba = tf.Evaluate(v);
       float a = static_cast<float>(1.0 - std::pow(1.0 - rgba[3], exponent));
       table_[i] = {{rgba[0], rgba[1], rgba[2]}, a};
@@ -94,11 +113,23 @@ bool Tracer::MakePrimary(const WorldRay& world, uint32_t pixel, RayDescriptor* r
   Vec3 d = world.direction * inv_spacing_;
   auto box = IntersectBox(o, d, dims);
   if (!box) return false;
+  double t = (*box)[0];
+  // An eye far from the volume (an explicit view may put it anywhere, and a
+  // tiny spacing puts it far in index space) gives an origin or t that a
+  // neighbour's Validate refuses, so every ray handed on was dropped and the
+  // frame aborted (found by job_fuzzer and volume_fuzzer). Such a ray starts
+  // where it enters instead: the same line, t counted from there. Ordinary
+  // views keep their origin, bit for bit.
+  if (!(std::abs(t) <= kRebase && std::abs(o.x) <= kRebase && std::abs(o.y) <= kRebase &&
+        std::abs(o.z) <= kRebase)) {
+    o = o + d * t;
+    t = 0;
+  }
   *ray = RayDescriptor{};
   ray->origin = o;
   ray->direction = d;
-  ray->t = (*box)[0];
-  ray->t_start = (*box)[0];
+  ray->t = t;
+  ray->t_start = t;
   ray->cell = CellAt(o, d, ray->t, dims);
   ray->pixel = pixel;
   ray->kind = RayKind::kPrimary;
@@ -113,15 +144,19 @@ absl::Status Tracer::Validate(const RayDescriptor& r) const {
              std::isfinite(r.color[a]);
   }
   if (!finite) return bad("non-finite origin, direction, t, colour or transmittance");
-  // Far-away numbers would lose the cell in rounding (and overflow the
-  // traversal's integer cells).
-  constexpr double kFar = 1e9;
   if (!(std::abs(r.t) <= kFar && std::abs(r.t_start) <= kFar && std::abs(r.origin.x) <= kFar &&
         std::abs(r.origin.y) <= kFar && std::abs(r.origin.z) <= kFar)) {
     return bad("origin or t further than ", kFar, " from the volume");
   }
   if (r.kind != RayKind::kPrimary && r.kind != RayKind::kShadow) {
     return bad("unknown kind ", static_cast<int>(r.kind));
+  }
+  // Only surfaces with shadows spawn shadow rays; a dvr scene has no
+  // materials for one to cross.
+  if (r.kind == RayKind::kShadow &&
+      (scene_.mode() != RenderMode::kSurfaces || !settings_.shadows)) {
+    return bad("a shadow ray, but this frame ",
+               scene_.mode() == RenderMode::kDvr ? "is dvr" : "has shadows off");
   }
   // The world direction, direction * spacing, is a unit vector.
   const auto& sp = scene_.spacing();
@@ -384,8 +419,10 @@ Vec3f Tracer::Gradient(const Vec3& p) const {
 }
 
 const Tracer::TableEntry& Tracer::Lookup(float value) const {
-  int i = static_cast<int>((value - table_lo_) * table_scale_ + 0.5f);
-  return table_[std::clamp(i, 0, kTableSize - 1)];
+  // Clamped before the conversion, which is undefined for NaN (a sample
+  // next to a NaN voxel, or a value range wider than a float holds).
+  const float x = (value - table_lo_) * table_scale_ + 0.5f;
+  return table_[x >= kTableSize - 1 ? kTableSize - 1 : (x > 0 ? static_cast<int>(x) : 0)];
 }
 
 void Tracer::Light(const Vec3f& g, const Vec3& view_dir, float* diffuse, float* specular,

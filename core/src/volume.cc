@@ -42,12 +42,15 @@ size_t ScalarTypeSize(ScalarType type) {
 
 std::array<float, 2> Volume::Range() const {
   // NaN compares false both ways, so NaN samples never become the min or max;
-  // a volume of nothing but NaN reports {0, 0} like an empty one.
-  float lo = std::numeric_limits<float>::infinity();
-  float hi = -std::numeric_limits<float>::infinity();
+  // infinities are left out too, so that the range has a width (a dvr table
+  // from -inf or to +inf was NaN throughout). A volume with no finite
+  // sample reports {0, 0} like an empty one.
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  float lo = kInf;
+  float hi = -kInf;
   for (float v : values) {
-    if (v < lo) lo = v;
-    if (v > hi) hi = v;
+    if (v < lo && v != -kInf) lo = v;
+    if (v > hi && v != kInf) hi = v;
   }
   if (lo > hi) return {0.0f, 0.0f};
   return {lo, hi};

@@ -1,16 +1,28 @@
 // libFuzzer entry for the volume readers: the input becomes a file that each
 // reader parses. Every input must give a volume or a status; a crash, an
-// out-of-bounds access (under ASan) or a large allocation is a bug.
+// out-of-bounds access (under ASan), undefined behaviour (under UBSan) or a
+// large allocation is a bug. A small volume that reads is then rendered as
+// `transtick render` would render it, in both modes: classified, cut into
+// slabs and a few pixels traced on a ring (fuzz_ring.h checks the rules on
+// the way), so that hostile values and spacings reach the tracer.
 #include <unistd.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <vector>
 
+#include "fuzz_ring.h"
+#include "transtick/check.h"
+#include "transtick/framebuffer.h"
+#include "transtick/partition.h"
 #include "transtick/volume_io.h"
 
+namespace transtick::fuzz {
 namespace {
 
 // One scratch file per process, reused for every input.
@@ -26,10 +38,77 @@ const std::string& ScratchPath() {
   return *path;
 }
 
+void RemoveScratch() { unlink(ScratchPath().c_str()); }
+
+// Volumes larger than this are read but not rendered (inputs stay fast).
+constexpr size_t kMaxRenderedVoxels = 32 * 32 * 32;
+
+void Render(const Volume& volume, const absl::StatusOr<Scene>& scene) {
+  if (!scene.ok()) {
+    TRANSTICK_CHECK(!scene.status().message().empty());
+    return;
+  }
+  CameraSpec spec;
+  spec.azimuth_deg = 30;
+  spec.elevation_deg = 20;
+  spec.width = spec.height = 6;
+  const auto& d = volume.dims;
+  const auto& sp = volume.spacing;
+  auto camera = Camera::Create(spec, Vec3{d[0] * sp[0], d[1] * sp[1], d[2] * sp[2]});
+  if (!camera.ok()) return;
+  RenderSettings settings;
+  if (absl::Status s =
+          CheckRenderSettings(settings, scene->mode(), d, sp, int64_t{spec.width} * spec.height);
+      !s.ok()) {
+    return;
+  }
+  FuzzRing ring(*scene, UniformCuts(d[1], std::min(2, d[1])), *camera, settings);
+  std::vector<Deposit> deposits;
+  for (int row = 0; row < spec.height; ++row) {
+    for (int col = 0; col < spec.width; ++col) ring.RunPixel(col, row, &deposits);
+  }
+  // The whole image, as the display completes it.
+  Framebuffer fb(spec.width, spec.height);
+  for (const Deposit& deposit : deposits) (void)fb.Add(deposit);
+  TRANSTICK_CHECK(fb.Complete());
+}
+
+// Surfaces with two materials across the volume's range, and dvr with a
+// ramp over it.
+void RenderBothModes(const Volume& volume) {
+  if (volume.VoxelCount() > kMaxRenderedVoxels) return;
+  auto [lo, hi] = volume.Range();
+  if (!(lo < hi)) hi = lo + 1;
+  const float mid = lo + (hi - lo) / 2;
+  Classification c;
+  c.materials = {{.name = "low", .min = lo, .max = mid, .opacity = 0.4f},
+                 {.name = "high", .min = mid, .max = hi, .opacity = 1.0f}};
+  if (c.Validate().ok()) Render(volume, Scene::ForSurfaces(volume, c));
+  TransferFunction tf;
+  tf.points = {{lo, {0, 0, 0, 0}}, {hi, {1, 0.8f, 0.6f, 0.7f}}};
+  if (tf.Validate().ok()) Render(volume, Scene::ForDvr(volume, tf));
+}
+
+void Check(const absl::StatusOr<Volume>& volume) {
+  if (!volume.ok()) {
+    TRANSTICK_CHECK(!volume.status().message().empty());
+    return;
+  }
+  TRANSTICK_CHECK_EQ(volume->values.size(), volume->VoxelCount());
+  RenderBothModes(*volume);
+}
+
 }  // namespace
+}  // namespace transtick::fuzz
+
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  (void)transtick::fuzz::ScratchPath();
+  std::atexit(transtick::fuzz::RemoveScratch);
+  return 0;
+}
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  const std::string& path = ScratchPath();
+  const std::string& path = transtick::fuzz::ScratchPath();
   std::FILE* file = std::fopen(path.c_str(), "wb");
   if (file == nullptr) std::abort();
   if (size > 0 && std::fwrite(data, 1, size, file) != size) std::abort();
@@ -38,8 +117,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   // Small enough that a lying header cannot exhaust the fuzzer's memory.
   transtick::ReadOptions options;
   options.max_bytes = uint64_t{64} << 20;
-  (void)transtick::ReadNrrd(path, options);
-  (void)transtick::ReadNifti(path, options);
-  (void)transtick::ReadDen(path, options);
+  transtick::fuzz::Check(transtick::ReadNrrd(path, options));
+  transtick::fuzz::Check(transtick::ReadNifti(path, options));
+  transtick::fuzz::Check(transtick::ReadDen(path, options));
   return 0;
 }

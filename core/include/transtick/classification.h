@@ -65,6 +65,10 @@ struct TransferFunction {
   float specular = 0.2f;
   float shininess = 20.0f;
 
+  // Checks at least 2 points with finite, strictly increasing values and
+  // RGBA in [0, 1], a positive reference_step, and the shading coefficients
+  // as a material's (ambient, diffuse, specular in [0, 4], shininess in
+  // [1, 1000]).
   absl::Status Validate() const;
   std::array<float, 4> Evaluate(float value) const;
 };

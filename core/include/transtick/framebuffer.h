@@ -39,7 +39,9 @@ class Framebuffer {
   // Back to no deposits, keeping the memory.
   void Clear();
 
-  // Adds a deposit. Returns true when this deposit completed its pixel.
+  // Adds a deposit. Returns true when this deposit completed its pixel;
+  // each pixel completes once, whatever arrives after (sums wrap rather
+  // than overflow on deposits no renderer makes).
   // REQUIRES: deposit.pixel < width * height (decoders check pixels from
   // the network against the image before they get here).
   bool Add(const Deposit& deposit);
@@ -60,6 +62,7 @@ class Framebuffer {
     // Shadow deposits still owed: the primary's count minus shadows seen.
     int32_t owed;
     uint8_t primary_seen;
+    uint8_t counted;  // in complete_ already
   };
   std::vector<Pixel> pixels_;
   std::atomic<uint64_t> complete_{0};

@@ -84,7 +84,8 @@ class Tracer {
   // one this tracer could have made: finite numbers, a unit world
   // direction, a cell inside the volume near the point at t, t after
   // t_start and within the volume's diagonal of it, a sample index and
-  // material in range, transmittance in [0, 1]. A ray that passes finishes
+  // material in range, transmittance in [0, 1], and a shadow ray only in
+  // surfaces mode with shadows on. A ray that passes finishes
   // within the bounds below; one that fails is named by the error.
   absl::Status Validate(const RayDescriptor& ray) const;
 

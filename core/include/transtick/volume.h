@@ -42,7 +42,8 @@ struct Volume {
   // REQUIRES: 0 <= x < dims[0], 0 <= y < dims[1], 0 <= z < dims[2].
   float At(int x, int y, int z) const { return values[Index(x, y, z)]; }
 
-  // Smallest and largest sample; {0, 0} for an empty volume.
+  // Smallest and largest finite sample (NaN and infinities are left out);
+  // {0, 0} for a volume without one.
   std::array<float, 2> Range() const;
 };
 

@@ -1,0 +1,165 @@
+// Writes the generated seed corpora of the fuzzers (scripts/fuzz.sh runs it;
+// the job seeds are text files in tests/fuzz/corpus/job and examples/):
+//   DIR/volume/  small valid NRRD (raw and gzip), NIfTI-1 (.nii and .nii.gz)
+//                and .den files, several sample types and both byte orders;
+//   DIR/batch/   ray batches as neighbours send them (fresh primaries, rays
+//                handed on mid-flight, shadow rays) and deposit batches as
+//                workers send them, each for the batch fuzzer's
+//                configurations (batch_setup.h), through the codec's Append
+//                functions.
+// Usage: fuzz_seeds DIR
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "batch_setup.h"
+#include "fuzz_volumes.h"
+#include "transtick/ray_codec.h"
+#include "transtick/synthetic.h"
+#include "transtick/volume_io.h"
+
+namespace transtick::fuzz {
+namespace {
+
+namespace fs = std::filesystem;
+
+bool Write(const fs::path& path, const std::string& bytes) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  return static_cast<bool>(out);
+}
+
+// Writes a volume file and reads it back: a seed that does not read would
+// start the fuzzer off in the readers' error paths only.
+bool WriteVolume(const fs::path& path, const std::string& bytes, const Volume& expected) {
+  if (!Write(path, bytes)) return false;
+  auto volume = ReadVolume(path.string());
+  if (!volume.ok() || volume->dims != expected.dims) {
+    std::fprintf(stderr, "fuzz_seeds: %s does not read back: %s\n", path.c_str(),
+                 std::string(volume.status().message()).c_str());
+    return false;
+  }
+  return true;
+}
+
+bool WriteVolumes(const fs::path& dir) {
+  Volume v = MakeNoisyPhantom({6, 5, 4}, 7);
+  v.spacing = {0.5, 1, 2.5};
+  bool ok = true;
+  int n = 0;
+  for (ScalarType type : {ScalarType::kUint8, ScalarType::kInt16, ScalarType::kFloat32}) {
+    for (ByteOrder order : {ByteOrder::kLittle, ByteOrder::kBig}) {
+      for (bool gzip : {false, true}) {
+        ok &=
+            WriteVolume(dir / absl::StrCat("nrrd-", n, ".nrrd"), NrrdFile(v, type, order, gzip), v);
+        ok &= WriteVolume(dir / absl::StrCat("nifti-", n, gzip ? ".nii.gz" : ".nii"),
+                          NiftiFile(v, type, order, gzip), v);
+        ++n;
+      }
+    }
+  }
+  // Values a float file may hold: NaN, infinities, and a range wider than
+  // a float (hi - lo overflows).
+  Volume extreme = v;
+  for (size_t i = 0; i < extreme.values.size(); i += 9) extreme.values[i] = 3e38f;
+  for (size_t i = 4; i < extreme.values.size(); i += 13) extreme.values[i] = -3e38f;
+  extreme.values[1] = NAN;
+  extreme.values[2] = INFINITY;
+  extreme.values[3] = -INFINITY;
+  ok &= WriteVolume(dir / "extreme.nrrd",
+                    NrrdFile(extreme, ScalarType::kFloat32, ByteOrder::kLittle, false), extreme);
+  ok &= WriteVolume(dir / "little.den", DenFile(v, ByteOrder::kLittle), v);
+  ok &= WriteVolume(dir / "big.den", DenFile(v, ByteOrder::kBig), v);
+  return ok;
+}
+
+std::string Batch(uint8_t header, const std::vector<RayDescriptor>& rays) {
+  std::string out(1, static_cast<char>(header));
+  for (const RayDescriptor& r : rays) AppendRay(r, &out);
+  return out;
+}
+
+bool WriteBatches(const fs::path& dir) {
+  bool ok = true;
+  for (int c = 0; c < kBatchConfigs; ++c) {
+    BatchConfig& config = BatchSetup::Get().config(c);
+    FuzzRing& ring = *config.ring;
+    const RingLayout& layout = ring.layout();
+    const Camera& camera = config.camera;
+    // Primary rays of a sparse grid of pixels; each traced once on the slab
+    // that holds its entry, which leaves it mid-flight (when it left the
+    // slab) and gives the shadow rays it spawned there.
+    std::vector<RayDescriptor> fresh, handed_on, shadows;
+    for (int row = 1; row < camera.height(); row += 4) {
+      for (int col = 1; col < camera.width(); col += 4) {
+        const uint32_t pixel = static_cast<uint32_t>(row * camera.width() + col);
+        RayDescriptor ray;
+        if (!ring.tracer(0).MakePrimary(camera.Generate(col, row), pixel, &ray)) continue;
+        if (!ring.tracer(0).Validate(ray).ok()) {
+          std::fprintf(stderr, "fuzz_seeds: configuration %d: a primary ray fails Validate\n", c);
+          return false;
+        }
+        fresh.push_back(ray);
+        const int slab = layout.SlabOf(ray.cell[1]);
+        std::vector<RayDescriptor> spawned;
+        Deposit deposit;
+        TraceCounters counters;
+        if (ring.tracer(slab).Trace(ray, spawned, deposit, counters) ==
+            Tracer::Outcome::kLeftSlab) {
+          handed_on.push_back(ray);
+        }
+        shadows.insert(shadows.end(), spawned.begin(), spawned.end());
+      }
+    }
+    // At most 30 records a seed: the fuzzer's inputs stay under 4 KB.
+    auto first = [](std::vector<RayDescriptor> v) {
+      if (v.size() > 30) v.resize(30);
+      return v;
+    };
+    const std::string name = absl::StrCat("config-", c);
+    ok &= Write(dir / (name + "-fresh"), Batch(RayHeader(c, 0, false), first(fresh)));
+    if (!handed_on.empty()) {
+      ok &= Write(dir / (name + "-handed-on"), Batch(RayHeader(c, 1, false), first(handed_on)));
+    }
+    if (!shadows.empty()) {
+      ok &= Write(dir / (name + "-shadows"), Batch(RayHeader(c, 2, false), first(shadows)));
+    }
+    ok &= Write(dir / (name + "-repair"),
+                Batch(RayHeader(c, 3, true), first(handed_on.empty() ? fresh : handed_on)));
+    // The deposits of the image's first rows, as the display receives them.
+    std::vector<Deposit> deposits;
+    for (int row = 0; row < 3; ++row) {
+      for (int col = 0; col < camera.width(); ++col) ring.RunPixel(col, row, &deposits);
+    }
+    if (deposits.size() > 180) deposits.resize(180);
+    std::string batch = {static_cast<char>(kDepositBatch), static_cast<char>(camera.width() - 1),
+                         static_cast<char>(camera.height() - 1)};
+    for (const Deposit& d : deposits) AppendDeposit(d, &batch);
+    ok &= Write(dir / (name + "-deposits"), batch);
+  }
+  return ok;
+}
+
+}  // namespace
+}  // namespace transtick::fuzz
+
+int main(int argc, char** argv) {
+  namespace fs = std::filesystem;
+  if (argc != 2) {
+    std::fprintf(stderr, "usage: fuzz_seeds DIR\n");
+    return 2;
+  }
+  const fs::path dir = argv[1];
+  fs::create_directories(dir / "volume");
+  fs::create_directories(dir / "batch");
+  if (!transtick::fuzz::WriteVolumes(dir / "volume") ||
+      !transtick::fuzz::WriteBatches(dir / "batch")) {
+    std::fprintf(stderr, "fuzz_seeds: cannot write under %s\n", argv[1]);
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,32 @@
+// Small volume files written in code, in each format the readers take: the
+// volume fuzzer's seeds and the job fuzzer's data directory. Each returns the
+// file's bytes; the samples are the volume's values rounded into `type`.
+#ifndef TRANSTICK_TESTS_FUZZ_FUZZ_VOLUMES_H_
+#define TRANSTICK_TESTS_FUZZ_FUZZ_VOLUMES_H_
+
+#include <string>
+
+#include "transtick/volume.h"
+#include "transtick/volume_io.h"
+
+namespace transtick::fuzz {
+
+// The samples alone, x fastest (a raw file, or the data of the others).
+std::string RawSamples(const Volume& volume, ScalarType type, ByteOrder order);
+
+// An attached NRRD header (with "spacings") and its data.
+std::string NrrdFile(const Volume& volume, ScalarType type, ByteOrder order, bool gzip);
+
+// A single-file NIfTI-1 (.nii): the 348-byte header, the 4-byte extension
+// flag, the samples. `gzip` gives the bytes of a .nii.gz.
+std::string NiftiFile(const Volume& volume, ScalarType type, ByteOrder order, bool gzip);
+
+// A Levoy .den file: the 62-byte header and uint8 samples.
+std::string DenFile(const Volume& volume, ByteOrder order);
+
+// The gzip form of `data`.
+std::string Gzip(const std::string& data);
+
+}  // namespace transtick::fuzz
+
+#endif  // TRANSTICK_TESTS_FUZZ_FUZZ_VOLUMES_H_
