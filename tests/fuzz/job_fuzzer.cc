@@ -1,7 +1,7 @@
 // libFuzzer entry for job files: the input is a job file that `transtick
 // submit` reads (LoadJobFile: protobuf JSON, with materials_file and
 // transfer_file read beside it). A job that loads goes through what the root
-// does with a submitted job: Datasets::Validate against a data directory of
+// does with a submitted job: Datasets::Plan against a data directory of
 // small volume files, then, for a job it accepts, what the runner and a
 // worker do before a frame runs (the dataset loaded and classified, the
 // balancer, CheckRenderSettings, the camera) and 25 pixels of each view
@@ -108,26 +108,26 @@ void CheckExplains(const absl::Status& status) {
 
 // What the runner (RunView) and a worker (WorkerService::Prepare) do with a
 // view before its frame runs, then a few of its pixels traced.
-void RunView(const v1::Job& job, const v1::View& view, const LoadedDataset& data) {
-  const std::string mode = view.balance().empty() ? job.balance() : view.balance();
-  auto rule = ParseBalanceRule(job.balance_rule());
-  TRANSTICK_CHECK(rule.ok());  // validated
-  auto balancer = MakeBalancer(mode, *rule, job.balance_grid());
-  TRANSTICK_CHECK(balancer.ok());
+void RunView(const v1::Job& job, const JobPlan& plan, const v1::View& view,
+             const FrameRequest& request, v1::BalanceMode mode, const LoadedDataset& data) {
+  auto balancer = MakeBalancer(mode, plan.rule, job.balance_grid());
+  TRANSTICK_CHECK(balancer != nullptr);
   (void)ViewKey(view);
   const Scene& scene = data.scene;
   const auto& d = scene.dims();
   const auto& sp = scene.spacing();
-  const RenderSettings settings = ToRenderSettings(view);
-  if (absl::Status s =
-          CheckRenderSettings(settings, scene.mode(), d, sp, int64_t{view.width()} * view.height());
+  const RenderSettings& settings = request.settings;
+  if (absl::Status s = CheckRenderSettings(settings, scene.mode(), d, sp,
+                                           int64_t{request.camera.width} * request.camera.height);
       !s.ok()) {
     CheckExplains(s);
     return;
   }
+  // A worker converts the view it is sent: the same request.
   auto spec = ToCameraSpec(view);
-  TRANSTICK_CHECK(spec.ok());  // validated
-  auto camera = Camera::Create(*spec, Vec3{d[0] * sp[0], d[1] * sp[1], d[2] * sp[2]});
+  TRANSTICK_CHECK(spec.ok());  // planned
+  TRANSTICK_CHECK_EQ(spec->width, request.camera.width);
+  auto camera = Camera::Create(request.camera, Vec3{d[0] * sp[0], d[1] * sp[1], d[2] * sp[2]});
   if (!camera.ok()) {
     CheckExplains(camera.status());
     return;
@@ -154,19 +154,23 @@ void Run(const std::string& bytes) {
     return;
   }
   Datasets datasets(scratch.data_dir.string(), kMaxVolumeBytes);
-  if (absl::Status s = datasets.Validate(*job); !s.ok()) {
-    CheckExplains(s);
+  auto plan = datasets.Plan(*job);
+  if (!plan.ok()) {
+    CheckExplains(plan.status());
     return;
   }
+  TRANSTICK_CHECK_EQ(plan->datasets.size(), static_cast<size_t>(job->datasets_size()));
   for (int i = 0; i < std::min(job->datasets_size(), kMaxDatasets); ++i) {
     const v1::Dataset& ds = job->datasets(i);
-    auto data = datasets.Load(ds);
+    const DatasetPlan& dp = plan->datasets[i];
+    TRANSTICK_CHECK_EQ(dp.views.size(), static_cast<size_t>(ds.views_size()));
+    auto data = datasets.Load(ds, dp);
     if (!data.ok()) {
       CheckExplains(data.status());
       continue;
     }
     for (int v = 0; v < std::min(ds.views_size(), kMaxViews); ++v) {
-      RunView(*job, ds.views(v), **data);
+      RunView(*job, *plan, ds.views(v), dp.views[v], dp.balance[v], **data);
     }
   }
 }
