@@ -93,6 +93,10 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
                      members[i].worker->address, s.error_message());
         registry_.ClearHeld(members[i].worker->id);
         why = absl::UnavailableError(why.message());
+      } else if (s.error_code() == grpc::StatusCode::NOT_FOUND) {
+        // The worker dropped the frame (its frame table evicted or expired
+        // it): the frame runs again.
+        why = absl::UnavailableError(why.message());
       }
       if (first.ok()) first = why;
     }
