@@ -60,6 +60,13 @@ std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address) {
   // Each channel gets its own connection: ray streams must not queue behind
   // slab transfers to the same peer.
   args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
+  // A peer that went away (a root restarting, a display rescheduled) is
+  // tried again at most 1 s apart, not after gRPC's default backoff of up
+  // to 120 s: a worker's heartbeat then finds a restarted root within a
+  // second or two, and a frame's retry finds a display that is back.
+  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 250);
+  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 250);
+  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 1000);
   for (const auto& [name, value] : KeepaliveArguments(/*server=*/false)) args.SetInt(name, value);
   return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
 }
