@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -132,15 +133,26 @@ int Info(int argc, char** argv) {
             << ", values " << range[0] << " .. " << range[1] << "\n";
   // A coarse histogram helps choose material intervals.
   constexpr int kBins = 16;
+  // In double: a float volume's range may span nearly all of float, and
+  // its NaN and infinite values (outside Range()) are counted apart.
   std::vector<uint64_t> hist(kBins, 0);
-  const float width = range[1] > range[0] ? (range[1] - range[0]) / kBins : 1;
+  uint64_t not_finite = 0;
+  const double lo = range[0], hi = range[1];
+  const double width = hi > lo ? (hi - lo) / kBins : 1;
   for (float v : volume->values) {
-    int b = std::min(kBins - 1, static_cast<int>((v - range[0]) / width));
-    ++hist[b];
+    if (!std::isfinite(v)) {
+      ++not_finite;
+      continue;
+    }
+    const double x = (v - lo) / width;
+    ++hist[x < 0 ? 0 : std::min<int>(kBins - 1, static_cast<int>(std::min(x, double{kBins})))];
   }
   for (int b = 0; b < kBins; ++b) {
-    std::printf("  [%10.1f, %10.1f)  %6.2f%%\n", range[0] + b * width, range[0] + (b + 1) * width,
+    std::printf("  [%10.1f, %10.1f)  %6.2f%%\n", lo + b * width, lo + (b + 1) * width,
                 100.0 * hist[b] / volume->values.size());
+  }
+  if (not_finite > 0) {
+    std::printf("  NaN or infinite        %6.2f%%\n", 100.0 * not_finite / volume->values.size());
   }
   return 0;
 }

@@ -56,6 +56,14 @@ expect 0 "dvr" -- render --volume "$dir/cube.nrrd" --transfer "$dir/t.json" --si
   --out "$dir/b.exr"
 [[ -s $dir/b.exr ]] || { echo "FAIL: no EXR written"; fails=$((fails + 1)); }
 expect 0 "values 0 .. 200" -- info --volume "$dir/cube.nrrd"
+# A float volume with NaN and infinities: its range and histogram leave them
+# out and count them apart (no undefined float-to-int conversion).
+python3 -c "
+import struct, sys
+vals = [float('nan'), float('inf'), -float('inf'), 1.0, 3.0e38, -3.0e38, 2.0, 0.5]
+sys.stdout.buffer.write(b'NRRD0004\\ntype: float\\ndimension: 3\\nsizes: 2 2 2\\nencoding: raw\\nendian: little\\n\\n' + struct.pack('<8f', *vals))
+" >"$dir/odd.nrrd"
+expect 0 "NaN or infinite         37.50%" -- info --volume "$dir/odd.nrrd"
 # Output formats come from one list (core's image_io): .hdr is written as
 # float, and a format outside the list is refused before anything renders.
 expect 0 "16x16 surfaces" -- render --local 0 --volume "$dir/cube.nrrd" --materials "$dir/m.json" \
