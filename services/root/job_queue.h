@@ -8,7 +8,7 @@
 // kMaxEvents small events (older progress events are dropped first), and
 // image chunks are held only until one watcher has taken them, at most
 // `max_pending_image_bytes` per job: a frame's publisher waits for a
-// watcher beyond that (JobQueue::PublishImage).
+// watcher beyond that (Job::PublishImage).
 #ifndef TRANSTICK_SERVICES_ROOT_JOB_QUEUE_H_
 #define TRANSTICK_SERVICES_ROOT_JOB_QUEUE_H_
 
