@@ -73,10 +73,19 @@ Image Framebuffer::Resolve() const {
   img.width = width_;
   img.height = height_;
   img.rgb.resize(pixels_.size() * 3);
-  for (size_t i = 0; i < pixels_.size(); ++i) {
-    for (int c = 0; c < 3; ++c) img.rgb[i * 3 + c] = static_cast<float>(pixels_[i].sum[c] / kScale);
-  }
+  ResolveRows(0, height_, img.rgb.data());
   return img;
+}
+
+void Framebuffer::ResolveRows(int row_begin, int row_end, float* rgb) const {
+  TRANSTICK_DCHECK_LE(0, row_begin);
+  TRANSTICK_DCHECK_LE(row_begin, row_end);
+  TRANSTICK_DCHECK_LE(row_end, height_);
+  const size_t begin = static_cast<size_t>(row_begin) * width_;
+  const size_t end = static_cast<size_t>(row_end) * width_;
+  for (size_t i = begin; i < end; ++i) {
+    for (int c = 0; c < 3; ++c) *rgb++ = static_cast<float>(pixels_[i].sum[c] / kScale);
+  }
 }
 
 }  // namespace transtick

@@ -23,7 +23,9 @@ double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).coun
 }  // namespace
 
 DisplayService::DisplayService(DisplayOptions options)
-    : options_(options), sweeper_(SweepPeriod(options.idle), [this] { ExpireIdle(); }) {}
+    : options_(options),
+      sweeper_(SweepPeriod(options.idle), [this] { ExpireIdle(); }),
+      heartbeat_(std::chrono::milliseconds(250), [this] { Heartbeat(); }) {}
 
 size_t DisplayService::open_frames() const {
   absl::MutexLock lock(&mu_);
@@ -184,8 +186,15 @@ grpc::Status DisplayService::Accumulate(const v1::DepositBatch& batch,
     return ToGrpc(
         absl::NotFoundError(absl::StrCat("display: frame ", batch.frame_id(), " was not begun")));
   }
-  FrameState& f = *frame;
-  // An AwaitFrame waiting for completion looks again when this unlocks.
+  bool completed = false;
+  grpc::Status s = AddDeposits(batch, *frame, &completed);
+  // The frame's AwaitFrame streams send `complete` and the image.
+  if (completed) Wake(*frame);
+  return s;
+}
+
+grpc::Status DisplayService::AddDeposits(const v1::DepositBatch& batch, FrameState& f,
+                                         bool* completed) {
   absl::MutexLock lock(&f.mu);
   if (f.aborted) {
     return ToGrpc(absl::FailedPreconditionError(absl::StrCat(
@@ -205,6 +214,7 @@ grpc::Status DisplayService::Accumulate(const v1::DepositBatch& batch,
   }
   for (const Deposit& d : *deposits) f.fb->Add(d);
   f.deposits += deposits->size();
+  *completed = f.fb->Complete();
   return grpc::Status::OK;
 }
 
@@ -226,89 +236,204 @@ grpc::Status DisplayService::ImageStatus(const FrameState& f) {
   return grpc::Status::OK;
 }
 
-grpc::Status DisplayService::WaitUntilOver(FrameState& f, grpc::ServerContext& ctx,
-                                           grpc::ServerWriter<v1::FrameProgress>& writer) {
-  // fb is null here only when the frame was aborted or another AwaitFrame
-  // took the image.
-  auto over = [&f]() ABSL_EXCLUSIVE_LOCKS_REQUIRED(f.mu) {
-    return f.aborted || !f.fb || f.fb->Complete();
-  };
-  while (!f.mu.AwaitWithTimeout(absl::Condition(&over), absl::Milliseconds(250))) {
-    if (ctx.IsCancelled()) return ToGrpc(absl::CancelledError("cancelled"));
-    v1::FrameProgress p;
-    p.set_pixels_done(f.fb->complete_pixels());
-    p.set_pixels_total(static_cast<uint64_t>(f.width) * f.height);
-    f.mu.Unlock();
-    writer.Write(p);
-    f.mu.Lock();
-  }
-  return ImageStatus(f);
-}
+// One AwaitFrame call: progress while the frame traces, then `complete`
+// (the root ends the workers' frame on it), then the image in chunks of
+// rows, each resolved from the framebuffer when the previous one is out.
+// Step() decides the next message under the frame's lock and starts it
+// after unlocking; no reaction ever waits. Owns itself until OnDone.
+class DisplayService::AwaitStream : public grpc::ServerWriteReactor<v1::FrameProgress> {
+ public:
+  AwaitStream(DisplayService* service, std::shared_ptr<FrameState> frame, bool no_image)
+      : service_(service), frame_(std::move(frame)), no_image_(no_image) {}
 
-grpc::Status DisplayService::AwaitFrame(grpc::ServerContext* ctx, const v1::FrameRef* req,
-                                        grpc::ServerWriter<v1::FrameProgress>* writer) {
+  // Joins `frame`'s watchers and takes the first step.
+  static AwaitStream* Start(DisplayService* service, std::shared_ptr<FrameState> frame,
+                            bool no_image) {
+    auto stream = std::make_shared<AwaitStream>(service, frame, no_image);
+    stream->self_ = stream;
+    {
+      absl::MutexLock lock(&frame->mu);
+      frame->watchers.push_back(stream);
+    }
+    stream->Step(/*tick=*/false);
+    return stream.get();
+  }
+
+  // Looks at the frame again; with `tick`, an incomplete frame's progress
+  // is sent (unless a message is on its way already).
+  void Step(bool tick) {
+    enum class Act { kNone, kWrite, kFinish } act = Act::kNone;
+    grpc::Status status;
+    bool release = false;
+    {
+      absl::MutexLock lock(&frame_->mu);
+      tick_ = tick_ || tick;
+      if (writing_ || finished_) return;
+      if (cancelled_) {
+        status = ToGrpc(absl::CancelledError("the root cancelled its AwaitFrame"));
+        act = Act::kFinish;
+      } else if (!sent_complete_) {
+        if (frame_->aborted || !frame_->fb) {
+          status = ImageStatus(*frame_);
+          act = Act::kFinish;
+        } else if (!frame_->fb->Complete()) {
+          if (tick_) {
+            msg_ = Progress(frame_->fb->complete_pixels(), false);
+            act = Act::kWrite;
+          }
+        } else {
+          // Every deposit is in: the root hears it before the image is
+          // resolved, so the workers end the frame while it is sent.
+          sent_complete_ = true;
+          msg_ = Progress(Total(), true);
+          act = Act::kWrite;
+        }
+      } else if (no_image_ || next_row_ == frame_->height) {
+        release = true;
+        act = Act::kFinish;
+      } else if (grpc::Status s = ImageStatus(*frame_); !s.ok()) {
+        // Aborted, or its framebuffer released by another AwaitFrame.
+        status = s;
+        act = Act::kFinish;
+      } else {
+        const int r0 = next_row_;
+        const int r1 = std::min(frame_->height, r0 + RowsPerChunk(frame_->width));
+        msg_ = Progress(Total(), true);
+        v1::ImageChunk* c = msg_.mutable_image();
+        c->set_width(frame_->width);
+        c->set_height(frame_->height);
+        c->set_row_begin(r0);
+        c->set_row_end(r1);
+        std::vector<float> rgb(static_cast<size_t>(r1 - r0) * frame_->width * 3);
+        frame_->fb->ResolveRows(r0, r1, rgb.data());
+        AppendFloats(rgb.data(), rgb.size(), c->mutable_rgb());
+        next_row_ = r1;
+        act = Act::kWrite;
+      }
+      if (act == Act::kWrite) {
+        writing_ = true;
+        tick_ = false;
+      }
+      finished_ = act == Act::kFinish;
+    }
+    if (act == Act::kWrite) StartWrite(&msg_);
+    if (act == Act::kFinish) {
+      if (release) service_->Release(frame_);
+      Finish(status);
+    }
+  }
+
+  void OnWriteDone(bool ok) override {
+    {
+      absl::MutexLock lock(&frame_->mu);
+      writing_ = false;
+      cancelled_ = cancelled_ || !ok;
+    }
+    Step(/*tick=*/false);
+  }
+
+  void OnCancel() override {
+    {
+      absl::MutexLock lock(&frame_->mu);
+      cancelled_ = true;
+    }
+    Step(/*tick=*/false);
+  }
+
+  void OnDone() override {
+    {
+      FrameState& f = *frame_;
+      absl::MutexLock lock(&f.mu);
+      std::erase_if(f.watchers, [this](const std::weak_ptr<AwaitStream>& w) {
+        auto p = w.lock();
+        return !p || p.get() == this;
+      });
+      f.last_activity = Clock::now();
+    }
+    // The last reference but the ones Wake may hold for a moment.
+    auto self = std::move(self_);
+  }
+
+ private:
+  uint64_t Total() const { return static_cast<uint64_t>(frame_->width) * frame_->height; }
+  v1::FrameProgress Progress(uint64_t done, bool complete) const {
+    v1::FrameProgress p;
+    p.set_pixels_done(done);
+    p.set_pixels_total(Total());
+    p.set_complete(complete);
+    return p;
+  }
+
+  DisplayService* const service_;
+  const std::shared_ptr<FrameState> frame_;
+  const bool no_image_;
+  std::shared_ptr<AwaitStream> self_;  // set by Start, dropped by OnDone
+  v1::FrameProgress msg_ ABSL_GUARDED_BY(frame_->mu);  // the message being written
+  bool writing_ ABSL_GUARDED_BY(frame_->mu) = false;
+  bool finished_ ABSL_GUARDED_BY(frame_->mu) = false;
+  bool cancelled_ ABSL_GUARDED_BY(frame_->mu) = false;
+  bool tick_ ABSL_GUARDED_BY(frame_->mu) = false;  // progress asked for
+  bool sent_complete_ ABSL_GUARDED_BY(frame_->mu) = false;
+  int next_row_ ABSL_GUARDED_BY(frame_->mu) = 0;  // of the image, to send next
+};
+
+namespace {
+
+// A call refused before it began.
+class Refusal : public grpc::ServerWriteReactor<v1::FrameProgress> {
+ public:
+  explicit Refusal(grpc::Status status) { Finish(std::move(status)); }
+  void OnDone() override { delete this; }
+};
+
+}  // namespace
+
+grpc::ServerWriteReactor<v1::FrameProgress>* DisplayService::AwaitFrame(
+    grpc::CallbackServerContext*, const v1::FrameRef* req) {
   std::shared_ptr<FrameState> frame = Find(req->frame_id());
   if (!frame) {
     absl::MutexLock lock(&mu_);
     if (const std::string* why = aborted_.Find(req->frame_id())) {
-      return Aborted(req->frame_id(), *why);
+      return new Refusal(Aborted(req->frame_id(), *why));
     }
-    return ToGrpc(
-        absl::NotFoundError(absl::StrCat("display: frame ", req->frame_id(), " was not begun")));
+    return new Refusal(ToGrpc(
+        absl::NotFoundError(absl::StrCat("display: frame ", req->frame_id(), " was not begun"))));
   }
-  FrameState& f = *frame;
-  const uint64_t total = static_cast<uint64_t>(f.width) * f.height;
-  Image image;
+  return AwaitStream::Start(this, std::move(frame), req->no_image());
+}
+
+void DisplayService::Wake(FrameState& frame, bool tick) {
+  std::vector<std::shared_ptr<AwaitStream>> streams;
   {
-    absl::MutexLock lock(&f.mu);
-    // While a root waits for the frame it does not expire: the root's own
-    // deadline and watchdog govern it.
-    ++f.waiters;
-    grpc::Status waited = WaitUntilOver(f, *ctx, *writer);
-    --f.waiters;
-    f.last_activity = Clock::now();
-    if (!waited.ok()) return waited;
-    // Every deposit is in: the root hears it before the image is resolved,
-    // so the workers end the frame while the image is made and sent.
-    v1::FrameProgress done;
-    done.set_pixels_done(total);
-    done.set_pixels_total(total);
-    done.set_complete(true);
-    f.mu.Unlock();
-    writer->Write(done);
-    f.mu.Lock();
-    // The frame may have been aborted, and its framebuffer freed, meanwhile.
-    if (grpc::Status s = ImageStatus(f); !s.ok()) return s;
-    // A balancing prerender wants to know the frame is done, not its image.
-    if (!req->no_image()) image = f.fb->Resolve();
+    absl::MutexLock lock(&frame.mu);
+    for (const auto& w : frame.watchers) {
+      if (auto p = w.lock()) streams.push_back(std::move(p));
+    }
   }
+  for (const auto& stream : streams) stream->Step(tick);
+}
+
+void DisplayService::Heartbeat() {
+  std::vector<std::shared_ptr<FrameState>> frames;
   {
     absl::MutexLock lock(&mu_);
-    frames_.erase(req->frame_id());
-    // Workers' deposit streams hold the frame state, not the framebuffer:
-    // every deposit is in, so none will touch it again.
-    absl::MutexLock frame_lock(&f.mu);
-    spare_ = std::move(f.fb);
+    for (const auto& [id, f] : frames_) frames.push_back(f);
+  }
+  for (const auto& f : frames) Wake(*f, /*tick=*/true);
+}
+
+void DisplayService::Release(const std::shared_ptr<FrameState>& frame) {
+  absl::MutexLock lock(&mu_);
+  if (auto it = frames_.find(frame->id); it != frames_.end() && it->second == frame) {
+    frames_.erase(it);
+  }
+  // Workers' deposit streams hold the frame state, not the framebuffer:
+  // every deposit is in, so none will touch it again.
+  absl::MutexLock frame_lock(&frame->mu);
+  if (frame->fb) {
+    spare_ = std::move(frame->fb);
     spare_since_ = Clock::now();
   }
-  if (req->no_image()) return grpc::Status::OK;
-  const int rows = RowsPerChunk(image.width);
-  for (int r0 = 0; r0 < image.height; r0 += rows) {
-    const int r1 = std::min(image.height, r0 + rows);
-    v1::FrameProgress p;
-    p.set_pixels_done(total);
-    p.set_pixels_total(total);
-    p.set_complete(true);
-    v1::ImageChunk* c = p.mutable_image();
-    c->set_width(image.width);
-    c->set_height(image.height);
-    c->set_row_begin(r0);
-    c->set_row_end(r1);
-    AppendFloats(image.rgb.data() + static_cast<size_t>(r0) * image.width * 3,
-                 static_cast<size_t>(r1 - r0) * image.width * 3, c->mutable_rgb());
-    if (!writer->Write(p)) return ToGrpc(absl::CancelledError("root went away"));
-  }
-  return grpc::Status::OK;
 }
 
 grpc::ServerUnaryReactor* DisplayService::AbortFrame(grpc::CallbackServerContext* ctx,
@@ -330,18 +455,21 @@ void DisplayService::AbortIncomplete(FrameState& frame, const std::string& why) 
 }
 
 bool DisplayService::MarkAborted(FrameState& frame, const std::string& why, bool unless_complete) {
-  absl::MutexLock lock(&frame.mu);  // an AwaitFrame waiting looks again when this unlocks
-  if (frame.aborted || (unless_complete && (!frame.fb || frame.fb->Complete()))) return false;
-  frame.aborted = true;
-  frame.abort_reason = why;
-  // Deposit streams may hold the frame for a while; its memory goes now.
-  frame.fb.reset();
+  {
+    absl::MutexLock lock(&frame.mu);
+    if (frame.aborted || (unless_complete && (!frame.fb || frame.fb->Complete()))) return false;
+    frame.aborted = true;
+    frame.abort_reason = why;
+    // Deposit streams may hold the frame for a while; its memory goes now.
+    frame.fb.reset();
+  }
+  Wake(frame);  // its AwaitFrame streams end with the reason
   return true;
 }
 
 Clock::time_point DisplayService::LastActive(FrameState& frame, Clock::time_point now) {
   absl::MutexLock lock(&frame.mu);
-  return frame.waiters > 0 ? now : frame.last_activity;
+  return frame.watchers.empty() ? frame.last_activity : now;
 }
 
 void DisplayService::Abort(uint64_t id, const std::string& reason) {

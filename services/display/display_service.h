@@ -7,6 +7,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "absl/base/thread_annotations.h"
 #include "absl/synchronization/mutex.h"
@@ -38,12 +39,14 @@ struct DisplayOptions {
   std::chrono::milliseconds idle = std::chrono::seconds(60);
 };
 
-// BeginFrame, AbortFrame and Deposits, the stream every worker sends its
-// finished rays on, use gRPC's callback API. AwaitFrame, which waits for a
-// frame to complete, keeps the sync API and its thread pool.
+// Every method uses gRPC's callback API, and no reaction waits: a deposit
+// that completes a frame, an abort, or the 250 ms heartbeat wakes the
+// frame's AwaitFrame streams, and each sends its image a chunk at a time,
+// resolving the chunk's rows from the framebuffer as it goes.
 class DisplayService final
     : public v1::Display::WithCallbackMethod_BeginFrame<v1::Display::WithCallbackMethod_AbortFrame<
-          v1::Display::WithCallbackMethod_Deposits<v1::Display::Service>>> {
+          v1::Display::WithCallbackMethod_Deposits<
+              v1::Display::WithCallbackMethod_AwaitFrame<v1::Display::Service>>>> {
  public:
   explicit DisplayService(DisplayOptions options = {});
 
@@ -56,13 +59,14 @@ class DisplayService final
                                        const v1::DisplayFrame* req, v1::FrameAck* reply) override;
   grpc::ServerReadReactor<v1::DepositBatch>* Deposits(grpc::CallbackServerContext* ctx,
                                                       v1::FrameAck* reply) override;
-  grpc::Status AwaitFrame(grpc::ServerContext* ctx, const v1::FrameRef* req,
-                          grpc::ServerWriter<v1::FrameProgress>* writer) override;
+  grpc::ServerWriteReactor<v1::FrameProgress>* AwaitFrame(grpc::CallbackServerContext* ctx,
+                                                          const v1::FrameRef* req) override;
   grpc::ServerUnaryReactor* AbortFrame(grpc::CallbackServerContext* ctx, const v1::FrameRef* req,
                                        v1::FrameAck* reply) override;
 
  private:
   class DepositStream;
+  class AwaitStream;
   struct FrameState {
     FrameState(uint64_t i, std::unique_ptr<Framebuffer> f)
         : id(i),
@@ -82,7 +86,8 @@ class DisplayService final
     bool aborted ABSL_GUARDED_BY(mu) = false;
     std::string abort_reason ABSL_GUARDED_BY(mu);
     uint64_t deposits ABSL_GUARDED_BY(mu) = 0;
-    int waiters ABSL_GUARDED_BY(mu) = 0;  // AwaitFrame calls in progress
+    // The AwaitFrame streams in progress; each leaves when it is done.
+    std::vector<std::weak_ptr<AwaitStream>> watchers ABSL_GUARDED_BY(mu);
     Clock::time_point last_activity ABSL_GUARDED_BY(mu) = Clock::now();
   };
   std::shared_ptr<FrameState> Find(uint64_t id) ABSL_LOCKS_EXCLUDED(mu_);
@@ -99,17 +104,23 @@ class DisplayService final
       ABSL_LOCKS_EXCLUDED(frame.mu);
   // OK when the frame's framebuffer is still here; else why it is not.
   static grpc::Status ImageStatus(const FrameState& frame) ABSL_EXCLUSIVE_LOCKS_REQUIRED(frame.mu);
-  // Waits until `frame` is complete or aborted, sending progress every
-  // 250 ms. OK when it is complete and its framebuffer is still here.
-  static grpc::Status WaitUntilOver(FrameState& frame, grpc::ServerContext& ctx,
-                                    grpc::ServerWriter<v1::FrameProgress>& writer)
-      ABSL_EXCLUSIVE_LOCKS_REQUIRED(frame.mu);
+  // Lets every AwaitFrame stream of `frame` look at it again; `tick` asks
+  // those of an incomplete frame to send their progress.
+  static void Wake(FrameState& frame, bool tick = false) ABSL_LOCKS_EXCLUDED(frame.mu);
+  // Sends progress on every AwaitFrame stream: the root's sign of life.
+  void Heartbeat() ABSL_LOCKS_EXCLUDED(mu_);
+  // Drops `frame`, whose image is out, keeping its framebuffer as the spare.
+  void Release(const std::shared_ptr<FrameState>& frame) ABSL_LOCKS_EXCLUDED(mu_);
   // Aborts frames idle beyond the limit; frees a spare unused as long.
   void ExpireIdle() ABSL_LOCKS_EXCLUDED(mu_);
   uint64_t OpenBytesLocked() const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
   // Adds a batch's deposits to its frame; `frame` caches the frame of the
   // stream's last batch.
   grpc::Status Accumulate(const v1::DepositBatch& batch, std::shared_ptr<FrameState>* frame);
+  // Adds a batch's deposits to `frame`; `completed` says whether the frame
+  // is complete after them.
+  static grpc::Status AddDeposits(const v1::DepositBatch& batch, FrameState& frame,
+                                  bool* completed) ABSL_LOCKS_EXCLUDED(frame.mu);
 
   const DisplayOptions options_;
   mutable absl::Mutex mu_;
@@ -120,8 +131,10 @@ class DisplayService final
   // Why recently aborted frames were aborted, for an AwaitFrame that comes
   // after the abort.
   RecentReasons aborted_ ABSL_GUARDED_BY(mu_);
-  // Sweeps frames_ for idle frames; declared last, so that it stops first.
+  // Sweeps frames_ for idle frames, and beats for AwaitFrame; declared
+  // last, so that they stop first.
   Ticker sweeper_;
+  Ticker heartbeat_;
 };
 
 }  // namespace transtick

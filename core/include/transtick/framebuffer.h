@@ -52,6 +52,11 @@ class Framebuffer {
   int height() const { return height_; }
 
   Image Resolve() const;
+  // Rows [row_begin, row_end) of Resolve()'s image into `rgb`, which holds
+  // (row_end - row_begin) * width * 3 floats: an image sent in chunks is
+  // resolved a chunk at a time, never whole.
+  // REQUIRES: 0 <= row_begin <= row_end <= height.
+  void ResolveRows(int row_begin, int row_end, float* rgb) const;
 
  private:
   int width_, height_;
