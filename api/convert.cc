@@ -265,6 +265,23 @@ absl::StatusOr<FrameRequest> ToFrameRequest(const v1::View& view) {
   return FrameRequest{*camera, ToRenderSettings(view)};
 }
 
+absl::StatusOr<RenderMode> ToRenderMode(v1::RenderMode mode) {
+  switch (mode) {
+    case v1::SURFACES:
+      return RenderMode::kSurfaces;
+    case v1::DVR:
+      return RenderMode::kDvr;
+    default:
+      return absl::InvalidArgumentError(
+          absl::StrCat("render mode ", EnumValueName(*v1::RenderMode_descriptor(), mode),
+                       " is neither SURFACES nor DVR"));
+  }
+}
+
+v1::RenderMode ToProto(RenderMode mode) {
+  return mode == RenderMode::kDvr ? v1::DVR : v1::SURFACES;
+}
+
 RenderSettings ToRenderSettings(const v1::View& v) {
   RenderSettings s;
   s.shadows = !v.has_shadows() || v.shadows();

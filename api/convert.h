@@ -39,6 +39,11 @@ RenderSettings ToRenderSettings(const v1::View& view);
 // Both at once.
 absl::StatusOr<FrameRequest> ToFrameRequest(const v1::View& view);
 
+// The render mode between its proto and core forms; RENDER_MODE_UNSPECIFIED
+// and unknown values are an error naming them.
+absl::StatusOr<RenderMode> ToRenderMode(v1::RenderMode mode);
+v1::RenderMode ToProto(RenderMode mode);
+
 // A proto enum's value by name as job files and the command's flags spell
 // it, "test-rays" or "TEST_RAYS" ("" is the enum's 0, its default). Errors
 // name `what` and the values that exist.

@@ -346,7 +346,7 @@ int Forward(const Options& o) {
     v1::SlabChunk chunk;
     v1::SlabHeader* h = chunk.mutable_header();
     h->set_dataset_key("bench");
-    h->set_mode("surfaces");
+    h->set_mode(transtick::v1::SURFACES);
     for (int a = 0; a < 3; ++a) h->add_dims(64), h->add_spacing(1);
     h->add_value_range(0);
     h->add_value_range(1);

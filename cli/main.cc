@@ -271,7 +271,7 @@ int RenderInProcess(const Flags& flags, const v1::View& view, bool dvr,
   fs.set_prepare_ms(prepare_ms);
   fs.set_load_ms(load_ms);
   fs.set_threads(stats.threads);
-  fs.set_mode(dvr ? "dvr" : "surfaces");
+  fs.set_mode(dvr ? v1::DVR : v1::SURFACES);
   fs.set_width(view.width());
   fs.set_height(view.height());
   const TraceCounters& c = stats.counters;
@@ -299,7 +299,7 @@ int RenderInProcess(const Flags& flags, const v1::View& view, bool dvr,
   std::fprintf(stderr,
                "%s: %dx%d %s in %.1f ms on %d threads (%llu primary + %llu shadow rays); "
                "sticks %.2f MB = %.1f%% of the raw volume\n",
-               out.c_str(), view.width(), view.height(), fs.mode().c_str(), stats.frame_ms,
+               out.c_str(), view.width(), view.height(), dvr ? "dvr" : "surfaces", stats.frame_ms,
                stats.threads, static_cast<unsigned long long>(c.primary),
                static_cast<unsigned long long>(c.shadow), encoded / 1e6, 100.0 * ss->ratio());
   if (flags.Has("stats")) WriteStats(flags.Get("stats"), fs);

@@ -71,7 +71,7 @@ void NodesTest::LoadWholeSlab(const Scene& scene, const std::string& key) {
   v1::SlabHeader* h = chunk.mutable_header();
   h->set_dataset_key(key);
   const bool dvr = scene.mode() == RenderMode::kDvr;
-  h->set_mode(dvr ? "dvr" : "surfaces");
+  h->set_mode(dvr ? v1::DVR : v1::SURFACES);
   for (int a = 0; a < 3; ++a) h->add_dims(dims_[a]);
   for (int a = 0; a < 3; ++a) h->add_spacing(1);
   h->add_value_range(scene.value_range()[0]);

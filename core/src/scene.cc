@@ -277,4 +277,8 @@ size_t Scene::MemoryBytes() const {
   return sticks_.MemoryBytes() + scalars_.size() * sizeof(float) + bricks_.bytes().size();
 }
 
+const char* RenderModeName(RenderMode mode) {
+  return mode == RenderMode::kDvr ? "dvr" : "surfaces";
+}
+
 }  // namespace transtick

@@ -145,10 +145,10 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
   data->spec = identity;
   absl::StatusOr<Scene> scene;
   if (const auto* c = std::get_if<Classification>(&plan.classification)) {
-    data->mode = "surfaces";
+    data->mode = RenderMode::kSurfaces;
     scene = Scene::ForSurfaces(*volume, *c);
   } else {
-    data->mode = "dvr";
+    data->mode = RenderMode::kDvr;
     scene = Scene::ForDvr(*volume, std::get<TransferFunction>(plan.classification));
   }
   if (!scene.ok())
@@ -157,7 +157,7 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
   data->scene = *std::move(scene);
   data->load_ms = MsSince(t0);
   spdlog::info("dataset {} ({}): {}x{}x{}, {} sticks, prepared in {:.0f} ms", ds.volume(),
-               data->mode, volume->dims[0], volume->dims[1], volume->dims[2],
+               RenderModeName(data->mode), volume->dims[0], volume->dims[1], volume->dims[2],
                data->scene.sticks().StickCount(), data->load_ms);
   cache_ = data;
   return data;

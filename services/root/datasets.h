@@ -49,7 +49,7 @@ struct JobPlan {
 // A dataset ready to be cut into slabs.
 struct LoadedDataset {
   std::string key;   // content: file identity + classification
-  std::string mode;  // "surfaces" or "dvr", as in the slab header
+  RenderMode mode = RenderMode::kSurfaces;
   v1::Dataset spec;  // without its views
   Scene scene;
   double load_ms = 0;

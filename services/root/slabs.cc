@@ -9,6 +9,7 @@
 #include "absl/strings/str_cat.h"
 #include "clock.h"
 #include "daemon.h"
+#include "convert.h"
 #include "fanout.h"
 #include "transtick/partition.h"
 #include "transtick/ray_codec.h"
@@ -80,7 +81,7 @@ absl::Status Slabs::LoadSlab(const LoadedDataset& data, WorkerEntry& worker, con
   v1::SlabChunk chunk;
   v1::SlabHeader* h = chunk.mutable_header();
   h->set_dataset_key(key);
-  h->set_mode(data.mode);
+  h->set_mode(ToProto(data.mode));
   for (int a = 0; a < 3; ++a) h->add_dims(dims[a]);
   for (int a = 0; a < 3; ++a) h->add_spacing(scene.spacing()[a]);
   h->add_value_range(scene.value_range()[0]);

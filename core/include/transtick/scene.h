@@ -18,6 +18,8 @@
 namespace transtick {
 
 enum class RenderMode { kSurfaces, kDvr };
+// "surfaces" or "dvr", for logs and messages.
+const char* RenderModeName(RenderMode mode);
 
 // The material of each 8x8x8 brick of the whole volume when all its voxels
 // share one (void included), else kMixed. Small (a byte per brick), so every
