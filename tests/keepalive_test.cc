@@ -145,10 +145,13 @@ TEST_F(KeepaliveTest, AWorkerNoticesALeftNeighbourWhoseHostVanished) {
   v1::RayBatch hello;
   hello.set_frame_id(2);
   ASSERT_TRUE(stream->Write(hello));
+  // The stream must hold the frame before it ends, or the hello finds no
+  // frame and the stream closes at once.
+  ASSERT_TRUE(Eventually([&] { return worker_service_->LeftAttached(2); }));
   ASSERT_TRUE(Run(2).ok());
   EXPECT_TRUE(Await(2).ok());
   ASSERT_TRUE(End(2).ok());
-  ASSERT_TRUE(Eventually([] { return Frame::alive() == 1; }, milliseconds(5000)));
+  ASSERT_TRUE(Eventually([] { return Frame::alive() == 1; }, milliseconds(5000))) << Frame::alive();
   to_worker.Freeze();
   EXPECT_TRUE(Eventually([] { return Frame::alive() == 0; }, milliseconds(5000))) << Frame::alive();
   EXPECT_FALSE(stream->Finish().ok());

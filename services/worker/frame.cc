@@ -396,12 +396,12 @@ class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBa
 std::atomic<int64_t> Frame::alive_{0};
 
 Frame::Frame(const v1::FrameSpec& spec, std::shared_ptr<const Scene> scene, Camera camera,
-             const FrameOptions& options)
+             const RenderSettings& settings, const FrameOptions& options)
     : spec_(spec),
       scene_(std::move(scene)),
       camera_(std::move(camera)),
       options_(options),
-      tracer_(*scene_, ToRenderSettings(spec.view()), camera_),
+      tracer_(*scene_, settings, camera_),
       pixel_limit_(static_cast<uint32_t>(camera_.width()) * camera_.height()),
       pixels_in_rows_(
           static_cast<int64_t>((spec.row_end() - spec.row_begin() + spec.row_step() - 1) /

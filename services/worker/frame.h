@@ -131,13 +131,16 @@ class Frame : public std::enable_shared_from_this<Frame> {
   // REQUIRES: the scene outlives the frame (the frame shares ownership);
   // spec.cuts() valid for the scene's planes (ValidCuts), with the scene
   // holding slab spec.index() of them (WorkerService::Prepare checks both).
+  // `camera` and `settings` are spec.view() converted (and checked).
   Frame(const v1::FrameSpec& spec, std::shared_ptr<const Scene> scene, Camera camera,
-        const FrameOptions& options);
+        const RenderSettings& settings, const FrameOptions& options);
   ~Frame();
   Frame(const Frame&) = delete;
   Frame& operator=(const Frame&) = delete;
 
   uint64_t id() const { return spec_.frame_id(); }
+  // Whether the left neighbour's stream has attached.
+  bool left_attached() const { return left_attached_.load(); }
   // Whether Start was called.
   bool running() const { return started_; }
   // When the frame last saw a call, a ray batch from a neighbour or a unit

@@ -29,10 +29,9 @@ absl::StatusOr<std::shared_ptr<const Scene>> AssembleSlab(const v1::SlabHeader& 
     return absl::InvalidArgumentError("slab header: dims, spacing and value_range incomplete");
   }
   std::array<int, 3> dims = {h.dims(0), h.dims(1), h.dims(2)};
-  const bool dvr = h.mode() == "dvr";
-  if (!dvr && h.mode() != "surfaces") {
-    return absl::InvalidArgumentError(absl::StrCat("slab header: unknown mode '", h.mode(), "'"));
-  }
+  auto mode = ToRenderMode(h.mode());
+  if (!mode.ok()) return absl::InvalidArgumentError(absl::StrCat("slab header: ", mode.status().message()));
+  const bool dvr = *mode == RenderMode::kDvr;
   Classification classification;
   TransferFunction transfer;
   int max_material = 1;
@@ -371,13 +370,14 @@ grpc::Status WorkerService::Prepare(const v1::FrameSpec& spec) {
                                 " of the cuts does not match the loaded slab [", scene->y_begin(),
                                 ", ", scene->y_end(), ")"));
   }
-  auto cam_spec = ToCameraSpec(spec.view());
-  if (!cam_spec.ok()) return ToGrpc(cam_spec.status());
+  // The view is converted here once; the frame keeps the result.
+  auto request = ToFrameRequest(spec.view());
+  if (!request.ok()) return ToGrpc(request.status());
   const auto& d = scene->dims();
   const auto& sp = scene->spacing();
-  auto camera = Camera::Create(*cam_spec, Vec3{d[0] * sp[0], d[1] * sp[1], d[2] * sp[2]});
+  auto camera = Camera::Create(request->camera, Vec3{d[0] * sp[0], d[1] * sp[1], d[2] * sp[2]});
   if (!camera.ok()) return ToGrpc(camera.status());
-  if (absl::Status s = CheckRenderSettings(ToRenderSettings(spec.view()), scene->mode(), d, sp,
+  if (absl::Status s = CheckRenderSettings(request->settings, scene->mode(), d, sp,
                                            int64_t{camera->width()} * camera->height());
       !s.ok()) {
     return ToGrpc(s);
@@ -388,7 +388,8 @@ grpc::Status WorkerService::Prepare(const v1::FrameSpec& spec) {
   }
   FrameOptions fo;
   fo.threads = options_.threads;
-  auto added = frames_.Add(std::make_shared<Frame>(spec, std::move(scene), *std::move(camera), fo));
+  auto added = frames_.Add(std::make_shared<Frame>(spec, std::move(scene), *std::move(camera),
+                                                   request->settings, fo));
   if (!added.ok()) return ToGrpc(added.status());
   if (*added) Drop(**std::move(added));
   return grpc::Status::OK;

@@ -41,6 +41,11 @@ class WorkerService final
   void CancelAll();
   // Frames prepared and not yet ended, expired or evicted.
   size_t frames_held() const { return frames_.size(); }
+  // Whether frame `id` is held and its left neighbour's stream attached.
+  bool LeftAttached(uint64_t id) {
+    auto frame = FindFrame(id);
+    return frame && frame->left_attached();
+  }
 
   grpc::Status LoadSlab(grpc::ServerContext* ctx, grpc::ServerReader<v1::SlabChunk>* reader,
                         v1::LoadReply* reply) override;
