@@ -334,10 +334,10 @@ int Forward(const Options& o) {
   wo.id = "bench";
   wo.address = "127.0.0.1";
   WorkerService service(wo);
-  auto server = Server::Start("127.0.0.1:0", {&service});
+  auto server = Server::Start("127.0.0.1:0", Role::kWorker, {&service});
   if (!server.ok()) return Fail(server.status());
   const std::string address = absl::StrCat("127.0.0.1:", (*server)->port());
-  auto stub = v1::Worker::NewStub(MakeChannel(address));
+  auto stub = v1::Worker::NewStub(MakeChannel(address, Role::kWorker));
   {
     grpc::ClientContext ctx;
     v1::LoadReply reply;

@@ -26,7 +26,7 @@ namespace fs = std::filesystem;
 absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::string& root,
                                                                   const v1::Job& job,
                                                                   const WatchOptions& options) {
-  auto stub = v1::Root::NewStub(MakeChannel(root));
+  auto stub = v1::Root::NewStub(MakeChannel(root, Role::kRoot));
   v1::SubmitReply submitted;
   {
     grpc::ClientContext ctx;
@@ -179,8 +179,8 @@ absl::StatusOr<v1::Job> LoadJobFile(const std::string& path) {
 }
 
 absl::StatusOr<grpc::health::v1::HealthCheckResponse::ServingStatus> CheckHealth(
-    const std::string& address, double timeout_s) {
-  auto stub = grpc::health::v1::Health::NewStub(MakeChannel(address));
+    const std::string& address, Role role, double timeout_s) {
+  auto stub = grpc::health::v1::Health::NewStub(MakeChannel(address, role));
   grpc::ClientContext ctx;
   ctx.set_deadline(Deadline(timeout_s));
   grpc::health::v1::HealthCheckRequest request;  // service "": the whole server

@@ -11,6 +11,7 @@
 #include "absl/status/statusor.h"
 #include "cluster.pb.h"
 #include "grpc/health/v1/health.pb.h"
+#include "security.h"
 
 namespace transtick {
 
@@ -39,9 +40,9 @@ absl::StatusOr<v1::Job> LoadJobFile(const std::string& path);
 // What the standard health service of the daemon at `address` reports for
 // the whole server, decoded from its HealthCheckResponse; or the call's
 // error (UNAVAILABLE when nothing answers there, DEADLINE_EXCEEDED after
-// `timeout_s` seconds).
+// `timeout_s` seconds). With TLS, the daemon's certificate must be of `role`.
 absl::StatusOr<grpc::health::v1::HealthCheckResponse::ServingStatus> CheckHealth(
-    const std::string& address, double timeout_s);
+    const std::string& address, Role role, double timeout_s);
 
 }  // namespace transtick
 

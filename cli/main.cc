@@ -17,6 +17,7 @@
 #include <string>
 #include <thread>
 
+#include "absl/strings/escaping.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "client.h"
@@ -219,6 +220,14 @@ absl::StatusOr<v1::View> ViewFromFlags(const Flags& flags) {
   return v;
 }
 
+// Takes the command's TLS and token flags (security.h) for its channels.
+absl::Status UseSecurity(const Flags& flags) {
+  auto security = SecurityFromFlags(flags, /*daemon=*/false);
+  if (!security.ok()) return security.status();
+  SetSecurity(*std::move(security));
+  return absl::OkStatus();
+}
+
 int Fail(const char* command, const absl::Status& s) {
   std::cerr << "transtick " << command << ": " << s.message() << "\n";
   return s.code() == absl::StatusCode::kInvalidArgument ? 2 : 1;
@@ -346,8 +355,9 @@ int Render(int argc, char** argv) {
     known.insert(f);
   }
   auto fail = [](const absl::Status& s) { return Fail("render", s); };
-  auto flags = Flags::Parse(argc, argv, 2, known);
+  auto flags = Flags::Parse(argc, argv, 2, WithSecurityFlags(known));
   if (!flags.ok()) return fail(flags.status());
+  if (absl::Status s = UseSecurity(*flags); !s.ok()) return fail(s);
 
   // Everything about the request is checked before the volume is read.
   std::string mode_name = flags->Get("mode", flags->Has("transfer") ? "dvr" : "surfaces");
@@ -479,8 +489,9 @@ int Render(int argc, char** argv) {
 }
 
 int Submit(int argc, char** argv) {
-  auto flags = Flags::Parse(argc, argv, 2, {"root", "out-dir", "stats"});
+  auto flags = Flags::Parse(argc, argv, 2, WithSecurityFlags({"root", "out-dir", "stats"}));
   if (!flags.ok()) return Fail("submit", flags.status());
+  if (absl::Status s = UseSecurity(*flags); !s.ok()) return Fail("submit", s);
   if (flags->positional().size() != 1) {
     return Fail("submit",
                 absl::InvalidArgumentError("usage: transtick submit JOB.json --root HOST:PORT "
@@ -507,11 +518,12 @@ int Submit(int argc, char** argv) {
 }
 
 int StatusCommand(int argc, char** argv) {
-  auto flags = Flags::Parse(argc, argv, 2, {"root"});
+  auto flags = Flags::Parse(argc, argv, 2, WithSecurityFlags({"root"}));
   if (!flags.ok()) return Fail("status", flags.status());
+  if (absl::Status s = UseSecurity(*flags); !s.ok()) return Fail("status", s);
   if (!flags->Has("root"))
     return Fail("status", absl::InvalidArgumentError("--root HOST:PORT is required"));
-  auto stub = v1::Root::NewStub(MakeChannel(flags->Get("root")));
+  auto stub = v1::Root::NewStub(MakeChannel(flags->Get("root"), Role::kRoot));
   grpc::ClientContext ctx;
   ctx.set_deadline(Deadline(10));
   v1::StatusReply reply;
@@ -526,21 +538,25 @@ int StatusCommand(int argc, char** argv) {
     std::printf("\n");
   }
   for (const auto& j : reply.jobs()) {
-    std::printf("%-10s %-10s %3d/%-3d %s%s%s\n", j.job_id().c_str(),
+    // Names are other clients' strings (an admin sees every job): escaped,
+    // they cannot move the cursor or forge a line.
+    std::printf("%-10s %-10s %3d/%-3d %-8s %s%s%s\n", j.job_id().c_str(),
                 v1::JobState_Name(j.state()).c_str(), j.frames_done(), j.frames_total(),
-                j.name().c_str(), j.error().empty() ? "" : "  error: ", j.error().c_str());
+                j.owner().c_str(), absl::CEscape(j.name()).c_str(),
+                j.error().empty() ? "" : "  error: ", absl::CEscape(j.error()).c_str());
   }
   return 0;
 }
 
 int CancelCommand(int argc, char** argv) {
-  auto flags = Flags::Parse(argc, argv, 2, {"root"});
+  auto flags = Flags::Parse(argc, argv, 2, WithSecurityFlags({"root"}));
   if (!flags.ok()) return Fail("cancel", flags.status());
+  if (absl::Status s = UseSecurity(*flags); !s.ok()) return Fail("cancel", s);
   if (!flags->Has("root") || flags->positional().size() != 1) {
     return Fail("cancel",
                 absl::InvalidArgumentError("usage: transtick cancel JOB_ID --root HOST:PORT"));
   }
-  auto stub = v1::Root::NewStub(MakeChannel(flags->Get("root")));
+  auto stub = v1::Root::NewStub(MakeChannel(flags->Get("root"), Role::kRoot));
   grpc::ClientContext ctx;
   ctx.set_deadline(Deadline(10));
   v1::JobRef ref;
@@ -558,8 +574,17 @@ int CancelCommand(int argc, char** argv) {
 // stderr.
 int Health(int argc, char** argv) {
   using grpc::health::v1::HealthCheckResponse;
-  auto flags = Flags::Parse(argc, argv, 2, {"addr", "timeout"});
+  auto flags = Flags::Parse(argc, argv, 2, WithSecurityFlags({"addr", "timeout", "role"}));
   if (!flags.ok()) return Fail("health", flags.status());
+  if (absl::Status s = UseSecurity(*flags); !s.ok()) return Fail("health", s);
+  const std::string role_name = flags->Get("role", "root");
+  std::optional<Role> role;
+  for (Role r : {Role::kRoot, Role::kWorker, Role::kDisplay}) {
+    if (RoleName(r) == absl::StrCat("transtick-", role_name)) role = r;
+  }
+  if (!role) {
+    return Fail("health", absl::InvalidArgumentError("--role must be root, worker or display"));
+  }
   auto timeout = flags->GetDouble("timeout", 3);
   if (!timeout.ok()) return Fail("health", timeout.status());
   if (*timeout <= 0)
@@ -572,7 +597,7 @@ int Health(int argc, char** argv) {
   }
   bool all_serving = true;
   for (const std::string& address : addresses) {
-    auto status = CheckHealth(address, *timeout);
+    auto status = CheckHealth(address, *role, *timeout);
     if (!status.ok()) {
       all_serving = false;
       const absl::Status& e = status.status();

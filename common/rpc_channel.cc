@@ -53,7 +53,7 @@ std::vector<std::pair<std::string, int>> KeepaliveArguments(bool server) {
   return args;
 }
 
-std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address) {
+std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address, Role role) {
   grpc::ChannelArguments args;
   args.SetMaxReceiveMessageSize(kMaxMessageBytes);
   args.SetMaxSendMessageSize(kMaxMessageBytes);
@@ -68,10 +68,11 @@ std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address) {
   args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 250);
   args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 1000);
   for (const auto& [name, value] : KeepaliveArguments(/*server=*/false)) args.SetInt(name, value);
-  return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+  auto creds = ChannelCredentialsFor(role, &args);
+  return grpc::CreateCustomChannel(address, creds, args);
 }
 
-std::shared_ptr<grpc::Channel> SharedChannel(const std::string& address,
+std::shared_ptr<grpc::Channel> SharedChannel(const std::string& address, Role role,
                                              const std::string& purpose) {
   static std::mutex mu;
   static auto* channels = new std::map<std::string, std::shared_ptr<grpc::Channel>>();
@@ -93,7 +94,7 @@ std::shared_ptr<grpc::Channel> SharedChannel(const std::string& address,
   // channel failing; a fresh one connects at once instead of backing off.
   if (!channel || channel->GetState(false) == GRPC_CHANNEL_TRANSIENT_FAILURE ||
       channel->GetState(false) == GRPC_CHANNEL_SHUTDOWN) {
-    channel = MakeChannel(address);
+    channel = MakeChannel(address, role);
   }
   return channel;
 }

@@ -12,6 +12,8 @@
 #include <utility>
 #include <vector>
 
+#include "security.h"
+
 namespace transtick {
 
 // The largest message a channel or a server of the cluster sends or
@@ -38,16 +40,16 @@ Keepalive CurrentKeepalive();
 // (else it counts them as abuse and sends GOAWAY).
 std::vector<std::pair<std::string, int>> KeepaliveArguments(bool server);
 
-// A channel with the cluster's message limits and keepalive, and a
-// connection of its own.
-std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address);
+// A channel to a peer of `role` with the cluster's message limits,
+// keepalive and security (security.h), and a connection of its own.
+std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address, Role role);
 
 // A channel to `address` kept for the life of the process and shared by
 // every caller with the same `purpose` ("rays", "deposits", ...), so that
 // per-frame streams reuse a warm connection instead of opening one each
 // frame. A channel whose peer has failed is replaced by a fresh one.
 // Thread-safe.
-std::shared_ptr<grpc::Channel> SharedChannel(const std::string& address,
+std::shared_ptr<grpc::Channel> SharedChannel(const std::string& address, Role role,
                                              const std::string& purpose);
 
 // A deadline `seconds` from now, for unary calls.

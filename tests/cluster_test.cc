@@ -324,7 +324,7 @@ TEST_F(ClusterTest, PreviousFrameBalancingCarriesCutsForward) {
 TEST_F(ClusterTest, AWorkerRegisteringTwiceIsRefused) {
   auto cluster = StartCluster(2);
   ASSERT_TRUE(cluster.ok()) << cluster.status();
-  auto root = v1::Root::NewStub(MakeChannel((*cluster)->root_address()));
+  auto root = v1::Root::NewStub(MakeChannel((*cluster)->root_address(), Role::kRoot));
   v1::RegisterRequest req;
   req.set_id("twice");
   req.set_address("127.0.0.1:1");
@@ -363,14 +363,14 @@ TEST_F(ClusterTest, BadPlaneRequestsGetClearErrors) {
   ASSERT_TRUE(cluster.ok()) << cluster.status();
   v1::View v = View(30, 10, true, "planes.exr");
   ASSERT_TRUE(SubmitAndWatch((*cluster)->root_address(), MakeJob({v}), WatchOptions{}).ok());
-  auto root = v1::Root::NewStub(MakeChannel((*cluster)->root_address()));
+  auto root = v1::Root::NewStub(MakeChannel((*cluster)->root_address(), Role::kRoot));
   v1::StatusReply status;
   {
     grpc::ClientContext ctx;
     ASSERT_TRUE(root->Status(&ctx, v1::StatusRequest(), &status).ok());
   }
   ASSERT_EQ(status.workers_size(), 2);
-  auto worker = v1::Worker::NewStub(MakeChannel(status.workers(0).address()));
+  auto worker = v1::Worker::NewStub(MakeChannel(status.workers(0).address(), Role::kWorker));
   {
     grpc::ClientContext ctx;
     v1::PlanesRequest req;
@@ -434,7 +434,7 @@ TEST_F(ClusterTest, ConcurrentClientsAllComplete) {
 TEST_F(ClusterTest, CancelStopsAJobAndTheNextOneRuns) {
   auto cluster = StartCluster(2);
   ASSERT_TRUE(cluster.ok()) << cluster.status();
-  auto root = v1::Root::NewStub(MakeChannel((*cluster)->root_address()));
+  auto root = v1::Root::NewStub(MakeChannel((*cluster)->root_address(), Role::kRoot));
   std::vector<v1::View> many(200, View(10, 0, true, "many.exr"));
   v1::SubmitReply submitted;
   {
@@ -479,7 +479,7 @@ TEST_F(ClusterTest, CancelStopsAJobAndTheNextOneRuns) {
 // the same address must get a fresh channel, not one stuck backing off.
 TEST(SharedChannelTest, APeerBackAtTheSameAddressIsReached) {
   auto ping = [](const std::string& address) {
-    auto stub = v1::Display::NewStub(SharedChannel(address, "test"));
+    auto stub = v1::Display::NewStub(SharedChannel(address, Role::kDisplay, "test"));
     grpc::ClientContext ctx;
     ctx.set_deadline(Deadline(2));
     v1::FrameRef ref;
@@ -488,15 +488,15 @@ TEST(SharedChannelTest, APeerBackAtTheSameAddressIsReached) {
     return stub->AbortFrame(&ctx, ref, &ack);  // harmless: no such frame
   };
   DisplayService service;
-  auto first = Server::Start("127.0.0.1:0", {&service});
+  auto first = Server::Start("127.0.0.1:0", Role::kDisplay, {&service});
   ASSERT_TRUE(first.ok()) << first.status();
   const std::string address = absl::StrCat("127.0.0.1:", (*first)->port());
   EXPECT_TRUE(ping(address).ok());
-  EXPECT_EQ(SharedChannel(address, "test"), SharedChannel(address, "test"));
+  EXPECT_EQ(SharedChannel(address, Role::kDisplay, "test"), SharedChannel(address, Role::kDisplay, "test"));
   (*first)->Shutdown(std::chrono::milliseconds(100));
   first->reset();
   EXPECT_FALSE(ping(address).ok());
-  auto second = Server::Start(address, {&service});
+  auto second = Server::Start(address, Role::kDisplay, {&service});
   ASSERT_TRUE(second.ok()) << second.status();
   EXPECT_TRUE(ping(address).ok());
   (*second)->Shutdown(std::chrono::milliseconds(100));

@@ -139,7 +139,7 @@ TEST_F(KeepaliveTest, TheDisplayNoticesAWorkerWhoseHostVanished) {
 TEST_F(KeepaliveTest, AWorkerNoticesALeftNeighbourWhoseHostVanished) {
   Forwarder to_worker(worker_->port());
   ASSERT_TRUE(Prepare(2).ok());
-  auto stub = v1::Worker::NewStub(MakeChannel(to_worker.address()));
+  auto stub = v1::Worker::NewStub(MakeChannel(to_worker.address(), Role::kWorker));
   grpc::ClientContext ctx;
   auto stream = stub->Rays(&ctx);
   v1::RayBatch hello;
@@ -163,7 +163,7 @@ TEST_F(KeepaliveTest, AWorkerNoticesALeftNeighbourWhoseHostVanished) {
 // the channel reconnect for its next call.
 TEST_F(KeepaliveTest, AnIdleStreamIsNotCutOff) {
   ASSERT_TRUE(Prepare(3).ok());
-  auto channel = MakeChannel(worker_address_);
+  auto channel = MakeChannel(worker_address_, Role::kWorker);
   auto stub = v1::Worker::NewStub(channel);
   grpc::ClientContext ctx;
   auto stream = stub->Rays(&ctx);

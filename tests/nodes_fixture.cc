@@ -30,18 +30,18 @@ WorkerOptions NodesTest::worker_options() const {
 
 void NodesTest::SetUp() {
   display_service_ = std::make_unique<DisplayService>(display_options());
-  auto display = Server::Start("127.0.0.1:0", {display_service_.get()});
+  auto display = Server::Start("127.0.0.1:0", Role::kDisplay, {display_service_.get()});
   ASSERT_TRUE(display.ok()) << display.status();
   display_ = *std::move(display);
   worker_service_ = std::make_unique<WorkerService>(worker_options());
-  auto worker = Server::Start("127.0.0.1:0", {worker_service_.get()});
+  auto worker = Server::Start("127.0.0.1:0", Role::kWorker, {worker_service_.get()});
   ASSERT_TRUE(worker.ok()) << worker.status();
   worker_ = *std::move(worker);
   worker_address_ = absl::StrCat("127.0.0.1:", worker_->port());
   display_address_ = absl::StrCat("127.0.0.1:", display_->port());
   worker_service_->set_address(worker_address_);
-  worker_stub_ = v1::Worker::NewStub(MakeChannel(worker_address_));
-  display_stub_ = v1::Display::NewStub(MakeChannel(display_address_));
+  worker_stub_ = v1::Worker::NewStub(MakeChannel(worker_address_, Role::kWorker));
+  display_stub_ = v1::Display::NewStub(MakeChannel(display_address_, Role::kDisplay));
 
   Volume v = MakeNoisyPhantom(dims_, 5);
   classification_.materials = {{.name = "soft", .min = 20, .max = 45, .opacity = 0.3f},

@@ -50,7 +50,7 @@ uint32_t Load32(const unsigned char* p, bool big) {
 }  // namespace
 
 absl::StatusOr<Volume> ReadDen(const std::string& path, const ReadOptions& options) {
-  absl::StatusOr<std::string> header = vi::ReadPrefix(path, kHeaderBytes);
+  absl::StatusOr<std::string> header = vi::ReadPrefix(path, kHeaderBytes, options);
   if (!header.ok()) return header.status();
   if (header->size() < kHeaderBytes) {
     return absl::InvalidArgumentError(absl::StrCat(path, ": file holds ", header->size(),
@@ -86,7 +86,7 @@ absl::StatusOr<Volume> ReadDen(const std::string& path, const ReadOptions& optio
         absl::StrCat(path, ": inconsistent header: map_length ", map_length, " but map_len ",
                      dims[0], "x", dims[1], "x", dims[2], " = ", *data_bytes, " voxels"));
   }
-  absl::StatusOr<uint64_t> file_size = vi::FileSize(path);
+  absl::StatusOr<uint64_t> file_size = vi::FileSize(path, options);
   if (!file_size.ok()) return file_size.status();
   const uint64_t available = *file_size > kHeaderBytes ? *file_size - kHeaderBytes : 0;
   if (available != *data_bytes) {
@@ -100,7 +100,7 @@ absl::StatusOr<Volume> ReadDen(const std::string& path, const ReadOptions& optio
   volume.spacing = {1.0, 1.0, 1.0};
   volume.source_type = ScalarType::kUint8;
   absl::Status status = vi::ReadRawSamples(path, kHeaderBytes, volume.VoxelCount(),
-                                           ScalarType::kUint8, ByteOrder::kLittle, &volume.values);
+                                           ScalarType::kUint8, ByteOrder::kLittle, &volume.values, options);
   if (!status.ok()) return status;
   return volume;
 }

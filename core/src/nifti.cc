@@ -210,13 +210,13 @@ void ApplyScaling(float slope, float inter, std::vector<float>* values) {
 }  // namespace
 
 absl::StatusOr<Volume> ReadNifti(const std::string& path, const ReadOptions& options) {
-  absl::StatusOr<bool> gzipped = vi::IsGzipFile(path);
+  absl::StatusOr<bool> gzipped = vi::IsGzipFile(path, options);
   if (!gzipped.ok()) return gzipped.status();
 
   unsigned char bytes[kHeaderBytes];
   std::unique_ptr<vi::GzipFileReader> gz;
   if (*gzipped) {
-    absl::StatusOr<std::unique_ptr<vi::GzipFileReader>> reader = vi::GzipFileReader::Open(path, 0);
+    absl::StatusOr<std::unique_ptr<vi::GzipFileReader>> reader = vi::GzipFileReader::Open(path, 0, options);
     if (!reader.ok()) return reader.status();
     gz = *std::move(reader);
     absl::Status status = gz->Read(bytes, kHeaderBytes);
@@ -225,7 +225,7 @@ absl::StatusOr<Volume> ReadNifti(const std::string& path, const ReadOptions& opt
                                                       kHeaderBytes, "-byte NIfTI-1 header"));
     }
   } else {
-    absl::StatusOr<std::string> prefix = vi::ReadPrefix(path, kHeaderBytes);
+    absl::StatusOr<std::string> prefix = vi::ReadPrefix(path, kHeaderBytes, options);
     if (!prefix.ok()) return prefix.status();
     if (prefix->size() < kHeaderBytes) {
       return Error(path, absl::StrCat("file holds ", prefix->size(), " bytes, less than the ",
@@ -260,7 +260,7 @@ absl::StatusOr<Volume> ReadNifti(const std::string& path, const ReadOptions& opt
                                                       " at offset ", header->vox_offset));
     }
   } else {
-    absl::StatusOr<uint64_t> file_size = vi::FileSize(path);
+    absl::StatusOr<uint64_t> file_size = vi::FileSize(path, options);
     if (!file_size.ok()) return file_size.status();
     const uint64_t available =
         *file_size > header->vox_offset ? *file_size - header->vox_offset : 0;
@@ -269,7 +269,7 @@ absl::StatusOr<Volume> ReadNifti(const std::string& path, const ReadOptions& opt
                                       ", file holds ", available));
     }
     absl::Status status = vi::ReadRawSamples(path, header->vox_offset, count, header->type,
-                                             header->order, &volume.values);
+                                             header->order, &volume.values, options);
     if (!status.ok()) return status;
   }
   ApplyScaling(header->slope, header->inter, &volume.values);

@@ -145,9 +145,9 @@ std::string DirectoryOf(const std::string& path) {
 }  // namespace
 
 absl::StatusOr<Volume> ReadNrrd(const std::string& path, const ReadOptions& options) {
-  absl::StatusOr<std::string> prefix = vi::ReadPrefix(path, kMaxHeaderBytes);
+  absl::StatusOr<std::string> prefix = vi::ReadPrefix(path, kMaxHeaderBytes, options);
   if (!prefix.ok()) return prefix.status();
-  absl::StatusOr<uint64_t> file_size = vi::FileSize(path);
+  absl::StatusOr<uint64_t> file_size = vi::FileSize(path, options);
   if (!file_size.ok()) return file_size.status();
   const std::string& text = *prefix;
 
@@ -332,7 +332,7 @@ absl::StatusOr<Volume> ReadNrrd(const std::string& path, const ReadOptions& opti
   const std::string where = data_path == path ? "file" : absl::StrCat("data file ", data_path);
 
   absl::StatusOr<uint64_t> after_lines =
-      vi::SkipLines(data_path, offset, static_cast<uint64_t>(line_skip));
+      vi::SkipLines(data_path, offset, static_cast<uint64_t>(line_skip), options);
   if (!after_lines.ok()) return after_lines.status();
   offset = *after_lines;
 
@@ -343,7 +343,7 @@ absl::StatusOr<Volume> ReadNrrd(const std::string& path, const ReadOptions& opti
   const uint64_t count = volume.VoxelCount();
 
   if (encoding == Encoding::kRaw) {
-    absl::StatusOr<uint64_t> data_size = vi::FileSize(data_path);
+    absl::StatusOr<uint64_t> data_size = vi::FileSize(data_path, options);
     if (!data_size.ok()) return data_size.status();
     uint64_t start = 0;
     if (byte_skip == -1) {
@@ -359,13 +359,13 @@ absl::StatusOr<Volume> ReadNrrd(const std::string& path, const ReadOptions& opti
     if (available != *data_bytes) {
       return Error(path, absl::StrCat("header says ", layout, ", ", where, " holds ", available));
     }
-    absl::Status status = vi::ReadRawSamples(data_path, start, count, *type, order, &volume.values);
+    absl::Status status = vi::ReadRawSamples(data_path, start, count, *type, order, &volume.values, options);
     if (!status.ok()) return status;
     return volume;
   }
 
   absl::StatusOr<std::unique_ptr<vi::GzipFileReader>> reader =
-      vi::GzipFileReader::Open(data_path, offset);
+      vi::GzipFileReader::Open(data_path, offset, options);
   if (!reader.ok()) return reader.status();
   vi::GzipFileReader& gz = **reader;
   const std::string context = absl::StrCat(

@@ -3,7 +3,9 @@
 // nifti.cc.
 #include "transtick/volume_io.h"
 
+#include <fcntl.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <bit>
@@ -54,42 +56,55 @@ void ConvertTyped(const unsigned char* src, size_t count, bool swap, float* dst)
 
 }  // namespace
 
-absl::StatusOr<FilePtr> OpenFile(const std::string& path) {
-  struct stat info;
-  if (::stat(path.c_str(), &info) != 0) {
-    int error = errno;
-    if (error == ENOENT || error == ENOTDIR) {
-      return absl::NotFoundError(absl::StrCat(path, ": no such file"));
+absl::StatusOr<FilePtr> OpenFile(const std::string& path, const ReadOptions& options) {
+  int fd = -1;
+  if (options.open) {
+    absl::StatusOr<int> opened = options.open(path);
+    if (!opened.ok()) return opened.status();
+    fd = *opened;
+  } else {
+    fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) {
+      const int error = errno;
+      if (error == ENOENT || error == ENOTDIR) {
+        return absl::NotFoundError(absl::StrCat(path, ": no such file"));
+      }
+      return ErrnoError(path, "cannot open", error);
     }
+  }
+  // The checks are on the file opened, not on the name, which may since
+  // name another.
+  struct stat info;
+  if (::fstat(fd, &info) != 0) {
+    const int error = errno;
+    ::close(fd);
     return ErrnoError(path, "cannot stat", error);
   }
   if (!S_ISREG(info.st_mode)) {
+    ::close(fd);
     return absl::InvalidArgumentError(absl::StrCat(path, ": not a regular file"));
   }
-  FilePtr file(std::fopen(path.c_str(), "rb"));
-  if (file == nullptr) return ErrnoError(path, "cannot open", errno);
+  FilePtr file(::fdopen(fd, "rb"));
+  if (file == nullptr) {
+    const int error = errno;
+    ::close(fd);
+    return ErrnoError(path, "cannot open", error);
+  }
   return file;
 }
 
-absl::StatusOr<uint64_t> FileSize(const std::string& path) {
+absl::StatusOr<uint64_t> FileSize(const std::string& path, const ReadOptions& options) {
+  absl::StatusOr<FilePtr> file = OpenFile(path, options);
+  if (!file.ok()) return file.status();
   struct stat info;
-  if (::stat(path.c_str(), &info) != 0) {
-    int error = errno;
-    if (error == ENOENT || error == ENOTDIR) {
-      return absl::NotFoundError(absl::StrCat(path, ": no such file"));
-    }
-    return ErrnoError(path, "cannot stat", error);
-  }
-  if (!S_ISREG(info.st_mode)) {
-    return absl::InvalidArgumentError(absl::StrCat(path, ": not a regular file"));
-  }
+  if (::fstat(::fileno(file->get()), &info) != 0) return ErrnoError(path, "cannot stat", errno);
   return static_cast<uint64_t>(info.st_size);
 }
 
-absl::StatusOr<std::string> ReadPrefix(const std::string& path, uint64_t max_len) {
-  absl::StatusOr<FilePtr> file = OpenFile(path);
+absl::StatusOr<std::string> ReadPrefix(const std::string& path, uint64_t max_len, const ReadOptions& options) {
+  absl::StatusOr<FilePtr> file = OpenFile(path, options);
   if (!file.ok()) return file.status();
-  absl::StatusOr<uint64_t> size = FileSize(path);
+  absl::StatusOr<uint64_t> size = FileSize(path, options);
   if (!size.ok()) return size.status();
   std::string data(static_cast<size_t>(std::min(*size, max_len)), '\0');
   size_t got = std::fread(data.data(), 1, data.size(), file->get());
@@ -100,9 +115,9 @@ absl::StatusOr<std::string> ReadPrefix(const std::string& path, uint64_t max_len
   return data;
 }
 
-absl::StatusOr<uint64_t> SkipLines(const std::string& path, uint64_t offset, uint64_t lines) {
+absl::StatusOr<uint64_t> SkipLines(const std::string& path, uint64_t offset, uint64_t lines, const ReadOptions& options) {
   if (lines == 0) return offset;
-  absl::StatusOr<FilePtr> file = OpenFile(path);
+  absl::StatusOr<FilePtr> file = OpenFile(path, options);
   if (!file.ok()) return file.status();
   if (::fseeko(file->get(), static_cast<off_t>(offset), SEEK_SET) != 0) {
     return ErrnoError(path, "seek failed", errno);
@@ -224,8 +239,8 @@ absl::Status ReadSamples(const ReadFn& read, uint64_t count, ScalarType type, By
 }
 
 absl::Status ReadRawSamples(const std::string& path, uint64_t offset, uint64_t count,
-                            ScalarType type, ByteOrder order, std::vector<float>* out) {
-  absl::StatusOr<FilePtr> file = OpenFile(path);
+                            ScalarType type, ByteOrder order, std::vector<float>* out, const ReadOptions& options) {
+  absl::StatusOr<FilePtr> file = OpenFile(path, options);
   if (!file.ok()) return file.status();
   if (::fseeko(file->get(), static_cast<off_t>(offset), SEEK_SET) != 0) {
     return ErrnoError(path, "seek failed", errno);
@@ -252,8 +267,8 @@ GzipFileReader::~GzipFileReader() {
 }
 
 absl::StatusOr<std::unique_ptr<GzipFileReader>> GzipFileReader::Open(const std::string& path,
-                                                                     uint64_t offset) {
-  absl::StatusOr<FilePtr> file = OpenFile(path);
+                                                                     uint64_t offset, const ReadOptions& options) {
+  absl::StatusOr<FilePtr> file = OpenFile(path, options);
   if (!file.ok()) return file.status();
   if (::fseeko(file->get(), static_cast<off_t>(offset), SEEK_SET) != 0) {
     return ErrnoError(path, "seek failed", errno);
@@ -354,8 +369,8 @@ absl::StatusOr<uint64_t> GzipFileReader::SkipToEnd(uint64_t limit) {
   return position_ - start;
 }
 
-absl::StatusOr<bool> IsGzipFile(const std::string& path) {
-  absl::StatusOr<std::string> prefix = ReadPrefix(path, 2);
+absl::StatusOr<bool> IsGzipFile(const std::string& path, const ReadOptions& options) {
+  absl::StatusOr<std::string> prefix = ReadPrefix(path, 2, options);
   if (!prefix.ok()) return prefix.status();
   return prefix->size() == 2 && static_cast<unsigned char>((*prefix)[0]) == 0x1f &&
          static_cast<unsigned char>((*prefix)[1]) == 0x8b;
@@ -411,7 +426,7 @@ absl::StatusOr<Volume> ReadRaw(const std::string& path, const RawSpec& spec,
   const std::array<int64_t, 3> dims = {spec.dims[0], spec.dims[1], spec.dims[2]};
   absl::StatusOr<uint64_t> data_bytes = vi::CheckedDataBytes(path, dims, spec.type, options);
   if (!data_bytes.ok()) return data_bytes.status();
-  absl::StatusOr<uint64_t> file_size = vi::FileSize(path);
+  absl::StatusOr<uint64_t> file_size = vi::FileSize(path, options);
   if (!file_size.ok()) return file_size.status();
   uint64_t needed = 0;
   if (!vi::CheckedAdd(spec.header_bytes, *data_bytes, &needed) || needed != *file_size) {
@@ -430,7 +445,7 @@ absl::StatusOr<Volume> ReadRaw(const std::string& path, const RawSpec& spec,
   volume.spacing = spec.spacing;
   volume.source_type = spec.type;
   absl::Status status = vi::ReadRawSamples(path, spec.header_bytes, volume.VoxelCount(), spec.type,
-                                           spec.byte_order, &volume.values);
+                                           spec.byte_order, &volume.values, options);
   if (!status.ok()) return status;
   return volume;
 }

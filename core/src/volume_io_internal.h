@@ -29,17 +29,17 @@ using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
 
 // Opens a regular file for binary reading: NotFound if it does not exist,
 // InvalidArgument if it is a directory or unreadable.
-absl::StatusOr<FilePtr> OpenFile(const std::string& path);
+absl::StatusOr<FilePtr> OpenFile(const std::string& path, const ReadOptions& options);
 
 // Size in bytes of the regular file at `path`.
-absl::StatusOr<uint64_t> FileSize(const std::string& path);
+absl::StatusOr<uint64_t> FileSize(const std::string& path, const ReadOptions& options);
 
 // Reads up to `max_len` bytes from the start of the file (fewer if the file is
 // shorter). Used for headers, whose length is not known in advance.
-absl::StatusOr<std::string> ReadPrefix(const std::string& path, uint64_t max_len);
+absl::StatusOr<std::string> ReadPrefix(const std::string& path, uint64_t max_len, const ReadOptions& options);
 
 // Returns the offset just past the `lines`-th '\n' at or after `offset`.
-absl::StatusOr<uint64_t> SkipLines(const std::string& path, uint64_t offset, uint64_t lines);
+absl::StatusOr<uint64_t> SkipLines(const std::string& path, uint64_t offset, uint64_t lines, const ReadOptions& options);
 
 // a * b, a + b; false on unsigned 64-bit overflow.
 bool CheckedMul(uint64_t a, uint64_t b, uint64_t* out);
@@ -74,7 +74,7 @@ absl::Status ReadSamples(const ReadFn& read, uint64_t count, ScalarType type, By
 // Reads `count` samples of `type` from [offset, offset + count * size) of a
 // plain file. REQUIRES: the caller checked that the file holds those bytes.
 absl::Status ReadRawSamples(const std::string& path, uint64_t offset, uint64_t count,
-                            ScalarType type, ByteOrder order, std::vector<float>* out);
+                            ScalarType type, ByteOrder order, std::vector<float>* out, const ReadOptions& options);
 
 // Streams the decompressed content of a gzip or zlib stream (detected from
 // its first bytes) that starts at `offset` in a file. Reading past the end of
@@ -85,7 +85,7 @@ absl::Status ReadRawSamples(const std::string& path, uint64_t offset, uint64_t c
 class GzipFileReader {
  public:
   static absl::StatusOr<std::unique_ptr<GzipFileReader>> Open(const std::string& path,
-                                                              uint64_t offset);
+                                                              uint64_t offset, const ReadOptions& options);
   ~GzipFileReader();
   GzipFileReader(const GzipFileReader&) = delete;
   GzipFileReader& operator=(const GzipFileReader&) = delete;
@@ -121,7 +121,7 @@ class GzipFileReader {
 };
 
 // True if the file starts with the gzip magic bytes 1f 8b.
-absl::StatusOr<bool> IsGzipFile(const std::string& path);
+absl::StatusOr<bool> IsGzipFile(const std::string& path, const ReadOptions& options);
 
 }  // namespace transtick::volume_io_internal
 

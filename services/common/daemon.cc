@@ -13,12 +13,14 @@
 
 namespace transtick {
 
-absl::StatusOr<std::unique_ptr<Server>> Server::Start(const std::string& address,
+absl::StatusOr<std::unique_ptr<Server>> Server::Start(const std::string& address, Role self,
                                                       std::vector<grpc::Service*> services) {
+  auto creds = ServerCredentialsFor(self, address);
+  if (!creds.ok()) return creds.status();
   grpc::EnableDefaultHealthCheckService(true);
   grpc::ServerBuilder builder;
   auto server = std::unique_ptr<Server>(new Server());
-  builder.AddListeningPort(address, grpc::InsecureServerCredentials(), &server->port_);
+  builder.AddListeningPort(address, *creds, &server->port_);
   builder.SetMaxReceiveMessageSize(kMaxMessageBytes);
   builder.SetMaxSendMessageSize(kMaxMessageBytes);
   // A client whose host vanished is noticed (its streams fail), and the
@@ -67,6 +69,13 @@ int WaitForSignal() {
   int sig = 0;
   sigwait(&set, &sig);
   return sig;
+}
+
+absl::Status UseDaemonSecurity(const Flags& flags) {
+  auto security = SecurityFromFlags(flags, /*daemon=*/true);
+  if (!security.ok()) return security.status();
+  SetSecurity(*std::move(security));
+  return absl::OkStatus();
 }
 
 std::string Setting(const Flags& flags, const std::string& flag, const char* env,

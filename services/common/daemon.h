@@ -28,8 +28,9 @@ namespace transtick {
 // Owns the server; Shutdown is idempotent. Thread-safe.
 class Server {
  public:
-  // Binds `address` ("host:port"; port 0 picks one) and starts serving.
-  static absl::StatusOr<std::unique_ptr<Server>> Start(const std::string& address,
+  // Binds `address` ("host:port"; port 0 picks one) and starts serving as
+  // `self`, with the process's security (security.h).
+  static absl::StatusOr<std::unique_ptr<Server>> Start(const std::string& address, Role self,
                                                        std::vector<grpc::Service*> services);
   ~Server();
 
@@ -62,6 +63,9 @@ absl::StatusOr<int64_t> IntSetting(const Flags& flags, const std::string& flag, 
 absl::StatusOr<std::chrono::milliseconds> SecondsSetting(const Flags& flags,
                                                          const std::string& flag, const char* env,
                                                          std::chrono::milliseconds fallback);
+
+// Reads the daemon's TLS flags (security.h) and makes them the process's.
+absl::Status UseDaemonSecurity(const Flags& flags);
 
 // Sets up spdlog's default logger: "[time] [level] [name] message".
 void InitLogging(const std::string& name);

@@ -6,7 +6,7 @@ absl::StatusOr<std::unique_ptr<DisplayNode>> DisplayNode::Start(const std::strin
                                                                 const DisplayOptions& options) {
   auto node = std::unique_ptr<DisplayNode>(new DisplayNode());
   node->service_ = std::make_unique<DisplayService>(options);
-  auto server = Server::Start(listen, {node->service_.get()});
+  auto server = Server::Start(listen, Role::kDisplay, {node->service_.get()});
   if (!server.ok()) return server.status();
   node->server_ = *std::move(server);
   return node;
@@ -14,6 +14,8 @@ absl::StatusOr<std::unique_ptr<DisplayNode>> DisplayNode::Start(const std::strin
 
 DisplayNode::~DisplayNode() { Stop(std::chrono::milliseconds(0)); }
 
-void DisplayNode::Stop(std::chrono::milliseconds grace) { server_->Shutdown(grace); }
+void DisplayNode::Stop(std::chrono::milliseconds grace) {
+  if (server_) server_->Shutdown(grace);  // null when Start failed
+}
 
 }  // namespace transtick

@@ -8,7 +8,9 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/time/time.h"
+#include "refused.h"
 #include "rpc_status.h"
+#include "security.h"
 #include "transtick/ray_codec.h"
 
 namespace transtick {
@@ -53,7 +55,8 @@ std::shared_ptr<DisplayService::FrameState> DisplayService::Find(uint64_t id) {
 grpc::ServerUnaryReactor* DisplayService::BeginFrame(grpc::CallbackServerContext* ctx,
                                                      const v1::DisplayFrame* req, v1::FrameAck*) {
   grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
-  reactor->Finish(Begin(*req));
+  grpc::Status s = RequireRole(*ctx, "BeginFrame", {Role::kRoot});
+  reactor->Finish(s.ok() ? Begin(*req) : s);
   return reactor;
 }
 
@@ -166,6 +169,9 @@ class DisplayService::DepositStream : public grpc::ServerReadReactor<v1::Deposit
 
 grpc::ServerReadReactor<v1::DepositBatch>* DisplayService::Deposits(
     grpc::CallbackServerContext* ctx, v1::FrameAck*) {
+  if (grpc::Status s = RequireRole(*ctx, "Deposits", {Role::kWorker}); !s.ok()) {
+    return new RefusedRead<v1::DepositBatch>(s);
+  }
   return new DepositStream(this, ctx);
 }
 
@@ -377,26 +383,18 @@ class DisplayService::AwaitStream : public grpc::ServerWriteReactor<v1::FramePro
   int next_row_ ABSL_GUARDED_BY(frame_->mu) = 0;  // of the image, to send next
 };
 
-namespace {
-
-// A call refused before it began.
-class Refusal : public grpc::ServerWriteReactor<v1::FrameProgress> {
- public:
-  explicit Refusal(grpc::Status status) { Finish(std::move(status)); }
-  void OnDone() override { delete this; }
-};
-
-}  // namespace
-
 grpc::ServerWriteReactor<v1::FrameProgress>* DisplayService::AwaitFrame(
-    grpc::CallbackServerContext*, const v1::FrameRef* req) {
+    grpc::CallbackServerContext* ctx, const v1::FrameRef* req) {
+  if (grpc::Status s = RequireRole(*ctx, "AwaitFrame", {Role::kRoot}); !s.ok()) {
+    return new RefusedWrite<v1::FrameProgress>(s);
+  }
   std::shared_ptr<FrameState> frame = Find(req->frame_id());
   if (!frame) {
     absl::MutexLock lock(&mu_);
     if (const std::string* why = aborted_.Find(req->frame_id())) {
-      return new Refusal(Aborted(req->frame_id(), *why));
+      return new RefusedWrite<v1::FrameProgress>(Aborted(req->frame_id(), *why));
     }
-    return new Refusal(ToGrpc(
+    return new RefusedWrite<v1::FrameProgress>(ToGrpc(
         absl::NotFoundError(absl::StrCat("display: frame ", req->frame_id(), " was not begun"))));
   }
   return AwaitStream::Start(this, std::move(frame), req->no_image());
@@ -438,9 +436,10 @@ void DisplayService::Release(const std::shared_ptr<FrameState>& frame) {
 
 grpc::ServerUnaryReactor* DisplayService::AbortFrame(grpc::CallbackServerContext* ctx,
                                                      const v1::FrameRef* req, v1::FrameAck*) {
-  Abort(req->frame_id(), req->reason());
   grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
-  reactor->Finish(grpc::Status::OK);
+  grpc::Status s = RequireRole(*ctx, "AbortFrame", {Role::kRoot});
+  if (s.ok()) Abort(req->frame_id(), req->reason());
+  reactor->Finish(s);
   return reactor;
 }
 

@@ -12,13 +12,22 @@ int main(int argc, char** argv) {
   ReturnLargeBlocksToTheSystem();
   InitLogging("display");
   auto flags = Flags::Parse(
-      argc, argv, 1, {"listen", "max-frames", "max-framebuffer-mb", "frame-idle-s"}, {"help"});
+      argc, argv, 1,
+      WithSecurityFlags({"listen", "max-frames", "max-framebuffer-mb", "frame-idle-s"}),
+      WithSecuritySwitches({"help"}));
   if (!flags.ok() || flags->Has("help")) {
     if (!flags.ok()) std::cerr << "transtick-display: " << flags.status().message() << "\n";
     std::cerr << "usage: transtick-display [--listen ADDR] [--max-frames N] "
                  "[--max-framebuffer-mb N] [--frame-idle-s S]\n(environment: TRANSTICK_LISTEN, "
-                 "TRANSTICK_MAX_FRAMES, TRANSTICK_MAX_FRAMEBUFFER_MB, TRANSTICK_FRAME_IDLE_S)\n";
+                 "TRANSTICK_MAX_FRAMES, TRANSTICK_MAX_FRAMEBUFFER_MB, TRANSTICK_FRAME_IDLE_S)\n"
+                 "TLS: " << kSecurityUsage << " (or TRANSTICK_TLS_CA, TRANSTICK_TLS_CERT, "
+                 "TRANSTICK_TLS_KEY); without them it serves plaintext on loopback only "
+                 "(docs/security.md)\n";
     return flags.ok() ? 0 : 2;
+  }
+  if (absl::Status s = UseDaemonSecurity(*flags); !s.ok()) {
+    std::cerr << "transtick-display: " << s.message() << "\n";
+    return 2;
   }
   const std::string listen = Setting(*flags, "listen", "TRANSTICK_LISTEN", "0.0.0.0:7002");
   DisplayOptions o;

@@ -2,15 +2,18 @@
 
 #include <spdlog/spdlog.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
 
+#include "absl/strings/escaping.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "balancer.h"
 #include "clock.h"
+#include "confined_dir.h"
 #include "convert.h"
 #include "transtick/image_io.h"
 #include "transtick/partition.h"
@@ -19,7 +22,23 @@
 namespace transtick {
 namespace {
 
-namespace fs = std::filesystem;
+// The client's path as a log or an error may show it: escaped, so that no
+// character of it can forge a line.
+std::string Shown(const std::string& path) { return absl::CEscape(path); }
+
+// OK when `relative` opens (confined) as a regular file.
+absl::Status CheckVolume(const ConfinedDir& dir, const std::string& relative) {
+  auto fd = dir.OpenFile(relative);
+  if (!fd.ok()) return absl::Status(fd.status().code(), Shown(std::string(fd.status().message())));
+  struct stat st {};
+  const bool regular = ::fstat(*fd, &st) == 0 && S_ISREG(st.st_mode);
+  ::close(*fd);
+  if (!regular) {
+    return absl::InvalidArgumentError(absl::StrCat("'", Shown(relative), "' is not a regular file"));
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 absl::StatusOr<JobPlan> Datasets::Plan(const v1::Job& job) const {
@@ -34,27 +53,17 @@ absl::StatusOr<JobPlan> Datasets::Plan(const v1::Job& job) const {
     plan.rule = *r;
   }
   int views = 0;
-  std::error_code ec;
-  const fs::path root = fs::weakly_canonical(data_dir_, ec);
+  auto dir = ConfinedDir::Open(data_dir_);
+  if (!dir.ok()) return absl::UnavailableError("the root's data directory cannot be opened");
   for (int d = 0; d < job.datasets_size(); ++d) {
     const v1::Dataset& ds = job.datasets(d);
     DatasetPlan& dp = plan.datasets.emplace_back();
     const std::string where = absl::StrCat("datasets[", d, "]");
     if (ds.volume().empty()) return absl::InvalidArgumentError(where + ": no volume given");
-    fs::path rel(ds.volume());
-    if (rel.is_absolute()) {
-      return absl::InvalidArgumentError(absl::StrCat(where, ": volume '", ds.volume(),
-                                                     "' must be relative to the data directory"));
-    }
-    fs::path full = fs::weakly_canonical(root / rel, ec);
-    auto mismatch = std::mismatch(root.begin(), root.end(), full.begin(), full.end());
-    if (ec || mismatch.first != root.end()) {
-      return absl::PermissionDeniedError(
-          absl::StrCat(where, ": volume '", ds.volume(), "' lies outside the data directory"));
-    }
-    if (!fs::is_regular_file(full, ec)) {
-      return absl::NotFoundError(
-          absl::StrCat(where, ": volume '", ds.volume(), "' not found in the data directory"));
+    // A check for an early, clear error. The file is opened again, just as
+    // confined, when the job runs: what the name means may change between.
+    if (absl::Status s = CheckVolume(**dir, ds.volume()); !s.ok()) {
+      return absl::Status(s.code(), absl::StrCat(where, ": volume ", s.message()));
     }
     if (!ds.materials_file().empty() || !ds.transfer_file().empty()) {
       return absl::InvalidArgumentError(
@@ -118,10 +127,17 @@ absl::StatusOr<JobPlan> Datasets::Plan(const v1::Job& job) const {
 
 absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset& ds,
                                                                const DatasetPlan& plan) {
-  const fs::path path = fs::path(data_dir_) / ds.volume();
+  // Every file the reader opens (the volume, a detached data file) is
+  // opened beneath the data directory, and errors name paths relative to it.
+  auto dir = ConfinedDir::Open(data_dir_);
+  if (!dir.ok()) return absl::UnavailableError("the root's data directory cannot be opened");
   struct stat st {};
-  if (stat(path.c_str(), &st) != 0) {
-    return absl::NotFoundError(absl::StrCat(ds.volume(), ": cannot open"));
+  {
+    auto fd = (*dir)->OpenFile(ds.volume());
+    if (!fd.ok()) return fd.status();
+    const int r = ::fstat(*fd, &st);
+    ::close(*fd);
+    if (r != 0) return absl::NotFoundError(absl::StrCat(Shown(ds.volume()), ": cannot stat"));
   }
   v1::Dataset identity = ds;
   identity.clear_views();
@@ -133,11 +149,12 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
   const auto t0 = Clock::now();
   ReadOptions ro;
   ro.max_bytes = max_volume_bytes_;
+  ro.open = [dir = *dir](const std::string& path) { return dir->OpenFile(path); };
   absl::StatusOr<Volume> volume;
   if (plan.raw) {
-    volume = ReadRaw(path.string(), *plan.raw, ro);
+    volume = ReadRaw(ds.volume(), *plan.raw, ro);
   } else {
-    volume = ReadVolume(path.string(), ro);
+    volume = ReadVolume(ds.volume(), ro);
   }
   if (!volume.ok()) return volume.status();
   auto data = std::make_shared<LoadedDataset>();
@@ -153,10 +170,10 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
   }
   if (!scene.ok())
     return absl::Status(scene.status().code(),
-                        absl::StrCat(ds.volume(), ": ", scene.status().message()));
+                        absl::StrCat(Shown(ds.volume()), ": ", scene.status().message()));
   data->scene = *std::move(scene);
   data->load_ms = MsSince(t0);
-  spdlog::info("dataset {} ({}): {}x{}x{}, {} sticks, prepared in {:.0f} ms", ds.volume(),
+  spdlog::info("dataset {} ({}): {}x{}x{}, {} sticks, prepared in {:.0f} ms", Shown(ds.volume()),
                RenderModeName(data->mode), volume->dims[0], volume->dims[1], volume->dims[2],
                data->scene.sticks().StickCount(), data->load_ms);
   cache_ = data;

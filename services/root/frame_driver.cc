@@ -46,7 +46,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
                                              const ChunkFn& on_chunk) {
   const uint64_t frame_id = next_frame_id_++;
   const auto t0 = Clock::now();
-  auto display = v1::Display::NewStub(SharedChannel(display_, "control"));
+  auto display = v1::Display::NewStub(SharedChannel(display_, Role::kDisplay, "control"));
   struct Member {
     std::shared_ptr<WorkerEntry> worker;
     v1::FrameSpec spec;

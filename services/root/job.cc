@@ -238,6 +238,7 @@ v1::JobSummary Job::Summary() const {
   s.set_frames_done(FramesDone());
   s.set_error(error_);
   s.set_submitted_unix(submitted_unix_);
+  s.set_owner(owner_);
   return s;
 }
 

@@ -12,9 +12,11 @@ int main(int argc, char** argv) {
   ReturnLargeBlocksToTheSystem();
   InitLogging("root");
   auto flags = Flags::Parse(
-      argc, argv, 1, {"listen", "data-dir", "state-dir", "display", "rings", "max-volume-mb", "frame-timeout",
-       "max-queued-jobs", "max-jobs-per-client", "max-job-megapixels"},
-      {"help"});
+      argc, argv, 1,
+      WithSecurityFlags({"listen", "data-dir", "state-dir", "display", "rings", "max-volume-mb",
+                         "frame-timeout", "max-queued-jobs", "max-jobs-per-client",
+                         "max-job-megapixels"}),
+      WithSecuritySwitches({"help"}));
   if (!flags.ok() || flags->Has("help")) {
     if (!flags.ok()) std::cerr << "transtick-root: " << flags.status().message() << "\n";
     std::cerr << "usage: transtick-root [--listen ADDR] [--data-dir DIR] [--state-dir DIR] "
@@ -24,8 +26,15 @@ int main(int argc, char** argv) {
                  "TRANSTICK_DISPLAY, TRANSTICK_RINGS, TRANSTICK_MAX_VOLUME_MB, "
                  "TRANSTICK_FRAME_TIMEOUT, TRANSTICK_MAX_QUEUED_JOBS, "
                  "TRANSTICK_MAX_JOBS_PER_CLIENT, TRANSTICK_MAX_JOB_MEGAPIXELS)\n"
+                 "TLS: " << kSecurityUsage << " [--tokens FILE] (or TRANSTICK_TLS_CA, TRANSTICK_TLS_CERT, "
+                 "TRANSTICK_TLS_KEY, TRANSTICK_TOKENS); without them it serves plaintext on loopback only "
+                 "(docs/security.md)\n"
                  "Without a state directory the jobs live in memory and a restart loses them.\n";
     return flags.ok() ? 0 : 2;
+  }
+  if (absl::Status s = UseDaemonSecurity(*flags); !s.ok()) {
+    std::cerr << "transtick-root: " << s.message() << "\n";
+    return 2;
   }
   RootOptions o;
   const std::string listen = Setting(*flags, "listen", "TRANSTICK_LISTEN", "0.0.0.0:7000");

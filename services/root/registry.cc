@@ -47,7 +47,7 @@ absl::Status Registry::Register(const v1::RegisterRequest& req) {
   w->address = req.address();
   w->threads = std::max(1, req.threads());
   w->order = next_order_++;
-  w->stub = v1::Worker::NewStub(MakeChannel(w->address));
+  w->stub = v1::Worker::NewStub(MakeChannel(w->address, Role::kWorker));
   workers_[w->id] = w;
   last_seen_[w->id] = std::chrono::steady_clock::now();
   spdlog::info("worker {} registered at {} ({} threads); {} workers", w->id, w->address, w->threads,

@@ -20,8 +20,8 @@ class RootNode {
   int port() const { return server_->port(); }
   RootService& service() { return *service_; }
   void Stop(std::chrono::milliseconds grace) {
-    service_->Stop();
-    server_->Shutdown(grace);
+    if (service_) service_->Stop();
+    if (server_) server_->Shutdown(grace);  // null when Start failed
   }
 
  private:
@@ -35,7 +35,7 @@ inline absl::StatusOr<std::unique_ptr<RootNode>> RootNode::Start(const std::stri
   auto service = RootService::Create(options);
   if (!service.ok()) return service.status();
   node->service_ = *std::move(service);
-  auto server = Server::Start(listen, {node->service_.get()});
+  auto server = Server::Start(listen, Role::kRoot, {node->service_.get()});
   if (!server.ok()) return server.status();
   node->server_ = *std::move(server);
   return node;

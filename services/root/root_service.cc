@@ -2,17 +2,37 @@
 
 #include <spdlog/spdlog.h>
 
+#include "absl/strings/escaping.h"
 #include "absl/strings/str_cat.h"
 #include "daemon.h"
 
 namespace transtick {
 namespace {
 
-// Who submitted a job, until clients authenticate: the host part of the
-// peer's address ("ipv4:127.0.0.1:5123" -> "ipv4:127.0.0.1").
+using absl::CEscape;
+
+// Who submitted a job when clients are not authenticated: the host part of
+// the peer's address ("ipv4:127.0.0.1:5123" -> "ipv4:127.0.0.1").
 std::string PeerHost(const std::string& peer) {
   const size_t colon = peer.rfind(':');
   return colon == std::string::npos || colon < peer.find(':') + 1 ? peer : peer.substr(0, colon);
+}
+
+absl::StatusOr<Client> Caller(const grpc::ServerContext& ctx) {
+  return CallingClient(ctx, PeerHost(ctx.peer()));
+}
+
+// The job `id` when `client` may see it: its owner's, or any for an admin.
+// Another client's job is refused as if it did not exist, so that job ids
+// say nothing about other clients' work.
+absl::StatusOr<std::shared_ptr<Job>> JobFor(const JobQueue& queue, const std::string& id,
+                                            const Client& client) {
+  std::shared_ptr<Job> job = queue.Find(id);
+  if (!job || (!client.admin && job->owner() != client.name)) {
+    return absl::NotFoundError(absl::StrCat("no job '", CEscape(id), "' of client '",
+                                            client.name, "'"));
+  }
+  return job;
 }
 
 }  // namespace
@@ -42,23 +62,29 @@ void RootService::Stop() { runner_.Stop(); }
 
 grpc::Status RootService::Submit(grpc::ServerContext* ctx, const v1::Job* job,
                                  v1::SubmitReply* reply) {
+  auto client = Caller(*ctx);
+  if (!client.ok()) return ToGrpc(client.status());
   auto plan = runner_.Plan(*job);
   if (!plan.ok()) return ToGrpc(plan.status());
   int position = 0;
-  auto record = queue_.Submit(*job, *std::move(plan), PeerHost(ctx->peer()), &position);
+  auto record = queue_.Submit(*job, *std::move(plan), client->name, &position);
   if (!record.ok()) return ToGrpc(record.status());
   reply->set_job_id((*record)->id());
   reply->set_frames((*record)->frames_total());
   reply->set_queue_position(position);
-  spdlog::info("{} queued: '{}', {} frames, {} ahead", (*record)->id(), job->name(),
-               (*record)->frames_total(), position);
+  // The name is the client's: escaped, it cannot forge a line of the log.
+  spdlog::info("{} queued: '{}', {} frames, {} ahead, from {}", (*record)->id(),
+               CEscape(job->name()), (*record)->frames_total(), position, client->name);
   return grpc::Status::OK;
 }
 
 grpc::Status RootService::Watch(grpc::ServerContext* ctx, const v1::WatchRequest* req,
                                 grpc::ServerWriter<v1::JobEvent>* writer) {
-  std::shared_ptr<Job> job = queue_.Find(req->job_id());
-  if (!job) return ToGrpc(absl::NotFoundError(absl::StrCat("no job '", req->job_id(), "'")));
+  auto client = Caller(*ctx);
+  if (!client.ok()) return ToGrpc(client.status());
+  auto found = JobFor(queue_, req->job_id(), *client);
+  if (!found.ok()) return ToGrpc(found.status());
+  std::shared_ptr<Job> job = *std::move(found);
   const std::set<int> have(req->have_frames().begin(), req->have_frames().end());
   if (req->resume() && job->Resume(have)) queue_.Requeue(job);
   const bool done = job->Stream([&](const v1::JobEvent& e) { return writer->Write(e); },
@@ -66,35 +92,45 @@ grpc::Status RootService::Watch(grpc::ServerContext* ctx, const v1::WatchRequest
   return done ? grpc::Status::OK : grpc::Status(grpc::StatusCode::CANCELLED, "watcher left");
 }
 
-grpc::Status RootService::Status(grpc::ServerContext*, const v1::StatusRequest*,
+grpc::Status RootService::Status(grpc::ServerContext* ctx, const v1::StatusRequest*,
                                  v1::StatusReply* reply) {
-  for (v1::JobSummary& s : queue_.Summaries()) *reply->add_jobs() = std::move(s);
+  auto client = Caller(*ctx);
+  if (!client.ok()) return ToGrpc(client.status());
+  // A client sees its own jobs; an admin sees every job.
+  for (v1::JobSummary& s : queue_.Summaries()) {
+    if (client->admin || s.owner() == client->name) *reply->add_jobs() = std::move(s);
+  }
   registry_.Describe(reply);
   reply->set_rings(options_.rings);
   return grpc::Status::OK;
 }
 
-grpc::Status RootService::Cancel(grpc::ServerContext*, const v1::JobRef* req,
+grpc::Status RootService::Cancel(grpc::ServerContext* ctx, const v1::JobRef* req,
                                  v1::CancelReply* reply) {
-  std::shared_ptr<Job> job = queue_.Find(req->job_id());
-  if (!job) return ToGrpc(absl::NotFoundError(absl::StrCat("no job '", req->job_id(), "'")));
+  auto client = Caller(*ctx);
+  if (!client.ok()) return ToGrpc(client.status());
+  auto found = JobFor(queue_, req->job_id(), *client);
+  if (!found.ok()) return ToGrpc(found.status());
+  std::shared_ptr<Job> job = *std::move(found);
   if (job->finished()) {
     reply->set_cancelled(false);
     return grpc::Status::OK;
   }
   job->RequestCancel();
   reply->set_cancelled(true);
-  spdlog::info("{}: cancel requested", job->id());
+  spdlog::info("{}: cancel requested by {}", job->id(), client->name);
   return grpc::Status::OK;
 }
 
-grpc::Status RootService::Register(grpc::ServerContext*, const v1::RegisterRequest* req,
+grpc::Status RootService::Register(grpc::ServerContext* ctx, const v1::RegisterRequest* req,
                                    v1::RegisterReply*) {
+  if (grpc::Status s = RequireRole(*ctx, "Register", {Role::kWorker}); !s.ok()) return s;
   return ToGrpc(registry_.Register(*req));
 }
 
-grpc::Status RootService::Unregister(grpc::ServerContext*, const v1::RegisterRequest* req,
+grpc::Status RootService::Unregister(grpc::ServerContext* ctx, const v1::RegisterRequest* req,
                                      v1::RegisterReply*) {
+  if (grpc::Status s = RequireRole(*ctx, "Unregister", {Role::kWorker}); !s.ok()) return s;
   return ToGrpc(registry_.Unregister(req->id()));
 }
 

@@ -230,7 +230,7 @@ class Frame::RightStream : public grpc::ClientBidiReactor<v1::RayBatch, v1::RayB
  public:
   explicit RightStream(std::shared_ptr<Frame> frame)
       : ClientCall(std::move(frame)),
-        stub_(v1::Worker::NewStub(SharedChannel(frame_->spec_.right(), "rays"))) {}
+        stub_(v1::Worker::NewStub(SharedChannel(frame_->spec_.right(), Role::kWorker, "rays"))) {}
 
   // `opened` hears whether the first message went out.
   void Begin(std::shared_ptr<RightStream> self, std::function<void(absl::Status)> opened) {
@@ -291,7 +291,7 @@ class Frame::DisplayStream : public grpc::ClientWriteReactor<v1::DepositBatch>,
  public:
   explicit DisplayStream(std::shared_ptr<Frame> frame)
       : ClientCall(std::move(frame)),
-        stub_(v1::Display::NewStub(SharedChannel(frame_->spec_.display(), "deposits"))) {}
+        stub_(v1::Display::NewStub(SharedChannel(frame_->spec_.display(), Role::kDisplay, "deposits"))) {}
 
   void Begin(std::shared_ptr<DisplayStream> self) {
     Own(std::move(self));
@@ -541,7 +541,7 @@ void Frame::Reject(uint64_t count, const char* side, const std::string& why) {
     v1::FrameAck ack;
   };
   auto call = std::make_shared<Call>();
-  call->stub = v1::Display::NewStub(SharedChannel(spec_.display(), "control"));
+  call->stub = v1::Display::NewStub(SharedChannel(spec_.display(), Role::kDisplay, "control"));
   call->ctx.set_deadline(Deadline(10));
   call->ref.set_frame_id(id());
   call->ref.set_reason(reason);

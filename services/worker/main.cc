@@ -13,17 +13,25 @@ int main(int argc, char** argv) {
   ReturnLargeBlocksToTheSystem();
   InitLogging("worker");
   auto flags = Flags::Parse(argc, argv, 1,
-                            {"listen", "root", "advertise", "threads", "max-frames", "frame-idle-s",
-                             "running-frame-idle-s"},
-                            {"help"});
+                            WithSecurityFlags({"listen", "root", "advertise", "threads",
+                                               "max-frames", "frame-idle-s",
+                                               "running-frame-idle-s"}),
+                            WithSecuritySwitches({"help"}));
   if (!flags.ok() || flags->Has("help")) {
     if (!flags.ok()) std::cerr << "transtick-worker: " << flags.status().message() << "\n";
     std::cerr << "usage: transtick-worker --root HOST:PORT [--listen ADDR] [--advertise ADDR] "
                  "[--threads N] [--max-frames N] [--frame-idle-s S] [--running-frame-idle-s S]\n"
                  "(environment: TRANSTICK_ROOT, TRANSTICK_LISTEN, TRANSTICK_ADVERTISE, "
                  "TRANSTICK_THREADS, TRANSTICK_MAX_FRAMES, TRANSTICK_FRAME_IDLE_S, "
-                 "TRANSTICK_RUNNING_FRAME_IDLE_S)\n";
+                 "TRANSTICK_RUNNING_FRAME_IDLE_S)\n"
+                 "TLS: " << kSecurityUsage << " (or TRANSTICK_TLS_CA, TRANSTICK_TLS_CERT, "
+                 "TRANSTICK_TLS_KEY); without them it serves plaintext on loopback only "
+                 "(docs/security.md)\n";
     return flags.ok() ? 0 : 2;
+  }
+  if (absl::Status s = UseDaemonSecurity(*flags); !s.ok()) {
+    std::cerr << "transtick-worker: " << s.message() << "\n";
+    return 2;
   }
   WorkerNodeOptions o;
   o.listen = Setting(*flags, "listen", "TRANSTICK_LISTEN", "0.0.0.0:7001");

@@ -36,7 +36,7 @@ absl::StatusOr<std::unique_ptr<WorkerNode>> WorkerNode::Start(const WorkerNodeOp
   wo.threads = node->threads_;
   wo.frames = options.frames;
   node->service_ = std::make_unique<WorkerService>(std::move(wo));
-  auto server = Server::Start(options.listen, {node->service_.get()});
+  auto server = Server::Start(options.listen, Role::kWorker, {node->service_.get()});
   if (!server.ok()) return server.status();
   node->server_ = *std::move(server);
   const std::string listen_host = options.listen.substr(0, options.listen.rfind(':'));
@@ -57,7 +57,7 @@ absl::StatusOr<std::unique_ptr<WorkerNode>> WorkerNode::Start(const WorkerNodeOp
 }
 
 void WorkerNode::RegisterLoop() {
-  auto stub = v1::Root::NewStub(MakeChannel(options_.root));
+  auto stub = v1::Root::NewStub(MakeChannel(options_.root, Role::kRoot));
   const std::chrono::milliseconds first_backoff(100), max_backoff(3000);
   std::chrono::milliseconds backoff = first_backoff;
   bool warned = false;
@@ -106,7 +106,7 @@ void WorkerNode::Stop(std::chrono::milliseconds grace) {
   }
   if (registrar_.joinable()) registrar_.join();
   if (registered_) {
-    auto stub = v1::Root::NewStub(MakeChannel(options_.root));
+    auto stub = v1::Root::NewStub(MakeChannel(options_.root, Role::kRoot));
     grpc::ClientContext ctx;
     ctx.set_deadline(Deadline(2));
     v1::RegisterRequest req;
@@ -117,7 +117,7 @@ void WorkerNode::Stop(std::chrono::milliseconds grace) {
     if (!s.ok()) spdlog::warn("unregistering from the root failed: {}", s.error_message());
   }
   service_->CancelAll();
-  server_->Shutdown(grace);
+  if (server_) server_->Shutdown(grace);  // null when Start failed
 }
 
 WorkerNode::~WorkerNode() { Stop(std::chrono::milliseconds(0)); }

@@ -11,6 +11,7 @@
 #include "absl/strings/str_join.h"
 #include "convert.h"
 #include "daemon.h"
+#include "refused.h"
 #include "rpc_status.h"
 #include "transtick/partition.h"
 #include "transtick/ray_codec.h"
@@ -103,6 +104,7 @@ grpc::Status WorkerService::NotHere(uint64_t id, const char* what) const {
 grpc::Status WorkerService::LoadSlab(grpc::ServerContext* ctx,
                                      grpc::ServerReader<v1::SlabChunk>* reader,
                                      v1::LoadReply* reply) {
+  if (grpc::Status s = RequireRole(*ctx, "LoadSlab", {Role::kRoot}); !s.ok()) return s;
   v1::SlabChunk chunk;
   if (!reader->Read(&chunk) || !chunk.has_header()) {
     return Invalid("LoadSlab: the first message must carry the slab header");
@@ -138,7 +140,9 @@ grpc::Status WorkerService::LoadSlab(grpc::ServerContext* ctx,
   return grpc::Status::OK;
 }
 
-grpc::Status WorkerService::Evict(grpc::ServerContext*, const v1::DatasetRef* req, v1::FrameAck*) {
+grpc::Status WorkerService::Evict(grpc::ServerContext* ctx, const v1::DatasetRef* req,
+                                  v1::FrameAck*) {
+  if (grpc::Status s = RequireRole(*ctx, "Evict", {Role::kRoot}); !s.ok()) return s;
   // An empty key used to mean "everything": one stray call wiped every slab
   // while the root believed them loaded, and later frames on them failed.
   if (req->dataset_key().empty()) {
@@ -158,8 +162,10 @@ std::shared_ptr<const Scene> WorkerService::FindDataset(const std::string& key) 
   return it == datasets_.end() ? nullptr : it->second;
 }
 
-grpc::Status WorkerService::FetchPlanes(grpc::ServerContext*, const v1::PlanesRequest* req,
+grpc::Status WorkerService::FetchPlanes(grpc::ServerContext* ctx, const v1::PlanesRequest* req,
                                         grpc::ServerWriter<v1::SlabChunk>* writer) {
+  // A worker re-slabbing fetches planes from another.
+  if (grpc::Status s = RequireRole(*ctx, "FetchPlanes", {Role::kWorker}); !s.ok()) return s;
   std::shared_ptr<const Scene> scene = FindDataset(req->dataset_key());
   if (!scene) {
     return ToGrpc(absl::NotFoundError(
@@ -229,7 +235,7 @@ std::vector<std::pair<int, int>> Missing(int lo, int hi, int held_lo, int held_h
 }
 
 void RunFetch(Fetch& f, const std::array<int, 3>& dims) {
-  auto stub = v1::Worker::NewStub(MakeChannel(f.source->address()));
+  auto stub = v1::Worker::NewStub(MakeChannel(f.source->address(), Role::kWorker));
   grpc::ClientContext ctx;
   ctx.set_deadline(Deadline(120));
   v1::PlanesRequest req;
@@ -267,8 +273,11 @@ void RunFetch(Fetch& f, const std::array<int, 3>& dims) {
 
 }  // namespace
 
-grpc::Status WorkerService::Reslab(grpc::ServerContext*, const v1::ReslabRequest* req,
+grpc::Status WorkerService::Reslab(grpc::ServerContext* ctx, const v1::ReslabRequest* req,
                                    v1::LoadReply* reply) {
+  // Only the root says where a worker fetches planes from: the addresses
+  // of workers it registered.
+  if (grpc::Status s = RequireRole(*ctx, "Reslab", {Role::kRoot}); !s.ok()) return s;
   std::shared_ptr<const Scene> old = FindDataset(req->old_key());
   if (!old) {
     return ToGrpc(absl::FailedPreconditionError(
@@ -338,7 +347,8 @@ grpc::Status WorkerService::Reslab(grpc::ServerContext*, const v1::ReslabRequest
 grpc::ServerUnaryReactor* WorkerService::PrepareFrame(grpc::CallbackServerContext* ctx,
                                                       const v1::FrameSpec* spec, v1::FrameAck*) {
   grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
-  reactor->Finish(Prepare(*spec));
+  grpc::Status s = RequireRole(*ctx, "PrepareFrame", {Role::kRoot});
+  reactor->Finish(s.ok() ? Prepare(*spec) : s);
   return reactor;
 }
 
@@ -404,6 +414,10 @@ std::shared_ptr<Frame> WorkerService::FindFrame(uint64_t id) {
 grpc::ServerUnaryReactor* WorkerService::RunFrame(grpc::CallbackServerContext* ctx,
                                                   const v1::FrameRef* req, v1::FrameAck*) {
   grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
+  if (grpc::Status s = RequireRole(*ctx, "RunFrame", {Role::kRoot}); !s.ok()) {
+    reactor->Finish(s);
+    return reactor;
+  }
   std::shared_ptr<Frame> frame = FindFrame(req->frame_id());
   if (!frame) {
     reactor->Finish(NotHere(req->frame_id(), "was not prepared"));
@@ -418,6 +432,10 @@ grpc::ServerUnaryReactor* WorkerService::EndFrame(grpc::CallbackServerContext* c
                                                   const v1::FrameRef* req,
                                                   v1::WorkerFrameStats* reply) {
   grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
+  if (grpc::Status s = RequireRole(*ctx, "EndFrame", {Role::kRoot}); !s.ok()) {
+    reactor->Finish(s);
+    return reactor;
+  }
   std::shared_ptr<Frame> frame = frames_.Take(req->frame_id());
   if (!frame) {
     reactor->Finish(NotHere(req->frame_id(), "is not running here"));
@@ -442,6 +460,9 @@ grpc::ServerUnaryReactor* WorkerService::EndFrame(grpc::CallbackServerContext* c
 
 grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* WorkerService::Rays(
     grpc::CallbackServerContext* ctx) {
+  if (grpc::Status s = RequireRole(*ctx, "Rays", {Role::kWorker}); !s.ok()) {
+    return new RefusedBidi<v1::RayBatch, v1::RayBatch>(s);
+  }
   return Frame::NewLeftStream(ctx, [this](uint64_t id) { return FindFrame(id); });
 }
 

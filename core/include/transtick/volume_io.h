@@ -10,6 +10,7 @@
 #define TRANSTICK_VOLUME_IO_H_
 
 #include <cstdint>
+#include <functional>
 #include <string>
 
 #include "absl/status/statusor.h"
@@ -20,6 +21,11 @@ namespace transtick {
 struct ReadOptions {
   // Largest in-memory volume accepted (float samples, 4 bytes per voxel).
   uint64_t max_bytes = uint64_t{8} << 30;
+  // Opens each file a reader needs (the volume; a detached data file named
+  // relative to its header) read-only, returning a descriptor the reader
+  // then owns, or an error naming the path. Null opens the path as given.
+  // The root passes one that keeps every open inside its data directory.
+  std::function<absl::StatusOr<int>(const std::string& path)> open;
 };
 
 enum class ByteOrder { kLittle, kBig };

@@ -1,0 +1,336 @@
+#include "security.h"
+
+#include <grpcpp/security/auth_context.h>
+#include <grpcpp/security/auth_metadata_processor.h>
+
+#include <cstdlib>
+#include <fstream>
+#include <mutex>
+#include <sstream>
+#include <utility>
+
+#include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
+#include "absl/strings/strip.h"
+#include "rpc_status.h"
+
+namespace transtick {
+namespace {
+
+// Properties the root's token check adds to a call's auth context.
+constexpr char kClientProperty[] = "transtick-client";
+constexpr char kAdminProperty[] = "transtick-admin";
+
+std::mutex security_mu;
+Security* security = new Security();
+
+bool ValidName(absl::string_view name) {
+  if (name.empty() || name.size() > 64) return false;
+  for (char c : name) {
+    if (!absl::ascii_isalnum(static_cast<unsigned char>(c)) && c != '.' && c != '_' && c != '-')
+      return false;
+  }
+  return true;
+}
+
+bool SameBytes(absl::string_view a, absl::string_view b) {
+  if (a.size() != b.size()) return false;
+  unsigned char diff = 0;
+  for (size_t i = 0; i < a.size(); ++i) diff |= static_cast<unsigned char>(a[i] ^ b[i]);
+  return diff == 0;
+}
+
+absl::StatusOr<std::string> ReadSmallFile(const std::string& path, const std::string& what) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError(absl::StrCat(what, ": cannot read ", path));
+  std::ostringstream text;
+  text << in.rdbuf();
+  std::string s = text.str();
+  if (s.size() > (1 << 20)) {
+    return absl::InvalidArgumentError(absl::StrCat(what, ": ", path, " is larger than 1 MB"));
+  }
+  return s;
+}
+
+std::string Env(const char* name) {
+  const char* v = std::getenv(name);
+  return v ? v : "";
+}
+
+std::string FlagOrEnv(const Flags& flags, const std::string& flag, const char* env) {
+  return flags.Has(flag) ? flags.Get(flag) : Env(env);
+}
+
+// The role a peer's verified certificate names, if any.
+std::optional<Role> RoleOf(const grpc::AuthContext& ctx) {
+  if (!ctx.IsPeerAuthenticated()) return std::nullopt;
+  for (const auto& cn : ctx.FindPropertyValues("x509_common_name")) {
+    const absl::string_view name(cn.data(), cn.size());
+    for (Role r : {Role::kRoot, Role::kWorker, Role::kDisplay}) {
+      if (name == RoleName(r)) return r;
+    }
+  }
+  return std::nullopt;
+}
+
+// The root's check of every call: a known bearer token names the client;
+// a call without one must come from a daemon of the cluster (its
+// certificate is checked again by the method). Runs on gRPC's transport
+// thread: a map lookup, nothing that blocks.
+class TokenCheck : public grpc::AuthMetadataProcessor {
+ public:
+  explicit TokenCheck(std::shared_ptr<const TokenTable> tokens) : tokens_(std::move(tokens)) {}
+  bool IsBlocking() const override { return false; }
+
+  grpc::Status Process(const InputMetadata& metadata, grpc::AuthContext* context,
+                       OutputMetadata* consumed, OutputMetadata*) override {
+    auto it = metadata.find("authorization");
+    if (it == metadata.end()) {
+      if (RoleOf(*context)) return grpc::Status::OK;
+      return grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
+                          "the root needs a bearer token: give the transtick command "
+                          "--token-file FILE (docs/security.md)");
+    }
+    absl::string_view value(it->second.data(), it->second.size());
+    if (!absl::ConsumePrefix(&value, "Bearer ")) {
+      return grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
+                          "the authorization header is not a bearer token");
+    }
+    std::optional<Client> client = tokens_->Find(value);
+    if (!client) {
+      return grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
+                          "the bearer token is not one this root knows");
+    }
+    context->AddProperty(kClientProperty, client->name);
+    if (client->admin) context->AddProperty(kAdminProperty, "1");
+    consumed->insert({std::string(it->first.data(), it->first.size()),
+                      std::string(it->second.data(), it->second.size())});
+    return grpc::Status::OK;
+  }
+
+ private:
+  const std::shared_ptr<const TokenTable> tokens_;
+};
+
+}  // namespace
+
+absl::string_view RoleName(Role role) {
+  switch (role) {
+    case Role::kRoot:
+      return "transtick-root";
+    case Role::kWorker:
+      return "transtick-worker";
+    case Role::kDisplay:
+      return "transtick-display";
+  }
+  return "";
+}
+
+absl::StatusOr<TokenTable> TokenTable::Parse(absl::string_view text, const std::string& source) {
+  TokenTable table;
+  std::set<std::string> names;
+  int line_no = 0;
+  for (absl::string_view line : absl::StrSplit(text, '\n')) {
+    ++line_no;
+    if (size_t hash = line.find('#'); hash != absl::string_view::npos) line = line.substr(0, hash);
+    std::vector<absl::string_view> fields =
+        absl::StrSplit(line, absl::ByAnyChar(" \t\r"), absl::SkipEmpty());
+    if (fields.empty()) continue;
+    const std::string where = absl::StrCat(source, ":", line_no);
+    if (fields.size() < 2 || fields.size() > 3 || (fields.size() == 3 && fields[2] != "admin")) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, ": expected NAME TOKEN [admin]"));
+    }
+    if (!ValidName(fields[0])) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          where, ": a client name is 1-64 letters, digits, '.', '_' or '-'"));
+    }
+    if (fields[1].size() < 16) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, ": the token of '", fields[0], "' is shorter than 16 characters"));
+    }
+    if (!names.insert(std::string(fields[0])).second) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, ": client '", fields[0], "' is listed twice"));
+    }
+    Client c{std::string(fields[0]), fields.size() == 3};
+    if (!table.clients_.emplace(std::string(fields[1]), std::move(c)).second) {
+      return absl::InvalidArgumentError(absl::StrCat(where, ": a token is listed twice"));
+    }
+  }
+  if (table.clients_.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat(source, ": no clients listed"));
+  }
+  return table;
+}
+
+absl::StatusOr<TokenTable> TokenTable::Load(const std::string& path) {
+  auto text = ReadSmallFile(path, "--tokens");
+  if (!text.ok()) return text.status();
+  return Parse(*text, path);
+}
+
+std::optional<Client> TokenTable::Find(absl::string_view token) const {
+  // Every entry is compared, each in constant time: how long this takes
+  // says nothing about which token is closest.
+  std::optional<Client> found;
+  for (const auto& [t, c] : clients_) {
+    if (SameBytes(t, token)) found = c;
+  }
+  return found;
+}
+
+std::set<std::string> WithSecurityFlags(std::set<std::string> known) {
+  known.insert({"tls-ca", "tls-cert", "tls-key", "tokens", "token-file"});
+  return known;
+}
+
+std::set<std::string> WithSecuritySwitches(std::set<std::string> switches) {
+  switches.insert("insecure");
+  return switches;
+}
+
+absl::StatusOr<Security> SecurityFromFlags(const Flags& flags, bool daemon) {
+  Security s;
+  s.insecure = flags.Has("insecure") || !Env("TRANSTICK_INSECURE").empty();
+  const std::string ca = FlagOrEnv(flags, "tls-ca", "TRANSTICK_TLS_CA");
+  const std::string cert = FlagOrEnv(flags, "tls-cert", "TRANSTICK_TLS_CERT");
+  const std::string key = FlagOrEnv(flags, "tls-key", "TRANSTICK_TLS_KEY");
+  const std::string tokens = FlagOrEnv(flags, "tokens", "TRANSTICK_TOKENS");
+  const std::string token_file = FlagOrEnv(flags, "token-file", "TRANSTICK_TOKEN_FILE");
+  if (ca.empty() && (!cert.empty() || !key.empty() || !tokens.empty() || !token_file.empty())) {
+    return absl::InvalidArgumentError(
+        "--tls-cert, --tls-key, --tokens and --token-file need --tls-ca: tokens and "
+        "certificates are only sent over TLS");
+  }
+  if (cert.empty() != key.empty()) {
+    return absl::InvalidArgumentError("--tls-cert and --tls-key go together");
+  }
+  if (daemon && !ca.empty() && cert.empty()) {
+    return absl::InvalidArgumentError(
+        "a daemon with --tls-ca needs its certificate and key too (--tls-cert, --tls-key)");
+  }
+  for (auto [path, field, flag] : {std::tuple{&ca, &s.ca, "--tls-ca"},
+                                   std::tuple{&cert, &s.cert, "--tls-cert"},
+                                   std::tuple{&key, &s.key, "--tls-key"}}) {
+    if (path->empty()) continue;
+    auto text = ReadSmallFile(*path, flag);
+    if (!text.ok()) return text.status();
+    if (!absl::StrContains(*text, "-----BEGIN ")) {
+      return absl::InvalidArgumentError(absl::StrCat(flag, ": ", *path, " is not PEM"));
+    }
+    *field = *std::move(text);
+  }
+  if (!tokens.empty()) {
+    auto table = TokenTable::Load(tokens);
+    if (!table.ok()) return table.status();
+    s.tokens = std::make_shared<const TokenTable>(*std::move(table));
+  }
+  if (!token_file.empty()) {
+    auto text = ReadSmallFile(token_file, "--token-file");
+    if (!text.ok()) return text.status();
+    s.token = std::string(absl::StripAsciiWhitespace(*text));
+    if (s.token.size() < 16 || s.token.find_first_of(" \t\r\n") != std::string::npos) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("--token-file: ", token_file, " must hold one token of 16 or more "
+                       "characters"));
+    }
+  }
+  return s;
+}
+
+void SetSecurity(Security s) {
+  std::lock_guard<std::mutex> lock(security_mu);
+  *security = std::move(s);
+}
+
+const Security& CurrentSecurity() {
+  std::lock_guard<std::mutex> lock(security_mu);
+  return *security;
+}
+
+std::shared_ptr<grpc::ChannelCredentials> ChannelCredentialsFor(Role role,
+                                                                grpc::ChannelArguments* args) {
+  const Security& s = CurrentSecurity();
+  if (!s.tls()) return grpc::InsecureChannelCredentials();
+  grpc::SslCredentialsOptions o;
+  o.pem_root_certs = s.ca;
+  o.pem_private_key = s.key;
+  o.pem_cert_chain = s.cert;
+  // The peer's certificate must name the role dialled, whatever its address.
+  args->SetSslTargetNameOverride(std::string(RoleName(role)));
+  auto creds = grpc::SslCredentials(o);
+  if (role == Role::kRoot && !s.token.empty()) {
+    creds = grpc::CompositeChannelCredentials(creds, grpc::AccessTokenCredentials(s.token));
+  }
+  return creds;
+}
+
+absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> ServerCredentialsFor(
+    Role self, const std::string& address) {
+  const Security& s = CurrentSecurity();
+  if (!s.tls()) {
+    if (!s.insecure && !IsLoopback(address)) {
+      return absl::FailedPreconditionError(absl::StrCat(
+          "refusing to serve plaintext on ", address,
+          ": give --tls-ca, --tls-cert and --tls-key (docs/security.md), listen on a loopback "
+          "address, or pass --insecure"));
+    }
+    return grpc::InsecureServerCredentials();
+  }
+  if (self == Role::kRoot && !s.tokens) {
+    return absl::FailedPreconditionError(
+        "the root serves TLS but has no --tokens FILE: its clients could not be told apart");
+  }
+  grpc::SslServerCredentialsOptions o(
+      self == Role::kRoot ? GRPC_SSL_REQUEST_CLIENT_CERTIFICATE_AND_VERIFY
+                          : GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY);
+  o.pem_root_certs = s.ca;
+  o.pem_key_cert_pairs.push_back({s.key, s.cert});
+  auto creds = grpc::SslServerCredentials(o);
+  if (self == Role::kRoot) creds->SetAuthMetadataProcessor(std::make_shared<TokenCheck>(s.tokens));
+  return creds;
+}
+
+grpc::Status RequireRole(const grpc::ServerContextBase& ctx, absl::string_view method,
+                         std::initializer_list<Role> roles) {
+  if (!CurrentSecurity().tls()) return grpc::Status::OK;
+  std::optional<Role> role;
+  if (auto auth = ctx.auth_context()) role = RoleOf(*auth);
+  for (Role r : roles) {
+    if (role == r) return grpc::Status::OK;
+  }
+  std::string allowed;
+  for (Role r : roles) absl::StrAppend(&allowed, allowed.empty() ? "" : " or ", RoleName(r));
+  return grpc::Status(
+      grpc::StatusCode::PERMISSION_DENIED,
+      absl::StrCat(method, " is for ", allowed, "; the caller's certificate is ",
+                   role ? absl::StrCat("of ", RoleName(*role)) : std::string("not the cluster's")));
+}
+
+absl::StatusOr<Client> CallingClient(const grpc::ServerContextBase& ctx,
+                                     const std::string& fallback) {
+  if (!CurrentSecurity().tokens) return Client{fallback, /*admin=*/true};
+  auto auth = ctx.auth_context();
+  if (auth) {
+    auto names = auth->FindPropertyValues(kClientProperty);
+    if (!names.empty()) {
+      return Client{std::string(names.front().data(), names.front().size()),
+                    !auth->FindPropertyValues(kAdminProperty).empty()};
+    }
+  }
+  return absl::UnauthenticatedError("this call needs a client's bearer token (--token-file)");
+}
+
+bool IsLoopback(const std::string& address) {
+  absl::string_view host = address;
+  if (const size_t colon = host.rfind(':'); colon != absl::string_view::npos) {
+    host = host.substr(0, colon);
+  }
+  if (absl::ConsumePrefix(&host, "[")) absl::ConsumeSuffix(&host, "]");
+  return host == "localhost" || host == "::1" || absl::StartsWith(host, "127.");
+}
+
+}  // namespace transtick

@@ -1,0 +1,75 @@
+#include "confined_dir.h"
+
+#include <fcntl.h>
+#include <linux/openat2.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <climits>
+#include <cstring>
+
+#include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
+
+namespace transtick {
+namespace {
+
+absl::Status OpenError(const std::string& relative, int error) {
+  switch (error) {
+    case ENOENT:
+    case ENOTDIR:
+      return absl::NotFoundError(
+          absl::StrCat("'", relative, "' is not in the data directory"));
+    case EXDEV:  // RESOLVE_BENEATH: the path leaves the directory
+    case ELOOP:  // a link where none may be
+      return absl::PermissionDeniedError(
+          absl::StrCat("'", relative, "' leads outside the data directory"));
+    default:
+      return absl::PermissionDeniedError(
+          absl::StrCat("'", relative, "': cannot open (", std::strerror(error), ")"));
+  }
+}
+
+}  // namespace
+
+absl::StatusOr<std::shared_ptr<const ConfinedDir>> ConfinedDir::Open(const std::string& dir) {
+  const int fd = ::open(dir.c_str(), O_PATH | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) {
+    return absl::NotFoundError(absl::StrCat("data directory ", dir, ": ", std::strerror(errno)));
+  }
+  char real[PATH_MAX];
+  const std::string self = absl::StrCat("/proc/self/fd/", fd);
+  const ssize_t n = ::readlink(self.c_str(), real, sizeof(real) - 1);
+  std::string resolved = n > 0 ? std::string(real, n) : dir;
+  return std::shared_ptr<const ConfinedDir>(new ConfinedDir(fd, std::move(resolved)));
+}
+
+ConfinedDir::~ConfinedDir() { ::close(fd_); }
+
+absl::StatusOr<int> ConfinedDir::OpenFile(const std::string& relative) const {
+  if (relative.empty() || relative.front() == '/') {
+    return absl::PermissionDeniedError(
+        absl::StrCat("'", relative, "' must be a path relative to the data directory"));
+  }
+  open_how how{};
+  how.flags = O_RDONLY | O_CLOEXEC | O_NOCTTY;
+  how.resolve = RESOLVE_BENEATH | RESOLVE_NO_MAGICLINKS;
+  int fd = static_cast<int>(::syscall(SYS_openat2, fd_, relative.c_str(), &how, sizeof(how)));
+  if (fd >= 0) return fd;
+  const int error = errno;
+  // Kernels before 5.6, or a seccomp filter that refuses openat2.
+  if (error != ENOSYS && error != EPERM) return OpenError(relative, error);
+  fd = ::openat(fd_, relative.c_str(), O_RDONLY | O_CLOEXEC | O_NOCTTY | O_NOFOLLOW);
+  if (fd < 0) return OpenError(relative, errno);
+  char real[PATH_MAX];
+  const std::string self = absl::StrCat("/proc/self/fd/", fd);
+  const ssize_t n = ::readlink(self.c_str(), real, sizeof(real) - 1);
+  if (n <= 0 || !absl::StartsWith(std::string(real, n), real_ + "/")) {
+    ::close(fd);
+    return OpenError(relative, EXDEV);
+  }
+  return fd;
+}
+
+}  // namespace transtick
