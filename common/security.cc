@@ -19,9 +19,23 @@
 namespace transtick {
 namespace {
 
-// Properties the root's token check adds to a call's auth context.
-constexpr char kClientProperty[] = "transtick-client";
-constexpr char kAdminProperty[] = "transtick-admin";
+// The client a call's "authorization: Bearer TOKEN" names; OK with no
+// client when the call has no such header. One header at most.
+absl::StatusOr<std::optional<Client>> BearerClient(
+    const std::multimap<grpc::string_ref, grpc::string_ref>& metadata, const TokenTable& tokens) {
+  auto [first, last] = metadata.equal_range("authorization");
+  if (first == last) return std::optional<Client>();
+  if (std::next(first) != last) {
+    return absl::UnauthenticatedError("a call may carry one authorization header");
+  }
+  absl::string_view value(first->second.data(), first->second.size());
+  if (!absl::ConsumePrefix(&value, "Bearer ")) {
+    return absl::UnauthenticatedError("the authorization header is not a bearer token");
+  }
+  std::optional<Client> client = tokens.Find(value);
+  if (!client) return absl::UnauthenticatedError("the bearer token is not one this root knows");
+  return client;
+}
 
 std::mutex security_mu;
 Security* security = new Security();
@@ -84,30 +98,17 @@ class TokenCheck : public grpc::AuthMetadataProcessor {
   explicit TokenCheck(std::shared_ptr<const TokenTable> tokens) : tokens_(std::move(tokens)) {}
   bool IsBlocking() const override { return false; }
 
+  // The header stays on the call: the method finds the client from it
+  // again (CallingClient). Properties added to `context` here would not do:
+  // they outlive the call on the connection's context.
   grpc::Status Process(const InputMetadata& metadata, grpc::AuthContext* context,
-                       OutputMetadata* consumed, OutputMetadata*) override {
-    auto it = metadata.find("authorization");
-    if (it == metadata.end()) {
-      if (RoleOf(*context)) return grpc::Status::OK;
-      return grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
-                          "the root needs a bearer token: give the transtick command "
-                          "--token-file FILE (docs/security.md)");
-    }
-    absl::string_view value(it->second.data(), it->second.size());
-    if (!absl::ConsumePrefix(&value, "Bearer ")) {
-      return grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
-                          "the authorization header is not a bearer token");
-    }
-    std::optional<Client> client = tokens_->Find(value);
-    if (!client) {
-      return grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
-                          "the bearer token is not one this root knows");
-    }
-    context->AddProperty(kClientProperty, client->name);
-    if (client->admin) context->AddProperty(kAdminProperty, "1");
-    consumed->insert({std::string(it->first.data(), it->first.size()),
-                      std::string(it->second.data(), it->second.size())});
-    return grpc::Status::OK;
+                       OutputMetadata*, OutputMetadata*) override {
+    auto client = BearerClient(metadata, *tokens_);
+    if (!client.ok()) return ToGrpc(client.status());
+    if (*client || RoleOf(*context)) return grpc::Status::OK;
+    return grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
+                        "the root needs a bearer token: give the transtick command "
+                        "--token-file FILE (docs/security.md)");
   }
 
  private:
@@ -312,16 +313,14 @@ grpc::Status RequireRole(const grpc::ServerContextBase& ctx, absl::string_view m
 
 absl::StatusOr<Client> CallingClient(const grpc::ServerContextBase& ctx,
                                      const std::string& fallback) {
-  if (!CurrentSecurity().tokens) return Client{fallback, /*admin=*/true};
-  auto auth = ctx.auth_context();
-  if (auth) {
-    auto names = auth->FindPropertyValues(kClientProperty);
-    if (!names.empty()) {
-      return Client{std::string(names.front().data(), names.front().size()),
-                    !auth->FindPropertyValues(kAdminProperty).empty()};
-    }
+  const std::shared_ptr<const TokenTable> tokens = CurrentSecurity().tokens;
+  if (!tokens) return Client{fallback, /*admin=*/true};
+  auto client = BearerClient(ctx.client_metadata(), *tokens);
+  if (!client.ok()) return client.status();
+  if (!*client) {
+    return absl::UnauthenticatedError("this call needs a client's bearer token (--token-file)");
   }
-  return absl::UnauthenticatedError("this call needs a client's bearer token (--token-file)");
+  return **client;
 }
 
 bool IsLoopback(const std::string& address) {
