@@ -11,7 +11,8 @@
 #   admin.token client.token  each client's token alone (--token-file)
 #
 # Usage: deploy/make-certs.sh DIR [--uid UID] [--days N] [--force]
-#   --uid UID   owner of the keys and tokens (the image runs as 10001)
+#   --uid UID   owner of the daemons' keys and of tokens (the image runs as
+#               10001); admin.token and client.token stay the caller's
 #   --days N    validity of the role certificates (default 825)
 #   --force     replace what DIR holds; without it, existing files are kept
 #               and only missing ones are made (a new role certificate is
@@ -67,5 +68,6 @@ fi
 
 chmod 644 ca.crt root.crt worker.crt display.crt
 chmod 600 ca.key root.key worker.key display.key tokens admin.token client.token
-if [[ -n $uid ]]; then chown "$uid" root.key worker.key display.key tokens admin.token client.token; fi
+# The daemons' files go to the image's user; the client tokens stay the caller's.
+if [[ -n $uid ]]; then chown "$uid" root.key worker.key display.key tokens; fi
 echo "make-certs: $(pwd): CA, root/worker/display certificates and tokens ready" >&2

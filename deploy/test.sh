@@ -97,6 +97,11 @@ fi
 work=$(mktemp -d /tmp/transtick-deploy.XXXXXX)
 chmod 755 "$work"
 mkdir -p "$work/ref" "$work/cluster4" "$work/cluster2"
+# TLS on every port: the cluster's CA, certificates and tokens, the
+# daemons' files owned by the image's user (docs/security.md).
+"$TT_REPO/deploy/make-certs.sh" "$work/secrets" --uid 10001 2>/dev/null
+export TRANSTICK_SECRETS=$work/secrets
+client_tls=(--tls-ca "$work/secrets/ca.crt" --token-file "$work/secrets/client.token")
 
 cleanup() {
   local rc=$?
@@ -139,7 +144,7 @@ tt_log "reference renders in $((SECONDS - step)) s"
 # the root does not answer.
 root_addr=""
 status_counts() {
-  "$client" status --root "$root_addr" 2>/dev/null |
+  "$client" status --root "$root_addr" "${client_tls[@]}" 2>/dev/null |
     sed -n -E '1s/^([0-9]+) workers?, ([0-9]+) rings?.*/\1 \2/p' | grep . || echo "-1 -1"
 }
 workers_registered() { status_counts | cut -d' ' -f1; }
@@ -163,7 +168,7 @@ healthy_workers() {
 # The client's progress lines go to a file; its last words are shown on failure.
 submit() {
   local rc=0
-  timeout "${TRANSTICK_TEST_TIMEOUT:-300}" "$client" submit "$work/job.json" --root "$root_addr" \
+  timeout "${TRANSTICK_TEST_TIMEOUT:-300}" "$client" submit "$work/job.json" --root "$root_addr" "${client_tls[@]}" \
     --out-dir "$work/$1" >"$work/$1.log" 2>&1 || rc=$?
   ((rc == 0)) || tt_log "submit exited with $rc: $(tail -c 400 "$work/$1.log" | tr '\r' '\n' | tail -3)"
   return $rc
@@ -193,6 +198,16 @@ root_addr=$(compose port root 7000 | tail -1)
 root_id=$(compose ps -q root)
 root_started=$("$TT_DOCKER" inspect -f '{{.State.StartedAt}}' "$root_id")
 if wait_workers 4; then pass "4 workers registered with the root"; else fail "4 workers registered"; fi
+if "$client" status --root "$root_addr" --tls-ca "$work/secrets/ca.crt" >/dev/null 2>&1; then
+  fail "the root answered a client without a token"
+else
+  pass "the root refuses a client without a token"
+fi
+if "$client" status --root "$root_addr" >/dev/null 2>&1; then
+  fail "the root answered plaintext"
+else
+  pass "the root refuses plaintext"
+fi
 rings=$(status_counts | cut -d' ' -f2)
 if [[ $rings == 2 ]]; then pass "root forms 2 rings"; else fail "root forms $rings rings, not 2"; fi
 deadline=$((SECONDS + 60))
@@ -239,11 +254,11 @@ step=$SECONDS
   done
   printf ']}]}\n'
 } >"$work/restart.json"
-timeout "${TRANSTICK_TEST_TIMEOUT:-300}" "$client" submit "$work/restart.json" --root "$root_addr" \
+timeout "${TRANSTICK_TEST_TIMEOUT:-300}" "$client" submit "$work/restart.json" --root "$root_addr" "${client_tls[@]}" \
   --out-dir "$work/restart" >"$work/restart.log" 2>&1 &
 spid=$!
 deadline=$((SECONDS + 60))
-until "$client" status --root "$root_addr" 2>/dev/null | grep -qE 'RUNNING +[1-9]'; do
+until "$client" status --root "$root_addr" "${client_tls[@]}" 2>/dev/null | grep -qE 'RUNNING +[1-9]'; do
   ((SECONDS < deadline)) || break
   sleep 0.2
 done
@@ -260,10 +275,10 @@ if compose logs --no-color root 2>/dev/null | grep -q "recovered: [0-9]* of 24 f
 else
   fail "the restarted root did not recover the job from its state volume"
 fi
-if (($("$client" status --root "$root_addr" 2>/dev/null | grep -c ' DONE ') >= 3)); then
+if (($("$client" status --root "$root_addr" "${client_tls[@]}" 2>/dev/null | grep -c ' DONE ') >= 3)); then
   pass "the jobs before the restart are still in the root's history"
 else
-  fail "the root's history after a restart: $("$client" status --root "$root_addr" 2>&1 | tail -4)"
+  fail "the root's history after a restart: $("$client" status --root "$root_addr" "${client_tls[@]}" 2>&1 | tail -4)"
 fi
 
 # ---------------------------------------------------------------- teardown

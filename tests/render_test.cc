@@ -2,7 +2,9 @@
 // transmittance of semi-transparent slabs, the shadow a sphere casts.
 #include "transtick/render.h"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <vector>
 
@@ -384,6 +386,68 @@ TEST(FramebufferTest, HostileDepositsNeitherCountTwiceNorOverflow) {
     backward.Add(huge[huge.size() - 1 - i]);
   }
   EXPECT_EQ(forward.Resolve().rgb, backward.Resolve().rgb);
+}
+
+}  // namespace
+}  // namespace transtick
+
+namespace transtick {
+namespace {
+
+// NaN and infinite samples are mapped, not refused (docs/security.md): in
+// any mix with finite ones, at random places, every pixel of every view in
+// both modes is finite, NaN voxels are empty in surfaces mode, and a volume
+// of nothing else renders as background.
+TEST(RenderTest, NonFiniteSamplesGiveFiniteImages) {
+  const std::array<int, 3> dims = {20, 18, 22};
+  const float kInf = std::numeric_limits<float>::infinity();
+  const float kNaN = std::numeric_limits<float>::quiet_NaN();
+  const std::vector<float> odd = {kNaN, kInf, -kInf, std::numeric_limits<float>::max(),
+                                  -std::numeric_limits<float>::max()};
+  uint64_t state = 12345;
+  auto next = [&] {
+    state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+    return static_cast<uint32_t>(state >> 33);
+  };
+  Classification c;
+  c.materials = {Opaque("a", 50, 150), Filter("b", 150, 250, 0.5f)};
+  TransferFunction tf;
+  tf.points = {{0, {0, 0, 0, 0}}, {100, {1, 0.5f, 0.2f, 0.3f}}, {250, {1, 1, 1, 0.8f}}};
+  RenderSettings settings;
+  settings.background = {0.25f, 0.5f, 0.75f};
+  for (int trial = 0; trial < 24; ++trial) {
+    Volume v;
+    v.dims = dims;
+    v.values.resize(v.VoxelCount());
+    const int odd_percent = trial % 4 == 3 ? 100 : 5 + 30 * (trial % 3);
+    for (float& x : v.values) {
+      x = static_cast<int>(next() % 100) < odd_percent ? odd[next() % odd.size()]
+                                                       : static_cast<float>(next() % 300);
+    }
+    const bool only_nan = trial % 8 == 7;
+    if (only_nan) std::fill(v.values.begin(), v.values.end(), kNaN);
+    const Camera cam = MakeCamera(dims, 24, 15.0 * trial, 10.0 * (trial % 5) - 20);
+    for (bool dvr : {false, true}) {
+      auto scene = dvr ? Scene::ForDvr(v, tf) : Scene::ForSurfaces(v, c);
+      ASSERT_TRUE(scene.ok()) << scene.status();
+      const Image img = RenderWhole(*scene, cam, settings);
+      for (size_t i = 0; i < img.rgb.size(); ++i) {
+        ASSERT_TRUE(std::isfinite(img.rgb[i])) << "trial " << trial << (dvr ? " dvr" : " surfaces")
+                                               << " value " << i;
+      }
+      if (only_nan) {
+        for (size_t i = 0; i < img.rgb.size(); ++i) {
+          ASSERT_EQ(img.rgb[i], settings.background[i % 3]) << "trial " << trial << " value " << i;
+        }
+      }
+      // Mostly finite: the finite voxels still show.
+      if (odd_percent == 5) {
+        size_t shown = 0;
+        for (size_t i = 0; i < img.rgb.size(); ++i) shown += img.rgb[i] != settings.background[i % 3];
+        EXPECT_GT(shown, img.rgb.size() / 10) << "trial " << trial << (dvr ? " dvr" : " surfaces");
+      }
+    }
+  }
 }
 
 }  // namespace
