@@ -542,8 +542,8 @@ int StatusCommand(int argc, char** argv) {
     // they cannot move the cursor or forge a line.
     std::printf("%-10s %-10s %3d/%-3d %-8s %s%s%s\n", j.job_id().c_str(),
                 v1::JobState_Name(j.state()).c_str(), j.frames_done(), j.frames_total(),
-                j.owner().c_str(), absl::CEscape(j.name()).c_str(),
-                j.error().empty() ? "" : "  error: ", absl::CEscape(j.error()).c_str());
+                j.owner().c_str(), Printable(j.name()).c_str(),
+                j.error().empty() ? "" : "  error: ", Printable(j.error()).c_str());
   }
   return 0;
 }

@@ -111,6 +111,12 @@ grpc::Status RequireRole(const grpc::ServerContextBase& ctx, absl::string_view m
 absl::StatusOr<Client> CallingClient(const grpc::ServerContextBase& ctx,
                                      const std::string& fallback);
 
+// `text` (a client's string: a job name, a path, an error quoting them) as a
+// log line or a terminal may show it: control characters and DEL become
+// \n, \r, \t or \xNN, and a backslash \\; everything else, UTF-8 included,
+// stays as it is. No client string can then forge a line or move a cursor.
+std::string Printable(absl::string_view text);
+
 // Whether `address`'s host is a loopback address (127.0.0.0/8, ::1,
 // localhost).
 bool IsLoopback(const std::string& address);

@@ -14,6 +14,7 @@
 #include "balancer.h"
 #include "clock.h"
 #include "confined_dir.h"
+#include "security.h"
 #include "convert.h"
 #include "transtick/image_io.h"
 #include "transtick/partition.h"
@@ -24,7 +25,7 @@ namespace {
 
 // The client's path as a log or an error may show it: escaped, so that no
 // character of it can forge a line.
-std::string Shown(const std::string& path) { return absl::CEscape(path); }
+std::string Shown(const std::string& path) { return Printable(path); }
 
 // OK when `relative` opens (confined) as a regular file.
 absl::Status CheckVolume(const ConfinedDir& dir, const std::string& relative) {

@@ -10,6 +10,7 @@
 #include "absl/strings/str_cat.h"
 #include "clock.h"
 #include "convert.h"
+#include "security.h"
 #include "transtick/tracer.h"
 
 namespace transtick {
@@ -62,7 +63,7 @@ void JobRunner::Loop() {
     if (status.ok()) {
       spdlog::info("{} done", job->id());
     } else {
-      spdlog::warn("{} ended: {}", job->id(), std::string(status.message()));
+      spdlog::warn("{} ended: {}", job->id(), Printable(status.message()));
     }
   }
 }
@@ -178,7 +179,7 @@ absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data) {
     if (!result.ok()) {
       status = result.status();
       if (status.code() != absl::StatusCode::kUnavailable || job.cancelled()) return status;
-      spdlog::warn("{}: frame failed ({}); retrying", job.id(), std::string(status.message()));
+      spdlog::warn("{}: frame failed ({}); retrying", job.id(), Printable(status.message()));
       continue;
     }
     balancer->Learn(*result, layout, data.balance, &report);

@@ -9,7 +9,6 @@
 namespace transtick {
 namespace {
 
-using absl::CEscape;
 
 // Who submitted a job when clients are not authenticated: the host part of
 // the peer's address ("ipv4:127.0.0.1:5123" -> "ipv4:127.0.0.1").
@@ -29,7 +28,7 @@ absl::StatusOr<std::shared_ptr<Job>> JobFor(const JobQueue& queue, const std::st
                                             const Client& client) {
   std::shared_ptr<Job> job = queue.Find(id);
   if (!job || (!client.admin && job->owner() != client.name)) {
-    return absl::NotFoundError(absl::StrCat("no job '", CEscape(id), "' of client '",
+    return absl::NotFoundError(absl::StrCat("no job '", Printable(id), "' of client '",
                                             client.name, "'"));
   }
   return job;
@@ -74,7 +73,7 @@ grpc::Status RootService::Submit(grpc::ServerContext* ctx, const v1::Job* job,
   reply->set_queue_position(position);
   // The name is the client's: escaped, it cannot forge a line of the log.
   spdlog::info("{} queued: '{}', {} frames, {} ahead, from {}", (*record)->id(),
-               CEscape(job->name()), (*record)->frames_total(), position, client->name);
+               Printable(job->name()), (*record)->frames_total(), position, client->name);
   return grpc::Status::OK;
 }
 
