@@ -61,6 +61,7 @@ void WorkerNode::RegisterLoop() {
   const std::chrono::milliseconds first_backoff(100), max_backoff(3000);
   std::chrono::milliseconds backoff = first_backoff;
   bool warned = false;
+  std::string last_error;  // said once until it changes
   while (true) {
     {
       absl::MutexLock lock(&mu_);
@@ -82,13 +83,17 @@ void WorkerNode::RegisterLoop() {
         spdlog::info("registered with the root at {}", options_.root);
       }
       warned = false;
+      last_error.clear();
       backoff = first_backoff;
     } else {
       registered_ = false;
-      if (!warned) {
+      // A root not up yet, then one that refuses this worker's certificate:
+      // each reason is logged when it first appears.
+      if (!warned || s.error_message() != last_error) {
         spdlog::warn("registration with {} failed ({}); retrying", options_.root,
                      s.error_message());
         warned = true;
+        last_error = s.error_message();
       }
       wait = backoff;
       backoff = std::min(backoff * 2, max_backoff);
