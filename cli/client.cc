@@ -140,6 +140,10 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::str
     }
     std::this_thread::sleep_for(backoff);
     backoff = std::min(backoff * 2, std::chrono::milliseconds(2000));
+    // A fresh channel: over TLS, the channel whose stream broke when the root
+    // was killed never connected again (each TCP connect hung until the
+    // attempt's deadline, gRPC 1.51), while a new one connects at once.
+    stub = v1::Root::NewStub(MakeChannel(root, Role::kRoot));
   }
   if (state == v1::FAILED)
     return absl::AbortedError(absl::StrCat(submitted.job_id(), " failed: ", error));

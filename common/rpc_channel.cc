@@ -65,7 +65,11 @@ std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address, Role role
   // to 120 s: a worker's heartbeat then finds a restarted root within a
   // second or two, and a frame's retry finds a display that is back.
   args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 250);
-  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 250);
+  // gRPC takes this as the least time a connection attempt (TCP and the TLS
+  // handshake) is given, not as a backoff. 250 ms left a TLS handshake over
+  // a slow link or with a loaded peer no margin; a peer that is down still
+  // refuses at once, and the attempts stay 250 ms to 1 s apart.
+  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 5000);
   args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 1000);
   for (const auto& [name, value] : KeepaliveArguments(/*server=*/false)) args.SetInt(name, value);
   auto creds = ChannelCredentialsFor(role, &args);

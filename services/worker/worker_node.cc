@@ -97,6 +97,10 @@ void WorkerNode::RegisterLoop() {
       }
       wait = backoff;
       backoff = std::min(backoff * 2, max_backoff);
+      // A fresh channel for the next try, as the client does when it lost
+      // the root (cli/client.cc): a TLS channel whose peer died mid-call may
+      // not connect again.
+      stub = v1::Root::NewStub(MakeChannel(options_.root, Role::kRoot));
     }
     absl::MutexLock lock(&mu_);  // until the next heartbeat, or Stop
     mu_.AwaitWithTimeout(absl::Condition(&stopping_), absl::FromChrono(wait));
