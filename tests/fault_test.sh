@@ -4,7 +4,8 @@
 # kills (SIGKILL, then starts again) or pauses (SIGSTOP, then SIGCONT) a
 # random daemon of a random kind every few seconds: workers, the root (on
 # its state directory) and the display. The job must complete, and every
-# frame must be bit-identical to `transtick render --local 0`.
+# frame must be bit-identical to `transtick render --local 0`. Every daemon
+# serves TLS with certificates from deploy/make-certs.sh, as deployed.
 #
 # Usage: fault_test.sh BUILD_DIR SOURCE_DIR. TRANSTICK_FAULT_SEED replays a
 # run (the seed is printed); TRANSTICK_FAULTS sets how many faults (default
@@ -23,6 +24,10 @@ trap cleanup EXIT
 fails=0
 fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
 port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])' 2>/dev/null || echo $((20000 + RANDOM % 20000)); }
+
+"$2/deploy/make-certs.sh" "$dir/certs" 2>/dev/null || { echo "FAIL: make-certs"; exit 1; }
+tls() { echo --tls-ca "$dir/certs/ca.crt" --tls-cert "$dir/certs/$1.crt" --tls-key "$dir/certs/$1.key"; }
+client=(--tls-ca "$dir/certs/ca.crt" --token-file "$dir/certs/client.token")
 
 seed=${TRANSTICK_FAULT_SEED:-$(date +%N | sed 's/^0*//')}
 seed=$((seed % 32768))
@@ -69,23 +74,27 @@ rport=$(port)
 n_display=0 n_root=0 n_worker=0
 start_display() {
   n_display=$((n_display + 1))
-  "$build/services/display/transtick-display" --listen 127.0.0.1:$dport \
+  # shellcheck disable=SC2046  # the TLS flags are words
+  "$build/services/display/transtick-display" --listen 127.0.0.1:$dport $(tls display) \
     >"$dir/display$n_display.log" 2>&1 &
   dpid=$!
   pids+=($dpid)
 }
 start_root() {
   n_root=$((n_root + 1))
+  # shellcheck disable=SC2046
   "$build/services/root/transtick-root" --listen 127.0.0.1:$rport --data-dir "$dir/data" \
-    --state-dir "$dir/state" --display 127.0.0.1:$dport >"$dir/root$n_root.log" 2>&1 &
+    --state-dir "$dir/state" --display 127.0.0.1:$dport $(tls root) --tokens "$dir/certs/tokens" \
+    >"$dir/root$n_root.log" 2>&1 &
   rpid=$!
   pids+=($rpid)
 }
 wpids=()
 start_worker() {
   n_worker=$((n_worker + 1))
+  # shellcheck disable=SC2046
   "$build/services/worker/transtick-worker" --root 127.0.0.1:$rport --listen 127.0.0.1:0 \
-    --threads 1 >"$dir/worker$n_worker.log" 2>&1 &
+    --threads 1 $(tls worker) >"$dir/worker$n_worker.log" 2>&1 &
   pids+=($!)
   wpids[$1]=$!
 }
@@ -93,13 +102,13 @@ start_display
 start_root
 for w in 0 1 2; do start_worker $w; done
 for _ in $(seq 100); do
-  "$T" status --root 127.0.0.1:$rport 2>/dev/null | grep -q '^3 workers' && break
+  "$T" status --root 127.0.0.1:$rport "${client[@]}" 2>/dev/null | grep -q '^3 workers' && break
   sleep 0.1
 done
-"$T" status --root 127.0.0.1:$rport | grep -q '^3 workers' || fail "3 workers did not register"
+"$T" status --root 127.0.0.1:$rport "${client[@]}" | grep -q '^3 workers' || fail "3 workers did not register"
 
 begin=$(date +%s)
-timeout 400 "$T" submit "$dir/job.json" --root 127.0.0.1:$rport --out-dir "$dir/out" \
+timeout 400 "$T" submit "$dir/job.json" --root 127.0.0.1:$rport "${client[@]}" --out-dir "$dir/out" \
   >"$dir/submit.log" 2>&1 &
 spid=$!
 
