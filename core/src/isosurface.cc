@@ -119,4 +119,54 @@ std::optional<double> FirstRoot(const RayCubic& g, double t_begin, double t_end)
   return std::nullopt;
 }
 
+std::optional<double> FirstCrossing(const Scene& scene, const Vec3& origin, const Vec3& dir,
+                                    double t_begin, double t_end, double iso) {
+  if (!(t_begin <= t_end)) return std::nullopt;
+  // The cell of the field holding the start: corners at voxel centres
+  // base + 0.5 .. base + 1.5 along each axis.
+  std::array<int, 3> base;
+  std::array<double, 3> next;
+  std::array<int, 3> step;
+  // The t of the next plane between cells along axis a, from the plane
+  // itself (never by adding up steps, whose rounding would depend on how
+  // far the ray has come).
+  auto plane_t = [&](int a) {
+    const double plane = base[a] + 0.5 + (step[a] > 0 ? 1 : 0);
+    return step[a] == 0 ? INFINITY : (plane - origin[a]) / dir[a];
+  };
+  const Vec3 start = origin + dir * t_begin;
+  for (int a = 0; a < 3; ++a) {
+    base[a] = static_cast<int>(std::floor(start[a] - 0.5));
+    step[a] = dir[a] > 0 ? 1 : (dir[a] < 0 ? -1 : 0);
+    next[a] = plane_t(a);
+  }
+  double t = t_begin;
+  // A ray crosses at most this many cells between t_begin and t_end.
+  const double span = (t_end - t_begin);
+  const int max_cells =
+      4 + static_cast<int>(std::min(1e6, span * (std::abs(dir.x) + std::abs(dir.y) + std::abs(dir.z))));
+  for (int n = 0; n < max_cells && t <= t_end; ++n) {
+    const double t_exit = std::min({next[0], next[1], next[2], t_end});
+    CellCorners corners;
+    for (int k = 0; k < 8; ++k) {
+      corners[k] = scene.Scalar(base[0] + (k & 1), base[1] + ((k >> 1) & 1), base[2] + (k >> 2));
+    }
+    const std::array<double, 3> o = {origin.x - (base[0] + 0.5), origin.y - (base[1] + 0.5),
+                                     origin.z - (base[2] + 0.5)};
+    if (auto root = FirstRoot(CellCubic(corners, o, {dir.x, dir.y, dir.z}, iso), t, t_exit)) {
+      return root;
+    }
+    if (t_exit >= t_end) break;
+    // Into the next cell along the axis whose plane comes first (the lowest
+    // axis on a tie, so that every node takes the same path).
+    int a = 0;
+    if (next[1] < next[a]) a = 1;
+    if (next[2] < next[a]) a = 2;
+    base[a] += step[a];
+    t = std::max(t, next[a]);
+    next[a] = plane_t(a);
+  }
+  return std::nullopt;
+}
+
 }  // namespace transtick

@@ -18,6 +18,9 @@
 #include <array>
 #include <optional>
 
+#include "transtick/scene.h"
+#include "transtick/vec.h"
+
 namespace transtick {
 
 // f(t) - iso = a t^3 + b t^2 + c t + d along the ray.
@@ -44,6 +47,17 @@ double Trilinear(const CellCorners& corners, const std::array<double, 3>& p);
 // split point lands on it exactly. Within the interval found, the answer
 // is within 1e-9 of the interval's length of the root.
 std::optional<double> FirstRoot(const RayCubic& g, double t_begin, double t_end);
+
+// The first t in [t_begin, t_end] where the trilinear field of `scene`'s
+// scalars (samples at voxel centres, index space, as Tracer::Sample reads
+// them, clamped at the volume's faces) along origin + t dir meets `iso`.
+// The ray is cut at the planes between voxel centres into the cells of
+// that field, and each piece is solved by FirstRoot in order. Each piece's
+// root depends only on the ray and the cell's eight samples.
+// REQUIRES: the scalar planes the pieces touch are stored in `scene` (a
+// slab's own planes and its ghost planes).
+std::optional<double> FirstCrossing(const Scene& scene, const Vec3& origin, const Vec3& dir,
+                                    double t_begin, double t_end, double iso);
 
 }  // namespace transtick
 
