@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Fuzzes what transtick reads from outside for a bounded time, under ASan and
 # UBSan (docs/design.md, "Fuzzing"): volume files (volume_fuzzer), job files
-# (job_fuzzer) and the ray and deposit batches a worker and the display
-# receive (batch_fuzzer). Builds them with clang and libFuzzer into
+# (job_fuzzer), the ray and deposit batches a worker and the display
+# receive (batch_fuzzer), and the sticks blocks and brick map of a slab
+# (sticks_fuzzer). Builds them with clang and libFuzzer into
 # build-fuzz/, writes the seed corpora, runs each fuzzer for
 # SECONDS_PER_FUZZER seconds (default 60) and fails on any crash, leak,
 # undefined behaviour, hang (an input slower than 20 s) or large allocation.
@@ -56,14 +57,14 @@ ninja -C "$build" -j "$(nproc)" fuzzers
 work=$build/fuzz
 rm -rf "$work/seeds" "$work/tmp"
 "$build/tests/fuzz_seeds" "$work/seeds"
-mkdir -p "$work/seeds/job" "$work/artifacts" "$work/tmp"
+mkdir -p "$work/seeds/job" "$work/seeds/sticks" "$work/artifacts" "$work/tmp"
 cp examples/*_job.json tests/fuzz/corpus/job/*.json "$work/seeds/job/"
 
 # UB already aborts (-fno-sanitize-recover); print where.
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1}
 export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1}
 failed=()
-for name in volume job batch; do
+for name in volume job batch sticks; do
   mkdir -p "$work/corpus/$name"
   options=(-max_total_time="$seconds" -timeout=20 -rss_limit_mb=2048 -malloc_limit_mb=512
     -max_len=4096 -print_final_stats=1 -artifact_prefix="$work/artifacts/$name-")

@@ -1,0 +1,106 @@
+// libFuzzer entry for the slab a worker receives (LoadSlab, FetchPlanes):
+// sticks blocks (docs/formats.md, "Sticks block") and the brick map. The
+// input edits the real blocks of a small synthetic slab (so that most
+// inputs get past the first checks): it overwrites bytes at chosen offsets,
+// truncates or drops blocks, and changes the slab's range and the largest
+// material. Sticks::FromBlocks must give a status or sticks whose every
+// track is sorted, disjoint and in range, and that encode and decode again
+// to the same bytes; BrickMap::FromBytes must refuse any size but its own.
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "transtick/check.h"
+#include "transtick/scene.h"
+#include "transtick/sticks.h"
+
+namespace transtick::fuzz {
+namespace {
+
+constexpr std::array<int, 3> kDims = {40, 70, 36};
+
+struct Base {
+  std::vector<uint8_t> labels;
+  std::vector<std::string> blocks;  // of the slab [10, 60)
+};
+
+const Base& GetBase() {
+  static const Base* base = [] {
+    auto* b = new Base;
+    b->labels.resize(static_cast<size_t>(kDims[0]) * kDims[1] * kDims[2]);
+    uint32_t state = 12345;
+    for (int z = 0; z < kDims[2]; ++z)
+      for (int y = 0; y < kDims[1]; ++y)
+        for (int x = 0; x < kDims[0]; ++x) {
+          state = state * 1664525u + 1013904223u;
+          // Shells of three materials, and noise that makes short sticks.
+          const int r2 = (x - 20) * (x - 20) + (y - 35) * (y - 35) + (z - 18) * (z - 18);
+          uint8_t m = r2 < 100 ? 3 : (r2 < 225 ? 2 : (r2 < 400 ? 1 : 0));
+          if ((state >> 28) == 0) m = static_cast<uint8_t>((state >> 20) % 4);
+          b->labels[(static_cast<size_t>(z) * kDims[1] + y) * kDims[0] + x] = m;
+        }
+    b->blocks = Sticks::Encode(b->labels, kDims, 0, kDims[1]).EncodeRows(10, 60);
+    return b;
+  }();
+  return *base;
+}
+
+void CheckSticks(const Sticks& s, int y_begin, int y_end, int max_material) {
+  for (int y = y_begin; y < y_end; ++y) {
+    for (int x = 0; x < kDims[0]; ++x) {
+      int end = 0;
+      for (const Stick& st : s.Track(x, y)) {
+        TRANSTICK_CHECK_LE(end, static_cast<int>(st.begin));
+        TRANSTICK_CHECK_LT(st.begin, st.end);
+        TRANSTICK_CHECK_LE(static_cast<int>(st.end), kDims[2]);
+        TRANSTICK_CHECK_GE(st.material, 1);
+        TRANSTICK_CHECK_LE(static_cast<int>(st.material), max_material);
+        end = st.end;
+      }
+    }
+  }
+  // Encoded and decoded again: the same sticks, the same bytes.
+  const std::vector<std::string> once = s.EncodeRows(y_begin, y_end);
+  auto again = Sticks::FromBlocks(kDims, y_begin, y_end, max_material, once);
+  TRANSTICK_CHECK(again.ok());
+  TRANSTICK_CHECK(again->EncodeRows(y_begin, y_end) == once);
+}
+
+}  // namespace
+}  // namespace transtick::fuzz
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  using namespace transtick;
+  using namespace transtick::fuzz;
+  const Base& base = GetBase();
+  if (size < 2) return 0;
+  // Byte 0: the slab asked for (inside, or past, the blocks' [10, 60)) and
+  // the largest material; byte 1: blocks dropped or truncated.
+  const int y_begin = 10 + (data[0] & 3) * 5 - 5;  // 5 .. 20
+  const int y_end = 50 + ((data[0] >> 2) & 3) * 5;  // 50 .. 65
+  const int max_material = 1 + ((data[0] >> 4) & 3);  // 1 .. 4
+  std::vector<std::string> blocks = base.blocks;
+  if (data[1] & 1) blocks.erase(blocks.begin() + (data[1] >> 1) % blocks.size());
+  if (data[1] & 2 && !blocks.empty()) {
+    std::string& b = blocks[(data[1] >> 2) % blocks.size()];
+    b.resize(b.size() * ((data[1] >> 4) & 7) / 8);
+  }
+  // Then edits of 4 bytes each: block, offset (2 bytes), value.
+  for (size_t i = 2; i + 4 <= size && !blocks.empty(); i += 4) {
+    std::string& b = blocks[data[i] % blocks.size()];
+    if (b.empty()) continue;
+    b[(data[i + 1] | (data[i + 2] << 8)) % b.size()] = static_cast<char>(data[i + 3]);
+  }
+  auto sticks = Sticks::FromBlocks(kDims, y_begin, y_end, max_material, blocks);
+  if (sticks.ok()) {
+    CheckSticks(*sticks, y_begin, y_end, max_material);
+  } else {
+    TRANSTICK_CHECK(!sticks.status().message().empty());
+  }
+  // The brick map from the input's bytes: only its own size is accepted.
+  std::vector<uint8_t> bytes(data, data + size);
+  auto bricks = BrickMap::FromBytes(kDims, bytes);
+  if (!bricks.ok()) TRANSTICK_CHECK(!bricks.status().message().empty());
+  return 0;
+}
