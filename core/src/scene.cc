@@ -133,6 +133,23 @@ std::vector<uint8_t> DvrVisibility(const Volume& volume, const TransferFunction&
   return labels;
 }
 
+std::vector<uint8_t> SurfaceCandidates(const Volume& volume, const Classification& classification) {
+  std::vector<float> edges;
+  for (const Material& m : classification.materials) {
+    edges.push_back(m.min);
+    edges.push_back(m.max);
+  }
+  std::sort(edges.begin(), edges.end());
+  const std::vector<float> mn = Filter3(volume, false), mx = Filter3(volume, true);
+  std::vector<uint8_t> labels(volume.values.size());
+  for (size_t i = 0; i < labels.size(); ++i) {
+    // The first edge above the neighbourhood's least value.
+    auto e = std::upper_bound(edges.begin(), edges.end(), mn[i]);
+    labels[i] = e != edges.end() && *e <= mx[i] ? 1 : 0;
+  }
+  return labels;
+}
+
 absl::StatusOr<Scene> Scene::ForSurfaces(const Volume& volume,
                                          const Classification& classification) {
   if (auto s = CheckDims(volume); !s.ok()) return s;

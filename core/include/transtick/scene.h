@@ -162,6 +162,16 @@ class Scene {
 // Labels for the dvr empty-space map (see Scene::ForDvr).
 std::vector<uint8_t> DvrVisibility(const Volume& volume, const TransferFunction& transfer);
 
+// 1 for each voxel inside which the trilinear field of the samples (at
+// voxel centres) may take values of two materials of `classification`,
+// else 0: the voxels where a smooth surface can lie. Inside voxel v the
+// field is a convex combination of the samples of v's 3x3x3 neighbourhood
+// (clamped at the faces), so its values lie in that neighbourhood's
+// [min, max]; Classify is constant there unless an interval edge e has
+// min < e <= max. A voxel labelled 0 therefore holds no surface, and no
+// root can be missed by skipping it.
+std::vector<uint8_t> SurfaceCandidates(const Volume& volume, const Classification& classification);
+
 }  // namespace transtick
 
 #endif  // TRANSTICK_SCENE_H_
