@@ -174,6 +174,9 @@ TEST_F(KeepaliveTest, AnIdleStreamIsNotCutOff) {
   EXPECT_EQ(channel->GetState(false), GRPC_CHANNEL_READY);
   AppendRay(CentreRay(), batch.mutable_rays());
   EXPECT_TRUE(stream->Write(batch));
+  // Write returns once the batch is buffered: the worker must have read it
+  // before the frame ends, or it is not counted.
+  EXPECT_TRUE(Eventually([&] { return worker_service_->RaysReceivedLeft(3) == 1; }));
   auto stats = End(3, /*cancel=*/true);
   ASSERT_TRUE(stats.ok()) << stats.status();
   EXPECT_EQ(stats->received_left(), 1u);

@@ -465,6 +465,8 @@ grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* Frame::NewLeftStream(
   return new LeftStream(ctx, std::move(find));
 }
 
+uint64_t Frame::rays_received_left() const { return left_->rays_received.load(); }
+
 bool Frame::AttachLeft(grpc::CallbackServerContext* ctx) {
   if (left_attached_.exchange(true)) return false;
   absl::MutexLock lock(&left_mu_);

@@ -141,6 +141,8 @@ class Frame : public std::enable_shared_from_this<Frame> {
   uint64_t id() const { return spec_.frame_id(); }
   // Whether the left neighbour's stream has attached.
   bool left_attached() const { return left_attached_.load(); }
+  // Rays received from the left neighbour so far.
+  uint64_t rays_received_left() const;
   // Whether Start was called.
   bool running() const { return started_; }
   // When the frame last saw a call, a ray batch from a neighbour or a unit

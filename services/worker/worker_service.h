@@ -46,6 +46,11 @@ class WorkerService final
     auto frame = FindFrame(id);
     return frame && frame->left_attached();
   }
+  // Rays frame `id` has received from its left neighbour (0 when not held).
+  uint64_t RaysReceivedLeft(uint64_t id) {
+    auto frame = FindFrame(id);
+    return frame ? frame->rays_received_left() : 0;
+  }
 
   grpc::Status LoadSlab(grpc::ServerContext* ctx, grpc::ServerReader<v1::SlabChunk>* reader,
                         v1::LoadReply* reply) override;
