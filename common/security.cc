@@ -5,7 +5,6 @@
 
 #include <cstdlib>
 #include <fstream>
-#include <mutex>
 #include <sstream>
 #include <utility>
 
@@ -37,7 +36,8 @@ absl::StatusOr<std::optional<Client>> BearerClient(
   return client;
 }
 
-std::mutex security_mu;
+// Written once by SetSecurity before any thread or channel exists, then
+// only read: no lock.
 Security* security = new Security();
 
 bool ValidName(absl::string_view name) {
@@ -242,15 +242,9 @@ absl::StatusOr<Security> SecurityFromFlags(const Flags& flags, bool daemon) {
   return s;
 }
 
-void SetSecurity(Security s) {
-  std::lock_guard<std::mutex> lock(security_mu);
-  *security = std::move(s);
-}
+void SetSecurity(Security s) { *security = std::move(s); }
 
-const Security& CurrentSecurity() {
-  std::lock_guard<std::mutex> lock(security_mu);
-  return *security;
-}
+const Security& CurrentSecurity() { return *security; }
 
 std::shared_ptr<grpc::ChannelCredentials> ChannelCredentialsFor(Role role,
                                                                 grpc::ChannelArguments* args) {

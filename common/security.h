@@ -86,7 +86,8 @@ std::set<std::string> WithSecuritySwitches(std::set<std::string> switches);
 inline constexpr char kSecurityUsage[] =
     "[--tls-ca FILE --tls-cert FILE --tls-key FILE] [--insecure]";
 
-// Sets the process's security; call before making channels or servers.
+// Sets the process's security. Call once, at startup, before any thread,
+// channel or server exists (it is then read without a lock).
 void SetSecurity(Security security);
 const Security& CurrentSecurity();
 
