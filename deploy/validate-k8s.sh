@@ -44,7 +44,7 @@ tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 typos=(
   "worker.yaml|s/^      containers:/      contaners:/"
-  "root.yaml|s/^            grpc:/            grcp:/"
+  "root.yaml|s/^            exec:/            exce:/"
   "display.yaml|s/imagePullPolicy:/imagePullPolicyy:/"
   "worker.yaml|s/^  serviceName:/  servicename:/"
   "config.yaml|s/^  TRANSTICK_ROOT:/  TRANSTICK_ROOTS:/"
