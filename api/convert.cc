@@ -156,6 +156,18 @@ absl::StatusOr<Classification> ToClassification(const v1::MaterialSet& set) {
     if (pm.has_shininess()) m.shininess = pm.shininess();
     c.materials.push_back(std::move(m));
   }
+  switch (set.surface()) {
+    case v1::SURFACE_DEFAULT:
+    case v1::SMOOTH:
+      c.surface = SurfaceModel::kSmooth;
+      break;
+    case v1::VOXEL:
+      c.surface = SurfaceModel::kVoxel;
+      break;
+    default:
+      return absl::InvalidArgumentError(
+          absl::StrCat("surface ", static_cast<int>(set.surface()), " is not a surface model"));
+  }
   if (auto s = c.Validate(); !s.ok()) return s;
   return c;
 }

@@ -51,6 +51,8 @@ render options:
   --materials FILE       surfaces mode classification (JSON, see docs/formats.md)
   --transfer FILE        dvr mode transfer function (JSON)
   --mode surfaces|dvr    default: surfaces with --materials, dvr with --transfer
+  --surface smooth|voxel surfaces on the trilinear field, hit exactly (default), or the
+                         paper's voxel faces (overrides the materials file's "surface")
   --azimuth DEG          rotation about the volume's Y axis (0 looks along -Z)
   --elevation DEG        tilt toward +Y
   --zoom F               1 frames the whole volume (default 1)
@@ -350,7 +352,7 @@ int Render(int argc, char** argv) {
   for (const char* f :
        {"materials",  "transfer",   "mode",  "azimuth", "elevation",    "zoom",
         "projection", "fov",        "eye",   "target",  "up",           "size",
-        "shadows",    "background", "step",  "threads", "out",          "stats",
+        "shadows",    "background", "step",  "threads", "out",          "stats", "surface",
         "local",      "root",       "rings", "balance", "balance-grid", "balance-rule"}) {
     known.insert(f);
   }
@@ -401,6 +403,13 @@ int Render(int argc, char** argv) {
   } else {
     if (auto s = ParseJson(*text, settings_file, dataset.mutable_materials()); !s.ok())
       return fail(s);
+    if (flags->Has("surface")) {
+      auto surface = ParseEnum<v1::SurfaceModel>(flags->Get("surface"), "--surface");
+      if (!surface.ok() || *surface == v1::SURFACE_DEFAULT) {
+        return fail(absl::InvalidArgumentError("--surface must be smooth or voxel"));
+      }
+      dataset.mutable_materials()->set_surface(*surface);
+    }
     auto c = ToClassification(dataset.materials());
     if (!c.ok())
       return fail(

@@ -140,6 +140,27 @@ TEST_F(ClusterTest, ImagesEqualTheInProcessRender) {
   }
 }
 
+// The surface model travels with the materials to every worker: the
+// paper's voxel faces through the cluster equal them in process, and
+// differ from the smooth image of the same view.
+TEST_F(ClusterTest, TheVoxelSurfaceModelGoesThroughTheCluster) {
+  v1::MaterialSet voxel = Materials();
+  voxel.set_surface(v1::VOXEL);
+  const v1::View view = View(30, 20, true, "voxel.exr");
+  const Image want = Reference(dir_ + "/" + volume_, voxel, view);
+  const Image smooth = Reference(dir_ + "/" + volume_, Materials(), view);
+  EXPECT_NE(want.rgb, smooth.rgb);
+  auto cluster = StartCluster(3);
+  ASSERT_TRUE(cluster.ok()) << cluster.status();
+  v1::Job job = MakeJob({view});
+  *job.mutable_datasets(0)->mutable_materials() = voxel;
+  auto stats = SubmitAndWatch((*cluster)->root_address(), job, WatchOptions{});
+  ASSERT_TRUE(stats.ok()) << stats.status();
+  auto got = ReadImage(view.output());
+  ASSERT_TRUE(got.ok()) << got.status();
+  EXPECT_EQ(got->rgb, want.rgb);
+}
+
 TEST_F(ClusterTest, BadJobsGetClearErrorsAndTheClusterGoesOn) {
   auto cluster = StartCluster(2);
   ASSERT_TRUE(cluster.ok()) << cluster.status();

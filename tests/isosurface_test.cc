@@ -5,7 +5,9 @@
 #include "transtick/isosurface.h"
 
 #include <cmath>
+#include <algorithm>
 #include <random>
+#include <vector>
 
 #include "gtest/gtest.h"
 #include "transtick/classification.h"
@@ -113,42 +115,28 @@ TEST(IsosurfaceTest, ThinFeaturesBetweenAnySamplingAreFound) {
   EXPECT_FALSE(FirstRoot(g, 1, 0).has_value());
 }
 
-// The field a scene's scalars define, in double: trilinear between voxel
-// centres, clamped at the faces (what Tracer::Sample reads, without its
-// float rounding).
-double Field(const Scene& s, double x, double y, double z) {
-  const double q[3] = {x - 0.5, y - 0.5, z - 0.5};
-  int i0[3];
-  double f[3];
-  for (int a = 0; a < 3; ++a) {
-    i0[a] = static_cast<int>(std::floor(q[a]));
-    f[a] = q[a] - i0[a];
-  }
-  double v = 0;
-  for (int k = 0; k < 8; ++k) {
-    const int dx = k & 1, dy = (k >> 1) & 1, dz = k >> 2;
-    const double w = (dx ? f[0] : 1 - f[0]) * (dy ? f[1] : 1 - f[1]) * (dz ? f[2] : 1 - f[2]);
-    v += w * s.Scalar(i0[0] + dx, i0[1] + dy, i0[2] + dz);
-  }
-  return v;
-}
 
 // Through whole volumes, cell after cell of the field (including rays
 // that leave the volume, where the field is clamped): the first crossing
-// dense sampling sees is never missed, and every crossing reported is one.
-TEST(IsosurfaceTest, FirstCrossingWalksTheFieldsCells) {
+// dense sampling sees is never missed, every crossing reported is one and
+// enters the band on the side the field moves to, and cutting the ray's
+// span into pieces (as segments and slabs do) changes no crossing by a bit.
+TEST(IsosurfaceTest, CrossingWalkWalksTheFieldsCells) {
   std::mt19937_64 rng(3);
   std::uniform_real_distribution<double> unit(0, 1), dir(-1, 1);
   constexpr int kSamples = 4096;
-  int crossings = 0;
+  int crossings = 0, cut_rays = 0;
   for (int trial = 0; trial < 200; ++trial) {
     Volume v;
     v.dims = {5 + static_cast<int>(rng() % 4), 5 + static_cast<int>(rng() % 4),
               5 + static_cast<int>(rng() % 4)};
     v.values.resize(v.VoxelCount());
     for (float& x : v.values) x = static_cast<float>(unit(rng) * 1000);
+    const float iso = static_cast<float>(200 + unit(rng) * 600);
     Classification c;
-    c.materials = {Material{.name = "m", .min = 500, .max = 1000}};
+    // One edge inside the values (iso), one above them all.
+    c.materials = {Material{.name = "m", .min = iso, .max = 5000}};
+    const Bands bands(c);
     auto scene = Scene::ForSurfaces(v, c);
     ASSERT_TRUE(scene.ok()) << scene.status();
     for (int r = 0; r < 50; ++r) {
@@ -156,32 +144,67 @@ TEST(IsosurfaceTest, FirstCrossingWalksTheFieldsCells) {
       Vec3 d{rng() % 4 == 0 ? 0.0 : dir(rng), rng() % 4 == 0 ? 0.0 : dir(rng), dir(rng)};
       const double len = std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
       d = d * (1 / len);
-      const double iso = 200 + unit(rng) * 600, t1 = 0.5 + unit(rng) * 6;
+      const double t1 = 0.5 + unit(rng) * 6;
       auto g = [&](double t) {
         const Vec3 p = o + d * t;
-        return Field(*scene, p.x, p.y, p.z) - iso;
+        return FieldAt(*scene, p) - iso;
       };
       int first = -1;
       double prev = g(0);
       for (int k = 1; k <= kSamples && first < 0; ++k) {
         const double val = g(t1 * k / kSamples);
-        if (prev == 0 || (val < 0) != (prev < 0)) first = k;
+        if ((val < 0) != (prev < 0)) first = k;
         prev = val;
       }
-      const auto hit = FirstCrossing(*scene, o, d, 0, t1, iso);
-      if (hit) {
-        ASSERT_GE(*hit, 0);
-        ASSERT_LE(*hit, t1);
-        ASSERT_LE(std::abs(g(*hit)), 1e-6) << "trial " << trial << " ray " << r;
+      std::vector<Crossing> all;
+      const int start_band = g(0) >= 0 ? 1 : 0;
+      CrossingWalk walk(*scene, bands, o, d, 0, t1, start_band);
+      while (auto x = walk.Next()) all.push_back(*x);
+      for (size_t k = 0; k < all.size(); ++k) {
+        const Crossing& x = all[k];
+        ASSERT_GE(x.t, 0);
+        ASSERT_LT(x.t, t1);
+        if (k > 0) {
+          ASSERT_GE(x.t, all[k - 1].t);
+        }
+        ASSERT_LE(std::abs(g(x.t)), 1e-6) << "trial " << trial << " ray " << r;
+        ASSERT_TRUE(x.band == 0 || x.band == 1);
+        // Crossings alternate: each leaves the band the last entered.
+        ASSERT_NE(x.band, k == 0 ? start_band : all[k - 1].band);
+        // Just past the crossing the field lies on the band's side.
+        const double after = g(x.t + 1e-7);
+        if (std::abs(after) > 1e-6) {
+          ASSERT_EQ(after >= 0, x.band == 1) << trial << " " << r;
+        }
       }
       if (first >= 0) {
         ++crossings;
-        ASSERT_TRUE(hit.has_value()) << "trial " << trial << " ray " << r;
-        ASSERT_LE(*hit, t1 * first / kSamples + 1e-12) << "trial " << trial << " ray " << r;
+        ASSERT_FALSE(all.empty()) << "trial " << trial << " ray " << r;
+        ASSERT_LE(all[0].t, t1 * first / kSamples + 1e-12) << "trial " << trial << " ray " << r;
+      }
+      // The same crossings, bit for bit, with the span cut at random points.
+      std::vector<double> cuts = {0, t1};
+      for (int k = rng() % 5; k > 0; --k) cuts.push_back(unit(rng) * t1);
+      std::sort(cuts.begin(), cuts.end());
+      std::vector<Crossing> pieces;
+      int band = start_band;
+      for (size_t k = 0; k + 1 < cuts.size(); ++k) {
+        CrossingWalk piece(*scene, bands, o, d, cuts[k], cuts[k + 1], band);
+        while (auto x = piece.Next()) {
+          pieces.push_back(*x);
+          band = x->band;
+        }
+      }
+      cut_rays += cuts.size() > 2;
+      ASSERT_EQ(pieces.size(), all.size()) << "trial " << trial << " ray " << r;
+      for (size_t k = 0; k < all.size(); ++k) {
+        ASSERT_EQ(pieces[k].t, all[k].t);
+        ASSERT_EQ(pieces[k].band, all[k].band);
       }
     }
   }
   EXPECT_GT(crossings, 5000);
+  EXPECT_GT(cut_rays, 5000);
 }
 
 // Wherever the field takes values of two materials inside a voxel (on a
@@ -220,7 +243,7 @@ TEST(IsosurfaceTest, EveryVoxelAFieldSurfaceCrossesIsACandidate) {
           int first = -1;
           for (int k = 0; k < 125 && !mixed; ++k) {
             const double px = x + (k % 5) / 4.0, py = y + (k / 5 % 5) / 4.0, pz = z + k / 25 / 4.0;
-            const int m = c.Classify(static_cast<float>(Field(*scene, px, py, pz)));
+            const int m = c.Classify(static_cast<float>(FieldAt(*scene, Vec3{px, py, pz})));
             if (first < 0) first = m;
             mixed = m != first;
           }

@@ -71,9 +71,10 @@ TEST(RayCodecTest, FieldsSitAtTheDocumentedOffsets) {
   r.material = 5;
   r.spawned = 0x0a0b;
   r.transmittance = 0.25f;
+  r.band = 0x0c0d;
   std::string w;
   AppendRay(r, &w);
-  ASSERT_EQ(w.size(), 104u);
+  ASSERT_EQ(w.size(), 106u);
   EXPECT_EQ(u64(w, 0), std::bit_cast<uint64_t>(r.origin[0]));
   EXPECT_EQ(u64(w, 24), std::bit_cast<uint64_t>(r.direction[0]));
   EXPECT_EQ(u64(w, 48), std::bit_cast<uint64_t>(2.5));
@@ -84,6 +85,7 @@ TEST(RayCodecTest, FieldsSitAtTheDocumentedOffsets) {
   EXPECT_EQ(w[85], 5);
   EXPECT_EQ(u32(w, 86) & 0xffff, 0x0a0bu);
   EXPECT_EQ(u32(w, 100), std::bit_cast<uint32_t>(0.25f));
+  EXPECT_EQ(static_cast<uint8_t>(w[104]) | (static_cast<uint8_t>(w[105]) << 8), 0x0c0d);
   std::string d;
   AppendDeposit(Deposit{0x00ab00cd, RayKind::kPrimary, 3, {1.0f, 0.5f, 0.0f}}, &d);
   ASSERT_EQ(d.size(), 20u);

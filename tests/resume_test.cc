@@ -13,10 +13,11 @@ using testing::MakeCamera;
 using testing::RenderSlabs;
 using testing::RenderWhole;
 
-Scene PhantomSurfaces(std::array<int, 3> dims) {
+Scene PhantomSurfaces(std::array<int, 3> dims, SurfaceModel model = SurfaceModel::kSmooth) {
   Volume v = MakeNoisyPhantom(dims, 21);
   auto range = v.Range();
   Classification c;
+  c.surface = model;
   c.materials = {Material{.name = "skin",
                           .min = range[1] * 0.2f,
                           .max = range[1] * 0.45f,
@@ -81,6 +82,24 @@ TEST(ResumeTest, SurfacesAcrossSlabsAreBitIdentical) {
   // every ray crosses every slab.
   ExpectSlabsMatch(PhantomSurfaces({40, 34, 38}),
                    {{0, 0}, {45, 0}, {30, 40}, {0, 90}, {10, -89}, {200, -30}}, 64);
+}
+
+TEST(ResumeTest, VoxelSurfacesAcrossSlabsAreBitIdentical) {
+  ExpectSlabsMatch(PhantomSurfaces({40, 34, 38}, SurfaceModel::kVoxel),
+                   {{0, 0}, {45, 0}, {30, 40}, {0, 90}, {200, -30}}, 64);
+}
+
+// The two surface models are different images of one classification (so
+// that the tests above exercise both): smooth hits lie inside voxels.
+TEST(ResumeTest, SmoothAndVoxelSurfacesDiffer) {
+  const Scene smooth = PhantomSurfaces({40, 34, 38});
+  const Scene voxel = PhantomSurfaces({40, 34, 38}, SurfaceModel::kVoxel);
+  const Camera cam = MakeCamera(smooth.dims(), 64, 30, 20);
+  RenderSettings settings;
+  const Image a = RenderWhole(smooth, cam, settings), b = RenderWhole(voxel, cam, settings);
+  size_t differ = 0;
+  for (size_t i = 0; i < a.rgb.size(); ++i) differ += a.rgb[i] != b.rgb[i];
+  EXPECT_GT(differ, a.rgb.size() / 20);
 }
 
 TEST(ResumeTest, DvrAcrossSlabsIsBitIdentical) {

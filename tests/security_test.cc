@@ -109,11 +109,6 @@ void Prepare(grpc::ClientContext* ctx, const std::string& token = "") {
   if (!token.empty()) ctx->AddMetadata("authorization", "Bearer " + token);
 }
 
-std::string Trim(std::string s) {
-  while (!s.empty() && (s.back() == '\n' || s.back() == '\r')) s.pop_back();
-  return s;
-}
-
 // A 16^3 uint8 volume, values 0..255 along x.
 void WriteVolume(const fs::path& path) {
   std::ofstream out(path, std::ios::binary);
@@ -488,7 +483,7 @@ TEST_F(SecurityTest, APathSwappedForASymlinkAfterSubmitIsNotRead) {
   const fs::path data = *dir_ / "data";
   fs::create_symlink(*dir_ / "outside.nrrd", data / "link.nrrd");
   auto root = RootAs(Cluster());
-  for (const std::string path :
+  for (const std::string& path :
        {std::string("link.nrrd"), std::string("../outside.nrrd"), (*dir_ / "outside.nrrd").string()}) {
     grpc::Status s = Submit(*root, SmallJob("p", {path}), kAlice);
     EXPECT_EQ(s.error_code(), grpc::StatusCode::PERMISSION_DENIED) << path << ": " << s.error_message();

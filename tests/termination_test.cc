@@ -389,11 +389,17 @@ TEST(TerminationTest, ValidateRefusesHostileDescriptors) {
     refused([](RayDescriptor& r) { r.kind = static_cast<RayKind>(9); }, "kind");
     if (dvr) {
       refused([](RayDescriptor& r) { r.sample = 4000000000u; }, "sample index");
+      refused([](RayDescriptor& r) { r.band = 0; }, "without smooth surfaces");
       // A dvr scene has no materials: tracing a shadow ray there read
       // materials[m - 1] of an empty list (found by batch_fuzzer).
       refused([](RayDescriptor& r) { r.kind = RayKind::kShadow; }, "shadow ray");
     } else {
       refused([](RayDescriptor& r) { r.material = 3; }, "material");
+      // Edges 0.5, 1.5 and 2.5: four bands, 0-3.
+      refused([](RayDescriptor& r) { r.band = 4; }, "band 4 of 4");
+      RayDescriptor banded = good;
+      banded.band = 3;
+      EXPECT_TRUE(tracer.Validate(banded).ok()) << tracer.Validate(banded);
       RayDescriptor shadow = good;
       shadow.kind = RayKind::kShadow;
       EXPECT_TRUE(tracer.Validate(shadow).ok()) << tracer.Validate(shadow);

@@ -19,6 +19,7 @@ Scene BlobScene(std::array<int, 3> dims, uint32_t seed) {
   }
   Classification c;
   c.materials = {{.name = "a", .min = 0.5f, .max = 1.5f}, {.name = "b", .min = 1.5f, .max = 2.5f}};
+  c.surface = SurfaceModel::kVoxel;  // the walk over the materials themselves
   return *Scene::ForSurfaces(v, c);
 }
 
@@ -81,6 +82,7 @@ TEST(TraversalTest, SkipsEmptySpaceInFewSteps) {
   v.values[v.Index(64, 64, 64)] = 100;
   Classification c;
   c.materials = {{.name = "dot", .min = 50, .max = 150}};
+  c.surface = SurfaceModel::kVoxel;
   Scene scene = *Scene::ForSurfaces(v, c);
   Vec3 dir = Normalize(Vec3{1, 1, 1});
   Vec3 origin = Vec3{64.5, 64.5, 64.5} - dir * 300.0;

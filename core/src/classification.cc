@@ -1,5 +1,6 @@
 #include "transtick/classification.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
@@ -64,6 +65,28 @@ absl::Status Classification::Validate() const {
     }
   }
   return absl::OkStatus();
+}
+
+const char* SurfaceModelName(SurfaceModel model) {
+  return model == SurfaceModel::kVoxel ? "voxel" : "smooth";
+}
+
+Bands::Bands(const Classification& classification) {
+  for (const Material& m : classification.materials) {
+    edges_.push_back(m.min);
+    edges_.push_back(m.max);
+  }
+  std::sort(edges_.begin(), edges_.end());
+  edges_.erase(std::unique(edges_.begin(), edges_.end()), edges_.end());
+  // Band 0 lies below every edge, where no interval reaches; band i >= 1
+  // starts at edge i - 1, which it holds.
+  materials_.push_back(0);
+  for (float e : edges_) materials_.push_back(classification.Classify(e));
+}
+
+int Bands::Of(float value) const {
+  if (!(value == value)) return 0;
+  return static_cast<int>(std::upper_bound(edges_.begin(), edges_.end(), value) - edges_.begin());
 }
 
 absl::Status TransferFunction::Validate() const {

@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+
+#include "transtick/traversal.h"
 
 namespace transtick {
 namespace {
@@ -68,29 +71,21 @@ double Refine(const RayCubic& g, double lo, double glo, double hi, double ghi) {
 
 RayCubic CellCubic(const CellCorners& c, const std::array<double, 3>& o,
                    const std::array<double, 3>& d, double iso) {
-  // Weight of corner side 0 or 1 along an axis: u + t v.
-  double u[3][2], v[3][2];
-  for (int a = 0; a < 3; ++a) {
-    u[a][0] = 1 - o[a];
-    v[a][0] = -d[a];
-    u[a][1] = o[a];
-    v[a][1] = d[a];
-  }
+  // The interpolant as a polynomial in x, y, z:
+  // k0 + k1 x + k2 y + k3 z + k4 xy + k5 xz + k6 yz + k7 xyz.
+  const double c0 = c[0], c1 = c[1], c2 = c[2], c3 = c[3], c4 = c[4], c5 = c[5], c6 = c[6],
+               c7 = c[7];
+  const double k0 = c0, k1 = c1 - c0, k2 = c2 - c0, k3 = c4 - c0;
+  const double k4 = c3 - c2 - c1 + c0, k5 = c5 - c4 - c1 + c0, k6 = c6 - c4 - c2 + c0;
+  const double k7 = c7 - c6 - c5 - c3 + c4 + c2 + c1 - c0;
+  const double ox = o[0], oy = o[1], oz = o[2], dx = d[0], dy = d[1], dz = d[2];
   RayCubic g;
-  for (int k = 0; k < 2; ++k) {
-    for (int j = 0; j < 2; ++j) {
-      for (int i = 0; i < 2; ++i) {
-        const double value = c[i + 2 * j + 4 * k];
-        const double ux = u[0][i], vx = v[0][i], uy = u[1][j], vy = v[1][j], uz = u[2][k],
-                     vz = v[2][k];
-        g.d += value * ux * uy * uz;
-        g.c += value * (vx * uy * uz + ux * vy * uz + ux * uy * vz);
-        g.b += value * (vx * vy * uz + vx * uy * vz + ux * vy * vz);
-        g.a += value * vx * vy * vz;
-      }
-    }
-  }
-  g.d -= iso;
+  g.a = k7 * dx * dy * dz;
+  g.b = k4 * dx * dy + k5 * dx * dz + k6 * dy * dz + k7 * (ox * dy * dz + oy * dx * dz + oz * dx * dy);
+  g.c = k1 * dx + k2 * dy + k3 * dz + k4 * (ox * dy + oy * dx) + k5 * (ox * dz + oz * dx) +
+        k6 * (oy * dz + oz * dy) + k7 * (ox * oy * dz + ox * oz * dy + oy * oz * dx);
+  g.d = k0 + k1 * ox + k2 * oy + k3 * oz + k4 * ox * oy + k5 * ox * oz + k6 * oy * oz +
+        k7 * ox * oy * oz - iso;
   return g;
 }
 
@@ -100,6 +95,23 @@ double Trilinear(const CellCorners& c, const std::array<double, 3>& p) {
   const double c01 = c[4] * (1 - x) + c[5] * x, c11 = c[6] * (1 - x) + c[7] * x;
   const double c0 = c00 * (1 - y) + c10 * y, c1 = c01 * (1 - y) + c11 * y;
   return c0 * (1 - z) + c1 * z;
+}
+
+double FieldAt(const Scene& scene, const Vec3& p) {
+  const double q[3] = {p.x - 0.5, p.y - 0.5, p.z - 0.5};
+  int i0[3];
+  double f[3];
+  for (int a = 0; a < 3; ++a) {
+    i0[a] = static_cast<int>(std::floor(q[a]));
+    f[a] = q[a] - i0[a];
+  }
+  double v = 0;
+  for (int k = 0; k < 8; ++k) {
+    const int dx = k & 1, dy = (k >> 1) & 1, dz = k >> 2;
+    const double w = (dx ? f[0] : 1 - f[0]) * (dy ? f[1] : 1 - f[1]) * (dz ? f[2] : 1 - f[2]);
+    v += w * scene.Scalar(i0[0] + dx, i0[1] + dy, i0[2] + dz);
+  }
+  return v;
 }
 
 std::optional<double> FirstRoot(const RayCubic& g, double t_begin, double t_end) {
@@ -119,52 +131,149 @@ std::optional<double> FirstRoot(const RayCubic& g, double t_begin, double t_end)
   return std::nullopt;
 }
 
-std::optional<double> FirstCrossing(const Scene& scene, const Vec3& origin, const Vec3& dir,
-                                    double t_begin, double t_end, double iso) {
-  if (!(t_begin <= t_end)) return std::nullopt;
-  // The cell of the field holding the start: corners at voxel centres
-  // base + 0.5 .. base + 1.5 along each axis.
-  std::array<int, 3> base;
-  std::array<double, 3> next;
-  std::array<int, 3> step;
-  // The t of the next plane between cells along axis a, from the plane
-  // itself (never by adding up steps, whose rounding would depend on how
-  // far the ray has come).
-  auto plane_t = [&](int a) {
-    const double plane = base[a] + 0.5 + (step[a] > 0 ? 1 : 0);
-    return step[a] == 0 ? INFINITY : (plane - origin[a]) / dir[a];
-  };
-  const Vec3 start = origin + dir * t_begin;
+CrossingWalk::CrossingWalk(const Scene& scene, const Bands& bands, const Vec3& origin,
+                           const Vec3& dir, double t0, double t1, int band)
+    : scene_(&scene), bands_(&bands), origin_(origin), t1_(t1), band_(band), t_(t0) {
+  const Vec3 start = origin + dir * t0;
+  double moves = 0;
   for (int a = 0; a < 3; ++a) {
-    base[a] = static_cast<int>(std::floor(start[a] - 0.5));
-    step[a] = dir[a] > 0 ? 1 : (dir[a] < 0 ? -1 : 0);
-    next[a] = plane_t(a);
+    const bool along = MovesAlong(dir[a]);
+    step_[a] = along ? (dir[a] > 0 ? 1 : -1) : 0;
+    dir_[a] = along ? dir[a] : 0.0;
+    inv_[a] = along ? 1.0 / dir[a] : 0.0;
+    moves += std::abs(dir_[a]);
+    // The cell of the field holding the start: corners at voxel centres
+    // base + 0.5 and base + 1.5; base runs from -1 to dims - 1 inside the
+    // volume (the half cells at the faces). Clamped only against overflow:
+    // beyond the faces the corners clamp as the field does.
+    base_[a] = FloorClamped(start[a] - 0.5, -(1 << 30), 1 << 30);
   }
-  double t = t_begin;
-  // A ray crosses at most this many cells between t_begin and t_end.
-  const double span = (t_end - t_begin);
-  const int max_cells =
-      4 + static_cast<int>(std::min(1e6, span * (std::abs(dir.x) + std::abs(dir.y) + std::abs(dir.z))));
-  for (int n = 0; n < max_cells && t <= t_end; ++n) {
-    const double t_exit = std::min({next[0], next[1], next[2], t_end});
-    CellCorners corners;
-    for (int k = 0; k < 8; ++k) {
-      corners[k] = scene.Scalar(base[0] + (k & 1), base[1] + ((k >> 1) & 1), base[2] + (k >> 2));
+  // The cells a ray can cross in [t0, t1): one more per unit it moves
+  // along each axis, and a few for the ends.
+  const double span = t1 - t0;
+  max_cells_ = 4 + static_cast<int>(span > 0 ? std::min(span * moves, 1e7) : 0);
+  done_ = !(t0 < t1) || !EnterCell();
+}
+
+bool CrossingWalk::EnterCell() {
+  for (;;) {
+    if (++cells_ > max_cells_) return false;
+    // The cell's span along the ray, from its planes between voxel centres
+    // (each time from its plane, never by adding up steps): the entry
+    // times of the axes the ray moves on, the first of their exit times.
+    double t_in = -std::numeric_limits<double>::infinity();
+    double t_out = std::numeric_limits<double>::infinity();
+    int exit_axis = -1;
+    for (int a = 0; a < 3; ++a) {
+      if (step_[a] == 0) continue;
+      const int near = step_[a] > 0 ? base_[a] : base_[a] + 1;
+      t_in = std::max(t_in, (near + 0.5 - origin_[a]) * inv_[a]);
+      const double leave = (near + step_[a] + 0.5 - origin_[a]) * inv_[a];
+      // The lowest axis on a tie, so that every node takes the same path.
+      if (leave < t_out) t_out = leave, exit_axis = a;
     }
-    const std::array<double, 3> o = {origin.x - (base[0] + 0.5), origin.y - (base[1] + 0.5),
-                                     origin.z - (base[2] + 0.5)};
-    if (auto root = FirstRoot(CellCubic(corners, o, {dir.x, dir.y, dir.z}, iso), t, t_exit)) {
-      return root;
+    if (exit_axis < 0) return false;  // a ray along no axis
+    t_in_ = t_in;
+    t_out_ = t_out;
+    exit_axis_ = exit_axis;
+    const double lo = std::max(t_in, t_), hi = std::min(t_out, t1_);
+    // A cell the ray only touches at an edge or a corner (t_in = t_out)
+    // holds no root of its own; the walk goes on through it.
+    if (t_in < t_out && lo < hi) {
+      scene_->Corners(base_[0], base_[1], base_[2], corners_.data());
+      const auto [mn, mx] = std::minmax_element(corners_.begin(), corners_.end());
+      lo_value_ = *mn;
+      hi_value_ = *mx;
+      hi_ = hi;
+      solved_ = false;
+      cache_[0].edge = cache_[1].edge = -1;
+      last_edge_ = -1;
+      return true;
     }
-    if (t_exit >= t_end) break;
-    // Into the next cell along the axis whose plane comes first (the lowest
-    // axis on a tie, so that every node takes the same path).
-    int a = 0;
-    if (next[1] < next[a]) a = 1;
-    if (next[2] < next[a]) a = 2;
-    base[a] += step[a];
-    t = std::max(t, next[a]);
-    next[a] = plane_t(a);
+    if (t_out >= t1_) return false;
+    base_[exit_axis] += step_[exit_axis];
+  }
+}
+
+bool CrossingWalk::AdvanceCell() {
+  if (t_out_ >= t1_) return false;
+  base_[exit_axis_] += step_[exit_axis_];
+  return EnterCell();
+}
+
+const CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
+  // The two edges of a band differ in parity: one slot each.
+  EdgeRoots& r = cache_[edge & 1];
+  if (r.edge == edge) return r;
+  if (!solved_) {
+    // The field along the ray in s = t - t_in, from the entry point in
+    // cell coordinates, so that the coefficients stay well scaled however
+    // far the ray's origin lies; and its monotonic pieces.
+    const Vec3 p = origin_ + Vec3{dir_[0], dir_[1], dir_[2]} * t_in_;
+    const std::array<double, 3> entry = {p.x - (base_[0] + 0.5), p.y - (base_[1] + 0.5),
+                                         p.z - (base_[2] + 0.5)};
+    cubic_ = CellCubic(corners_, entry, dir_, 0);
+    const double span = t_out_ - t_in_;
+    double splits[2];
+    splits_ = SlopeRoots(cubic_, 0, span, splits);
+    at_[0] = 0;
+    for (int k = 0; k < splits_; ++k) at_[k + 1] = splits[k];
+    at_[splits_ + 1] = span;
+    for (int k = 0; k <= splits_ + 1; ++k) value_[k] = cubic_(at_[k]);
+    solved_ = true;
+  }
+  const double e = bands_->edges()[edge];
+  RayCubic g = cubic_;
+  g.d -= e;
+  r.edge = edge;
+  r.count = 0;
+  for (int k = 0; k <= splits_; ++k) {
+    const double ga = value_[k] - e, gb = value_[k + 1] - e;
+    if ((ga < 0) != (gb < 0)) {
+      r.t[r.count] = t_in_ + Refine(g, at_[k], ga, at_[k + 1], gb);
+      r.up[r.count] = gb >= 0;
+      ++r.count;
+    }
+  }
+  return r;
+}
+
+std::optional<std::pair<double, int>> CrossingWalk::Candidate(int edge, bool up) {
+  const EdgeRoots& r = Roots(edge);
+  for (int k = 0; k < r.count; ++k) {
+    if (r.up[k] != up) continue;
+    // One edge's roots alternate in direction: past the one just taken
+    // by index, so that a double root (up and down at one t) is taken twice.
+    if (edge == last_edge_ ? k > last_index_ : r.t[k] >= t_) return std::pair{r.t[k], k};
+  }
+  return std::nullopt;
+}
+
+std::optional<Crossing> CrossingWalk::Next() {
+  const std::vector<float>& edges = bands_->edges();
+  while (!done_) {
+    // Band b lies between edge b - 1 below and edge b above. An edge the
+    // corners do not straddle (lo < e <= hi) is not crossed in this cell.
+    const int down = band_ - 1, up = band_;
+    std::optional<std::pair<double, int>> best;
+    bool best_up = false;
+    if (down >= 0 && edges[down] > lo_value_ && edges[down] <= hi_value_) {
+      best = Candidate(down, false);
+    }
+    if (up < static_cast<int>(edges.size()) && edges[up] > lo_value_ && edges[up] <= hi_value_) {
+      auto c = Candidate(up, true);
+      if (c && (!best || c->first < best->first)) best = c, best_up = true;
+    }
+    // A root on the cell's far plane is the cell's; one at t1 is the next
+    // segment's.
+    if (best && (best->first < hi_ || (best->first == hi_ && hi_ < t1_))) {
+      t_ = best->first;
+      last_edge_ = best_up ? up : down;
+      last_index_ = best->second;
+      band_ = best_up ? Bands::Above(up) : Bands::Below(down);
+      return Crossing{t_, band_};
+    }
+    done_ = !AdvanceCell();
   }
   return std::nullopt;
 }

@@ -52,6 +52,7 @@ void AppendRay(const RayDescriptor& r, std::string* out) {
   p = EncodeFixed16(p, r.spawned);
   for (int c = 0; c < 3; ++c) p = EncodeFixed32(p, std::bit_cast<uint32_t>(r.color[c]));
   p = EncodeFixed32(p, std::bit_cast<uint32_t>(r.transmittance));
+  p = EncodeFixed16(p, r.band);
   out->append(b, p - b);
 }
 
@@ -82,7 +83,7 @@ absl::StatusOr<std::vector<RayDescriptor>> DecodeRays(std::string_view bytes,
     ok = ok && in.GetFixed32(&r.pixel) && in.GetFixed32(&r.sample) && in.GetByte(&kind) &&
          in.GetByte(&r.material) && in.GetFixed16(&r.spawned);
     for (int c = 0; c < 3; ++c) ok = ok && GetF32(in, &r.color[c]);
-    ok = ok && GetF32(in, &r.transmittance);
+    ok = ok && GetF32(in, &r.transmittance) && in.GetFixed16(&r.band);
     if (!ok) return absl::InternalError("ray batch: decoder ran short");  // sizes were checked
     for (int a = 0; a < 3; ++a) r.cell[a] = static_cast<int32_t>(cell[a]);
     bool finite = std::isfinite(r.t) && std::isfinite(r.t_start);

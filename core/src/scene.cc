@@ -133,20 +133,79 @@ std::vector<uint8_t> DvrVisibility(const Volume& volume, const TransferFunction&
   return labels;
 }
 
+namespace {
+
+// The least and greatest value the trilinear field takes inside voxel
+// (x, y, z), give or take rounding. The voxel's centre cuts it into eight
+// boxes, one in each cell of the field around it; on each the field is
+// trilinear again, so its extremes lie at the box's corners. Those are the
+// 27 points with coordinates i, i + 1/2 or i + 1 along each axis, where
+// the field is the mean of the 1, 2, 4 or 8 samples around (indices
+// clamped at the faces, as the field is).
+std::array<double, 2> VoxelFieldRange(const Volume& v, int x, int y, int z) {
+  double n[3][3][3];
+  for (int k = 0; k < 3; ++k)
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i) {
+        const int xi = std::clamp(x + i - 1, 0, v.dims[0] - 1);
+        const int yj = std::clamp(y + j - 1, 0, v.dims[1] - 1);
+        const int zk = std::clamp(z + k - 1, 0, v.dims[2] - 1);
+        n[k][j][i] = v.values[v.Index(xi, yj, zk)];
+      }
+  // Means along x, then y, then z: offset 0 is the low face, 1 the centre,
+  // 2 the high face.
+  auto mean3 = [](double lo, double mid, double hi, double out[3]) {
+    out[0] = 0.5 * (lo + mid);
+    out[1] = mid;
+    out[2] = 0.5 * (mid + hi);
+  };
+  double ax[3][3][3], ay[3][3][3];
+  for (int k = 0; k < 3; ++k)
+    for (int j = 0; j < 3; ++j) mean3(n[k][j][0], n[k][j][1], n[k][j][2], ax[k][j]);
+  for (int k = 0; k < 3; ++k)
+    for (int i = 0; i < 3; ++i) {
+      double o[3];
+      mean3(ax[k][0][i], ax[k][1][i], ax[k][2][i], o);
+      for (int j = 0; j < 3; ++j) ay[k][j][i] = o[j];
+    }
+  double lo = INFINITY, hi = -INFINITY;
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i) {
+      double o[3];
+      mean3(ay[0][j][i], ay[1][j][i], ay[2][j][i], o);
+      for (double w : o) {
+        lo = std::min(lo, w);
+        hi = std::max(hi, w);
+      }
+    }
+  return {lo, hi};
+}
+
+}  // namespace
+
 std::vector<uint8_t> SurfaceCandidates(const Volume& volume, const Classification& classification) {
-  std::vector<float> edges;
-  for (const Material& m : classification.materials) {
-    edges.push_back(m.min);
-    edges.push_back(m.max);
-  }
-  std::sort(edges.begin(), edges.end());
+  const Bands bands(classification);
+  const std::vector<float>& edges = bands.edges();
   const std::vector<float> mn = Filter3(volume, false), mx = Filter3(volume, true);
   std::vector<uint8_t> labels(volume.values.size());
-  for (size_t i = 0; i < labels.size(); ++i) {
-    // The first edge above the neighbourhood's least value.
-    auto e = std::upper_bound(edges.begin(), edges.end(), mn[i]);
-    labels[i] = e != edges.end() && *e <= mx[i] ? 1 : 0;
-  }
+  const auto& d = volume.dims;
+  for (int z = 0; z < d[2]; ++z)
+    for (int y = 0; y < d[1]; ++y)
+      for (int x = 0; x < d[0]; ++x) {
+        const size_t i = volume.Index(x, y, z);
+        // The first edge above the neighbourhood's least value: a quick
+        // test that most voxels fail.
+        auto e = std::upper_bound(edges.begin(), edges.end(), mn[i]);
+        if (e == edges.end() || *e > mx[i]) continue;
+        // The exact range, widened by far more than its rounding (a few
+        // ulps of the largest sample).
+        auto [lo, hi] = VoxelFieldRange(volume, x, y, z);
+        const double slack = 1e-9 * std::max(std::abs(lo), std::abs(hi));
+        lo -= slack;
+        hi += slack;
+        auto f = std::upper_bound(edges.begin(), edges.end(), lo);
+        labels[i] = f != edges.end() && *f <= hi ? 1 : 0;
+      }
   return labels;
 }
 
@@ -156,6 +215,14 @@ absl::StatusOr<Scene> Scene::ForSurfaces(const Volume& volume,
   if (auto s = classification.Validate(); !s.ok()) return s;
   std::vector<uint8_t> labels(volume.values.size());
   for (size_t i = 0; i < labels.size(); ++i) labels[i] = classification.Classify(volume.values[i]);
+  if (classification.surface == SurfaceModel::kSmooth) {
+    // A candidate voxel is walked cell by cell of the field; every other
+    // voxel keeps its material, which is the field's throughout it.
+    const std::vector<uint8_t> candidates = SurfaceCandidates(volume, classification);
+    for (size_t i = 0; i < labels.size(); ++i) {
+      if (candidates[i]) labels[i] = Classification::kCandidate;
+    }
+  }
   Scene scene;
   scene.mode_ = RenderMode::kSurfaces;
   scene.dims_ = volume.dims;
@@ -245,8 +312,7 @@ ScalarPlanes Scene::CopyScalars(int y_begin, int y_end) const {
 
 absl::StatusOr<Scene> Scene::Reslab(int y_begin, int y_end, const std::vector<std::string>& blocks,
                                     const std::vector<ScalarPlanes>& planes) const {
-  const int max_material =
-      mode_ == RenderMode::kSurfaces ? static_cast<int>(classification_.materials.size()) : 1;
+  const int max_material = mode_ == RenderMode::kSurfaces ? classification_.MaxLabel() : 1;
   auto sticks = Sticks::FromBlocks(dims_, y_begin, y_end, max_material, blocks);
   if (!sticks.ok()) return sticks.status();
   Scene s;

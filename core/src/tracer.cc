@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
+#include "transtick/isosurface.h"
 #include "transtick/traversal.h"
 
 namespace transtick {
@@ -65,6 +66,9 @@ Tracer::Tracer(const Scene& scene, const RenderSettings& settings, const Camera&
   light_world_ = Normalize(l);
   if (Length(light_world_) == 0) light_world_ = -camera.forward();
   light_index_ = light_world_ * inv_spacing_;
+  smooth_ = scene.mode() == RenderMode::kSurfaces &&
+            scene.classification().surface == SurfaceModel::kSmooth;
+  if (smooth_) bands_ = Bands(scene.classification());
   shadow_bias_ = 1.5 / Length(light_index_);
   const double min_spacing = std::min({sp[0], sp[1], sp[2]});
   // A step below the bound (CheckRenderSettings refuses it) is raised to it
@@ -190,6 +194,9 @@ absl::Status Tracer::Validate(const RayDescriptor& r) const {
   if (scene_.mode() == RenderMode::kSurfaces && r.material > materials) {
     return bad("material ", int{r.material}, " of ", materials);
   }
+  if (r.band != RayDescriptor::kNoBand && (!smooth_ || r.band >= bands_.size())) {
+    return bad("band ", r.band, smooth_ ? absl::StrCat(" of ", bands_.size()) : " without smooth surfaces");
+  }
   if (!(r.transmittance >= 0 && r.transmittance <= 1)) {
     return bad("transmittance ", r.transmittance, " outside [0, 1]");
   }
@@ -251,9 +258,52 @@ TRANSTICK_INLINE std::optional<Tracer::Step> Tracer::Walk(Walker& w, Outcome* ou
   return Step{*seg, cell};
 }
 
+bool Tracer::Shade(RayDescriptor& ray, uint8_t m, const Vec3& p, const Vec3& view,
+                   const std::array<int32_t, 3>& shadow_cell, double shadow_t,
+                   uint16_t shadow_band, uint8_t shadow_material,
+                   std::vector<RayDescriptor>& spawned, TraceCounters& counters) const {
+  ++counters.surface_hits;
+  const Material& mat = scene_.classification().materials[m - 1];
+  float diffuse, specular;
+  Light(Gradient(p), view, &diffuse, &specular, mat.shininess);
+  const float w = ray.transmittance * mat.opacity;
+  std::array<float, 3> direct;
+  for (int c = 0; c < 3; ++c) {
+    ray.color[c] += w * mat.ambient * mat.color[c];
+    direct[c] = w * (mat.diffuse * diffuse * mat.color[c] + mat.specular * specular);
+  }
+  const bool lit = direct[0] > 0 || direct[1] > 0 || direct[2] > 0;
+  if (lit && settings_.shadows && ray.spawned < UINT16_MAX) {
+    RayDescriptor s;
+    s.origin = p;
+    s.direction = light_index_;
+    s.t = shadow_t;
+    s.t_start = 0;
+    s.cell = shadow_cell;
+    s.pixel = ray.pixel;
+    s.kind = RayKind::kShadow;
+    s.material = shadow_material;
+    s.band = shadow_band;
+    s.color = direct;
+    s.transmittance = 1;
+    spawned.push_back(s);
+    ++ray.spawned;
+    ++counters.shadow;
+  } else if (lit) {
+    for (int c = 0; c < 3; ++c) ray.color[c] += direct[c];
+  }
+  ray.transmittance *= 1.0f - mat.opacity;
+  return ray.transmittance < settings_.min_transmittance;
+}
+
+uint16_t Tracer::BandAt(const Vec3& p, const std::array<int32_t, 3>& cell, uint8_t label) const {
+  const float value = label == Classification::kCandidate ? Sample(p)
+                                                          : scene_.Scalar(cell[0], cell[1], cell[2]);
+  return static_cast<uint16_t>(bands_.Of(value));
+}
+
 Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescriptor>& spawned,
                                       TraceCounters& counters) const {
-  const auto& materials = scene_.classification().materials;
   Walker walker = MakeWalker(ray);
   const Vec3 view = Normalize(-(ray.direction / inv_spacing_));
   Outcome outcome;
@@ -261,48 +311,65 @@ Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescrip
     const Segment& seg = step->seg;
     const std::array<int32_t, 3>& cell = step->cell;
     const uint8_t m = seg.material;
-    if (m != 0 && m != ray.material) {
-      ++counters.surface_hits;
-      const Material& mat = materials[m - 1];
-      const Vec3 p = ClampToCell(ray.origin + ray.direction * seg.t0, cell);
-      float diffuse, specular;
-      Light(Gradient(p), view, &diffuse, &specular, mat.shininess);
-      const float w = ray.transmittance * mat.opacity;
-      std::array<float, 3> direct;
-      for (int c = 0; c < 3; ++c) {
-        ray.color[c] += w * mat.ambient * mat.color[c];
-        direct[c] = w * (mat.diffuse * diffuse * mat.color[c] + mat.specular * specular);
-      }
-      const bool lit = direct[0] > 0 || direct[1] > 0 || direct[2] > 0;
-      if (lit && settings_.shadows && ray.spawned < UINT16_MAX) {
-        RayDescriptor s;
-        // Start a voxel and a half toward the light: a shadow ray from the
-        // face of a voxel-exact surface would otherwise hit the surface's own
-        // staircase (shadow acne). The start cell may lie in another slab or
-        // outside the volume; Trace then hands the ray on or finishes it.
-        s.origin = p;
-        s.direction = light_index_;
-        s.t = shadow_bias_;
-        s.t_start = 0;
-        for (int a = 0; a < 3; ++a) {
-          s.cell[a] = static_cast<int32_t>(std::floor(p[a] + light_index_[a] * shadow_bias_));
+    if (smooth_) {
+      // The ray's first segment, or a voxel whose material is not the
+      // band's (rounding at a crossing just before it): the band from the
+      // field here. Entering a material this way is a surface where the
+      // volume's faces clip it; its shadow ray starts at the same point, in
+      // that material (no root lies there to hit).
+      if (ray.band == RayDescriptor::kNoBand ||
+          (m != Classification::kCandidate && m != bands_.material(ray.band))) {
+        const Vec3 p = ClampToCell(ray.origin + ray.direction * seg.t0, cell);
+        ray.band = BandAt(p, cell, m);
+        const uint8_t n = bands_.material(ray.band);
+        if (n != 0 && n != ray.material &&
+            Shade(ray, n, p, view, cell, 0, ray.band, n, spawned, counters)) {
+          ray.material = n;
+          return walker.Stop(ray, Outcome::kFinished);
         }
-        s.pixel = ray.pixel;
-        s.kind = RayKind::kShadow;
-        s.material = m;
-        s.color = direct;
-        s.transmittance = 1;
-        spawned.push_back(s);
-        ++ray.spawned;
-        ++counters.shadow;
-      } else if (lit) {
-        for (int c = 0; c < 3; ++c) ray.color[c] += direct[c];
+        ray.material = n;
       }
-      ray.transmittance *= 1.0f - mat.opacity;
-      if (ray.transmittance < settings_.min_transmittance) {
-        ray.material = m;
-        return walker.Stop(ray, Outcome::kFinished);
+      if (m != Classification::kCandidate) continue;  // one band throughout
+      CrossingWalk walk(scene_, bands_, ray.origin, ray.direction, seg.t0, seg.t1, ray.band);
+      while (auto c = walk.Next()) {
+        const uint16_t before = ray.band;
+        const uint8_t n = bands_.material(c->band);
+        ray.band = static_cast<uint16_t>(c->band);
+        if (n != 0 && n != ray.material) {
+          // The exact hit, kept in the segment's column against rounding.
+          // Its shadow ray starts right there, on the side the ray came
+          // from (the lit side: Light turns the normal toward the viewer),
+          // in the band it came from: the walk leaves that band only by
+          // an edge's next root.
+          Vec3 p = ray.origin + ray.direction * c->t;
+          p.x = std::clamp(p.x, double(cell[0]), double(cell[0] + 1));
+          p.y = std::clamp(p.y, double(cell[1]), double(cell[1] + 1));
+          p.z = std::clamp(p.z, 0.0, double(scene_.dims()[2]));
+          const std::array<int32_t, 3> at = {cell[0], cell[1],
+                                             FloorClamped(p.z, 0, scene_.dims()[2] - 1)};
+          const bool finished = Shade(ray, n, p, view, at, 0, before, bands_.material(before),
+                                      spawned, counters);
+          ray.material = n;
+          if (finished) return walker.Stop(ray, Outcome::kFinished);
+        }
+        ray.material = n;
       }
+      continue;
+    }
+    if (m != 0 && m != ray.material) {
+      // Start a voxel and a half toward the light: a shadow ray from the
+      // face of a voxel-exact surface would otherwise hit the surface's own
+      // staircase (shadow acne). The start cell may lie in another slab or
+      // outside the volume; Trace then hands the ray on or finishes it.
+      const Vec3 p = ClampToCell(ray.origin + ray.direction * seg.t0, cell);
+      std::array<int32_t, 3> at;
+      for (int a = 0; a < 3; ++a) {
+        at[a] = static_cast<int32_t>(std::floor(p[a] + light_index_[a] * shadow_bias_));
+      }
+      const bool finished = Shade(ray, m, p, view, at, shadow_bias_, RayDescriptor::kNoBand, m,
+                                  spawned, counters);
+      ray.material = m;
+      if (finished) return walker.Stop(ray, Outcome::kFinished);
     }
     ray.material = m;
   }
@@ -311,17 +378,44 @@ Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescrip
 
 Tracer::Outcome Tracer::TraceShadow(RayDescriptor& ray, TraceCounters& counters) const {
   const auto& materials = scene_.classification().materials;
+  // Entering material n: true once the ray is dark enough to finish.
+  auto enter = [&](uint8_t n) {
+    ray.transmittance *= 1.0f - materials[n - 1].opacity;
+    if (ray.transmittance >= settings_.min_transmittance) return false;
+    ray.transmittance = 0;
+    return true;
+  };
   Walker walker = MakeWalker(ray);
   Outcome outcome;
   while (auto step = Walk(walker, &outcome, counters)) {
     const uint8_t m = step->seg.material;
-    if (m != 0 && m != ray.material) {
-      ray.transmittance *= 1.0f - materials[m - 1].opacity;
-      if (ray.transmittance < settings_.min_transmittance) {
-        ray.transmittance = 0;
-        ray.material = m;
-        return walker.Stop(ray, Outcome::kFinished);
+    if (smooth_) {
+      // As in TraceSurfaces.
+      if (ray.band == RayDescriptor::kNoBand ||
+          (m != Classification::kCandidate && m != bands_.material(ray.band))) {
+        const Vec3 p = ClampToCell(ray.origin + ray.direction * step->seg.t0, step->cell);
+        ray.band = BandAt(p, step->cell, m);
+        const uint8_t n = bands_.material(ray.band);
+        const bool dark = n != 0 && n != ray.material && enter(n);
+        ray.material = n;
+        if (dark) return walker.Stop(ray, Outcome::kFinished);
       }
+      if (m != Classification::kCandidate) continue;
+      CrossingWalk walk(scene_, bands_, ray.origin, ray.direction, step->seg.t0, step->seg.t1,
+                        ray.band);
+      while (auto c = walk.Next()) {
+        const uint8_t n = bands_.material(c->band);
+        ray.band = static_cast<uint16_t>(c->band);
+        const bool dark = n != 0 && n != ray.material && enter(n);
+        ray.material = n;
+        if (dark) return walker.Stop(ray, Outcome::kFinished);
+      }
+      continue;
+    }
+    if (m != 0 && m != ray.material) {
+      const bool dark = enter(m);
+      ray.material = m;
+      if (dark) return walker.Stop(ray, Outcome::kFinished);
     }
     ray.material = m;
   }

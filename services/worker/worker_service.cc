@@ -44,7 +44,7 @@ absl::StatusOr<std::shared_ptr<const Scene>> AssembleSlab(const v1::SlabHeader& 
     auto c = ToClassification(h.materials());
     if (!c.ok()) return c.status();
     classification = *std::move(c);
-    max_material = static_cast<int>(classification.materials.size());
+    max_material = classification.MaxLabel();
   }
   auto sticks = Sticks::FromBlocks(dims, h.y_begin(), h.y_end(), max_material, blocks);
   if (!sticks.ok()) return sticks.status();

@@ -27,12 +27,33 @@ struct Material {
   float shininess = 24.0f;
 };
 
+// Where a material's surface lies (docs/design.md, "Smooth surfaces").
+enum class SurfaceModel : uint8_t {
+  // The isosurface of the trilinear field at the interval's edges, hit
+  // exactly: the default.
+  kSmooth,
+  // The paper's: the faces of the voxels whose value lies in the interval.
+  kVoxel,
+};
+// "smooth" or "voxel".
+const char* SurfaceModelName(SurfaceModel model);
+
 // Material id 0 is void; material i (1-based) is materials[i - 1]. When
 // intervals overlap, the first listed wins. Immutable after Validate():
 // thread-safe for concurrent reads.
 struct Classification {
-  static constexpr int kMaxMaterials = 254;  // 255 marks mixed bricks
+  // 255 marks mixed bricks, and smooth-surface candidates in sticks.
+  static constexpr int kMaxMaterials = 254;
+  // The label of a voxel where a smooth surface may lie (SurfaceCandidates
+  // in scene.h), in place of its material.
+  static constexpr uint8_t kCandidate = 255;
   std::vector<Material> materials;
+  SurfaceModel surface = SurfaceModel::kSmooth;
+
+  // The largest label a voxel of this classification's sticks may carry.
+  int MaxLabel() const {
+    return surface == SurfaceModel::kSmooth ? kCandidate : static_cast<int>(materials.size());
+  }
 
   // Checks intervals (min < max, finite), colours and coefficients in range,
   // opacity in [0, 1], at most kMaxMaterials, names non-empty.
@@ -44,6 +65,29 @@ struct Classification {
     }
     return 0;
   }
+};
+
+// The value line cut at every interval edge of a classification: band i
+// holds the values v with exactly i edges <= v, so band 0 is (-inf, e_0),
+// band i is [e_(i-1), e_i) and the last is [e_last, inf). Classify is
+// constant on a band; a ray moving through the field changes band exactly
+// where the field crosses an edge. Immutable, thread-safe.
+class Bands {
+ public:
+  Bands() = default;
+  explicit Bands(const Classification& classification);
+
+  int Of(float value) const;  // NaN gives band 0
+  int size() const { return static_cast<int>(materials_.size()); }
+  uint8_t material(int band) const { return materials_[band]; }
+  const std::vector<float>& edges() const { return edges_; }
+  // The band a crossing of edge i enters: i + 1 going up, i going down.
+  static int Above(int edge) { return edge + 1; }
+  static int Below(int edge) { return edge; }
+
+ private:
+  std::vector<float> edges_;       // sorted, distinct
+  std::vector<uint8_t> materials_;  // by band
 };
 
 // A piecewise-linear map from scalar value to RGBA. Opacity is per unit of

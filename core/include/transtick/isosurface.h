@@ -18,6 +18,7 @@
 #include <array>
 #include <optional>
 
+#include "transtick/classification.h"
 #include "transtick/scene.h"
 #include "transtick/vec.h"
 
@@ -41,6 +42,13 @@ RayCubic CellCubic(const CellCorners& corners, const std::array<double, 3>& o,
 // The trilinear interpolant of `corners` at `p` (cell coordinates).
 double Trilinear(const CellCorners& corners, const std::array<double, 3>& p);
 
+// The trilinear field of `scene`'s scalars at index-space point p, in
+// double: samples at voxel centres, indices clamped at the faces (what
+// Tracer::Sample reads, without its float rounding, and what the cubics
+// describe). A reference for tests and benchmarks.
+// REQUIRES: the planes around p are stored.
+double FieldAt(const Scene& scene, const Vec3& p);
+
 // The first t in [t_begin, t_end] where the cubic is zero or changes sign,
 // or none. A root exactly at t_begin counts (a ray that starts on the
 // surface); a double root that only touches zero counts only where a
@@ -48,16 +56,84 @@ double Trilinear(const CellCorners& corners, const std::array<double, 3>& p);
 // is within 1e-9 of the interval's length of the root.
 std::optional<double> FirstRoot(const RayCubic& g, double t_begin, double t_end);
 
-// The first t in [t_begin, t_end] where the trilinear field of `scene`'s
-// scalars (samples at voxel centres, index space, as Tracer::Sample reads
-// them, clamped at the volume's faces) along origin + t dir meets `iso`.
-// The ray is cut at the planes between voxel centres into the cells of
-// that field, and each piece is solved by FirstRoot in order. Each piece's
-// root depends only on the ray and the cell's eight samples.
-// REQUIRES: the scalar planes the pieces touch are stored in `scene` (a
-// slab's own planes and its ghost planes).
-std::optional<double> FirstCrossing(const Scene& scene, const Vec3& origin, const Vec3& dir,
-                                    double t_begin, double t_end, double iso);
+// Where a ray's field changes band (classification.h, Bands): at t the
+// field crosses an interval edge and the ray enters `band`.
+struct Crossing {
+  double t;
+  int band;
+};
+
+// The crossings a ray meets in [t0, t1), in order, as the band it is in
+// changes: from band b the next crossing is the first root, at or after
+// where the ray is, of edge b - 1 going down or edge b going up (a value
+// exactly on an edge belongs to the band above, as in Bands::Of). The walk
+// goes through the cells of the field (corners at voxel centres, clamped at
+// the volume's faces, as Tracer::Sample reads it) that the ray crosses.
+//
+// Each cell's roots are those of its cubic over the cell's whole span
+// [t_in, t_out] along the ray, split at the cubic's extrema and refined by
+// FirstRoot's method: a function of the ray and the cell's eight samples
+// only, the same for every node and every segment that touches the cell.
+// So the crossings a ray meets do not depend on how its walk is cut into
+// segments or slabs, as long as each piece starts in the band the last
+// ended in.
+//
+//   CrossingWalk walk(scene, bands, origin, dir, t0, t1, band);
+//   while (auto c = walk.Next()) { ... c->t, c->band ... }
+//
+// A value type made per segment on the stack. Not thread-safe; the scene
+// and bands must outlive it.
+// REQUIRES: the scalar planes the cells touch are stored in `scene` (a
+// slab's own planes and one ghost plane each side), band < bands.size().
+class CrossingWalk {
+ public:
+  CrossingWalk(const Scene& scene, const Bands& bands, const Vec3& origin, const Vec3& dir,
+               double t0, double t1, int band);
+
+  std::optional<Crossing> Next();
+
+ private:
+  // The roots of one edge in the current cell, in increasing t.
+  struct EdgeRoots {
+    int edge = -1;
+    int count = 0;
+    double t[3];
+    bool up[3];
+  };
+  bool EnterCell();    // sets up the current cell; false when the walk is done
+  bool AdvanceCell();  // to the next cell; false when the walk is done
+  const EdgeRoots& Roots(int edge);
+  // The first root of `edge` going `up` at or after t_, past the root just
+  // taken when it is this edge's.
+  std::optional<std::pair<double, int>> Candidate(int edge, bool up);
+
+  const Scene* scene_;
+  const Bands* bands_;
+  Vec3 origin_;
+  std::array<double, 3> dir_;
+  std::array<double, 3> inv_;  // 1 / dir_, 0 where the ray does not move
+  std::array<int, 3> step_;
+  double t1_;
+  int max_cells_;
+  int cells_ = 0;
+  bool done_ = false;
+  int band_;
+  double t_;               // where the ray is: crossings before it are behind
+  int last_edge_ = -1;     // the edge of the crossing just taken, in this cell
+  int last_index_ = -1;    // and its index among that edge's roots
+  // The current cell.
+  std::array<int, 3> base_;
+  double t_in_ = 0, t_out_ = 0, hi_ = 0;  // its span, and the end of its part in [t0, t1)
+  int exit_axis_ = -1;
+  float lo_value_ = 0, hi_value_ = 0;  // its corners' least and greatest value
+  bool solved_ = false;                // the cubic below is set
+  RayCubic cubic_;                     // the field along the ray, s = t - t_in
+  int splits_ = 0;
+  double at_[4];     // the ends of the monotonic pieces, in s
+  double value_[4];  // the field there
+  CellCorners corners_;
+  EdgeRoots cache_[2];
+};
 
 }  // namespace transtick
 

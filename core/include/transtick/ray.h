@@ -37,6 +37,10 @@ struct RayDescriptor {
   // surface's opacity) and the transmittance toward the light so far.
   std::array<float, 3> color = {0, 0, 0};
   float transmittance = 1;
+  // Smooth surfaces: the band of the field (classification.h, Bands) the
+  // ray is in, or kNoBand until its first segment tells.
+  static constexpr uint16_t kNoBand = 0xFFFF;
+  uint16_t band = kNoBand;
 };
 
 // What a finished ray leaves in its pixel. Every ray ends in exactly one

@@ -13,7 +13,7 @@
 
 namespace transtick {
 
-inline constexpr size_t kRayRecordBytes = 104;
+inline constexpr size_t kRayRecordBytes = 106;
 inline constexpr size_t kDepositRecordBytes = 20;
 
 void AppendRay(const RayDescriptor& ray, std::string* out);

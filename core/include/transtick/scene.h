@@ -140,6 +140,24 @@ class Scene {
                     x];
   }
 
+  // The scalars at the eight voxels (x + i, y + j, z + k), i, j, k in
+  // {0, 1}, indexed i + 2j + 4k, each clamped as Scalar does.
+  // REQUIRES: the clamped planes are stored.
+  void Corners(int x, int y, int z, float out[8]) const {
+    const int nx = dims_[0];
+    if (x >= 0 && x + 1 < nx && y >= scalar_y_begin_ && y + 1 < scalar_y_begin_ + scalar_planes_ &&
+        z >= 0 && z + 1 < dims_[2]) {
+      const size_t row = static_cast<size_t>(nx), plane = row * scalar_planes_;
+      const float* p = scalars_.data() + (z * static_cast<size_t>(scalar_planes_) +
+                                          (y - scalar_y_begin_)) * row + x;
+      out[0] = p[0], out[1] = p[1], out[2] = p[row], out[3] = p[row + 1];
+      p += plane;
+      out[4] = p[0], out[5] = p[1], out[6] = p[row], out[7] = p[row + 1];
+      return;
+    }
+    for (int k = 0; k < 8; ++k) out[k] = Scalar(x + (k & 1), y + ((k >> 1) & 1), z + (k >> 2));
+  }
+
   // Bytes held: sticks, scalars and the brick map.
   size_t MemoryBytes() const;
 
@@ -164,12 +182,14 @@ std::vector<uint8_t> DvrVisibility(const Volume& volume, const TransferFunction&
 
 // 1 for each voxel inside which the trilinear field of the samples (at
 // voxel centres) may take values of two materials of `classification`,
-// else 0: the voxels where a smooth surface can lie. Inside voxel v the
-// field is a convex combination of the samples of v's 3x3x3 neighbourhood
-// (clamped at the faces), so its values lie in that neighbourhood's
-// [min, max]; Classify is constant there unless an interval edge e has
-// min < e <= max. A voxel labelled 0 therefore holds no surface, and no
-// root can be missed by skipping it.
+// else 0: the voxels where a smooth surface can lie. Classify is constant
+// on the values between two interval edges, so a voxel holds a surface
+// only if the field's range inside it, [lo, hi], has an edge e with
+// lo < e <= hi. The range is computed exactly (the field is trilinear on
+// each eighth of the voxel, so its extremes are among 27 points) and
+// widened by far more than its rounding. A voxel labelled 0 therefore
+// holds no surface, and no root can be missed by skipping it
+// (docs/design.md, "Smooth surfaces").
 std::vector<uint8_t> SurfaceCandidates(const Volume& volume, const Classification& classification);
 
 }  // namespace transtick

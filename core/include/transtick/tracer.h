@@ -11,6 +11,7 @@
 
 #include "absl/status/status.h"
 #include "transtick/camera.h"
+#include "transtick/classification.h"
 #include "transtick/ray.h"
 #include "transtick/scene.h"
 #include "transtick/traversal.h"
@@ -142,6 +143,19 @@ class Tracer {
 
   Outcome TraceSurfaces(RayDescriptor& ray, std::vector<RayDescriptor>& spawned,
                         TraceCounters& counters) const;
+  // Shades the surface of material m that `ray` meets at point p (index
+  // space) and spawns its shadow ray, which starts at (shadow_cell,
+  // shadow_t) on the line p + t * light, in `shadow_band` with material
+  // `shadow_material`. Returns true when the ray has become opaque enough
+  // to finish.
+  bool Shade(RayDescriptor& ray, uint8_t m, const Vec3& p, const Vec3& view,
+             const std::array<int32_t, 3>& shadow_cell, double shadow_t, uint16_t shadow_band,
+             uint8_t shadow_material, std::vector<RayDescriptor>& spawned,
+             TraceCounters& counters) const;
+  // Smooth surfaces: the band at a point of a segment in `cell`, for a
+  // ray that has none yet. In a candidate voxel the field's own value;
+  // elsewhere the voxel's, which its whole voxel shares.
+  uint16_t BandAt(const Vec3& p, const std::array<int32_t, 3>& cell, uint8_t label) const;
   Outcome TraceShadow(RayDescriptor& ray, TraceCounters& counters) const;
   Outcome TraceDvr(RayDescriptor& ray, TraceCounters& counters) const;
 
@@ -156,6 +170,8 @@ class Tracer {
 
   const Scene& scene_;
   RenderSettings settings_;
+  bool smooth_ = false;  // smooth surfaces (SurfaceModel::kSmooth)
+  Bands bands_;
   Vec3 light_world_;        // unit, toward the light
   Vec3 light_index_;        // light_world_ / spacing
   double shadow_bias_ = 0;  // t at which shadow rays start: 1.5 voxels out
