@@ -266,6 +266,10 @@ absl::StatusOr<CameraSpec> ToCameraSpec(const v1::View& v) {
   if (!(v.step() >= 0) || !std::isfinite(v.step())) {
     return absl::InvalidArgumentError("step must be a non-negative number");
   }
+  if (v.has_samples() && (v.samples() < 1 || v.samples() > kMaxSamplesPerPixel)) {
+    return absl::InvalidArgumentError(absl::StrCat("samples ", v.samples(), " must be in [1, ",
+                                                   kMaxSamplesPerPixel, "]"));
+  }
   // Camera::Create checks sizes, zoom, fov and the explicit view.
   if (auto cam = Camera::Create(c, Vec3{1, 1, 1}); !cam.ok()) return cam.status();
   return c;
@@ -299,6 +303,7 @@ RenderSettings ToRenderSettings(const v1::View& v) {
   s.shadows = !v.has_shadows() || v.shadows();
   for (int c = 0; c < v.background_size() && c < 3; ++c) s.background[c] = v.background(c);
   s.step = v.step();
+  s.samples = v.has_samples() ? v.samples() : 1;
   return s;
 }
 

@@ -61,6 +61,8 @@ render options:
   --eye X,Y,Z --target X,Y,Z [--up X,Y,Z]  explicit view (world units, volume centred at 0)
   --size WxH             image size, at most 8192x8192 (default 400x400)
   --shadows on|off       shadow rays in surfaces mode (default on)
+  --samples N            primary rays per pixel, 1-64, at a fixed stratified pattern
+                         (anti-aliasing; default 1)
   --background R,G,B     background colour in [0, 1] (default 0,0,0)
   --step S               dvr sample step in world units (default half the smallest spacing)
   --local N              render on an embedded cluster of N workers (default: one per
@@ -206,6 +208,11 @@ absl::StatusOr<v1::View> ViewFromFlags(const Flags& flags) {
   auto shadows = flags.GetOnOff("shadows", true);
   if (!shadows.ok()) return shadows.status();
   v.set_shadows(*shadows);
+  if (flags.Has("samples")) {
+    auto samples = flags.GetInt("samples", 1);
+    if (!samples.ok()) return samples.status();
+    v.set_samples(*samples);
+  }
   if (flags.Has("background")) {
     auto bg = flags.GetTriple("background");
     if (!bg.ok()) return bg.status();
@@ -352,7 +359,7 @@ int Render(int argc, char** argv) {
   for (const char* f :
        {"materials",  "transfer",   "mode",  "azimuth", "elevation",    "zoom",
         "projection", "fov",        "eye",   "target",  "up",           "size",
-        "shadows",    "background", "step",  "threads", "out",          "stats", "surface",
+        "shadows",    "background", "step",  "threads", "out",          "stats", "surface", "samples",
         "local",      "root",       "rings", "balance", "balance-grid", "balance-rule"}) {
     known.insert(f);
   }

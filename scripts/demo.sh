@@ -20,5 +20,5 @@ mkdir -p out
 build=${TRANSTICK_BUILD_DIR:-build}
 "$build/cli/transtick" render --volume "$den" --materials examples/brain_materials.json \
   --eye=-250,-100,-60 --target 0,0,0 --up 0,-1,0 --zoom 1.6 --size 400x400 --shadows on \
-  --out out/brain.png --stats out/brain.json
+  --samples 4 --out out/brain.png --stats out/brain.json
 echo "demo: wrote out/brain.png and out/brain.json"

@@ -365,6 +365,42 @@ TEST(FramebufferTest, CompletesPixelsInAnyOrder) {
   EXPECT_EQ(img.rgb[4], 0.625f);
 }
 
+// With N samples a pixel completes after N primaries and every shadow ray
+// they announce, in any order, and resolves to their mean.
+TEST(FramebufferTest, APixelOfSamplesCompletesAfterAllOfThem) {
+  Framebuffer fb(1, 1, 3);
+  EXPECT_FALSE(fb.Add(Deposit{0, RayKind::kPrimary, 1, {0.3f, 0, 0}}));
+  EXPECT_FALSE(fb.Add(Deposit{0, RayKind::kPrimary, 0, {0.3f, 0, 0}}));
+  EXPECT_FALSE(fb.Add(Deposit{0, RayKind::kShadow, 0, {0.3f, 0, 0}}));
+  EXPECT_FALSE(fb.Complete());
+  EXPECT_TRUE(fb.Add(Deposit{0, RayKind::kPrimary, 0, {0.3f, 0.6f, 0}}));
+  EXPECT_NEAR(fb.Resolve().rgb[0], 0.4f, 1e-6);
+  EXPECT_NEAR(fb.Resolve().rgb[1], 0.2f, 1e-6);
+  // Cleared for one sample, the same memory completes on one primary.
+  fb.Clear(1);
+  EXPECT_TRUE(fb.Add(Deposit{0, RayKind::kPrimary, 0, {0.5f, 0, 0}}));
+  EXPECT_EQ(fb.Resolve().rgb[0], 0.5f);
+}
+
+// The stratified pattern: every offset inside the pixel, distinct, and
+// evenly spread (each of N columns holds one sample, or a grid for squares).
+TEST(CameraTest, SampleOffsetsAreStratified) {
+  EXPECT_EQ(SampleOffset(0, 1), (std::array<double, 2>{0.5, 0.5}));
+  for (int n = 1; n <= kMaxSamplesPerPixel; ++n) {
+    std::vector<int> columns(n, 0);
+    for (int s = 0; s < n; ++s) {
+      const auto [x, y] = SampleOffset(s, n);
+      ASSERT_TRUE(x > 0 && x < 1 && y > 0 && y < 1) << s << " of " << n;
+      ++columns[static_cast<int>(x * n)];
+      for (int t = 0; t < s; ++t) ASSERT_NE(SampleOffset(t, n), SampleOffset(s, n)) << n;
+    }
+    const int side = static_cast<int>(std::lround(std::sqrt(n)));
+    if (side * side != n) {
+      for (int c : columns) ASSERT_EQ(c, 1) << n;
+    }
+  }
+}
+
 // Deposits no renderer sends, as a hostile peer may (found by batch_fuzzer):
 // a pixel completed twice made complete_pixels() reach the image's size with
 // pixel 1 never deposited, and colours beyond 2^31 overflowed the int64 sums

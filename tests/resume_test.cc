@@ -102,6 +102,26 @@ TEST(ResumeTest, SmoothAndVoxelSurfacesDiffer) {
   EXPECT_GT(differ, a.rgb.size() / 20);
 }
 
+// Several primary rays per pixel, each its own descriptor, across every
+// cut: the same bits as the single scene, with and without shadows.
+TEST(ResumeTest, SamplesPerPixelAcrossSlabsAreBitIdentical) {
+  const Scene scene = PhantomSurfaces({40, 34, 38});
+  const int ny = scene.dims()[1];
+  for (int samples : {2, 4, 5}) {
+    for (bool shadows : {true, false}) {
+      RenderSettings settings;
+      settings.samples = samples;
+      settings.shadows = shadows;
+      const Camera cam = MakeCamera(scene.dims(), 40, 35, 25);
+      const Image whole = RenderWhole(scene, cam, settings);
+      for (const std::vector<int>& cuts : {std::vector<int>{ny / 2}, {5, 11, 19, 30}}) {
+        ASSERT_EQ(whole.rgb, RenderSlabs(scene, cuts, cam, settings).rgb)
+            << samples << " samples, shadows " << shadows << ", " << cuts.size() + 1 << " slabs";
+      }
+    }
+  }
+}
+
 TEST(ResumeTest, DvrAcrossSlabsIsBitIdentical) {
   ExpectSlabsMatch(PhantomDvr({40, 34, 38}), {{0, 0}, {45, 20}, {0, 90}, {120, -60}}, 48);
 }

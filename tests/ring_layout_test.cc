@@ -140,14 +140,19 @@ TEST(RingLayoutTest, EveryPixelIsTakenCareOfExactlyOnce) {
         const RingLayout layout(RandomCuts(rng, kDims[1]), kDims, spacing, camera);
         for (int row = 0; row < camera.height(); ++row) {
           for (int col = 0; col < camera.width(); ++col) {
+            // The pixel's centre, or (on odd pixels) the last of three
+            // samples, off the centre: a footprint holds every sample.
+            const int samples = (row + col) % 2 ? 3 : 1, sample = samples - 1;
+            const auto [ox, oy] = SampleOffset(sample, samples);
             RayDescriptor want;
             const uint32_t pixel = static_cast<uint32_t>(row) * camera.width() + col;
-            const bool hits = tracer.MakePrimary(camera.Generate(col, row), pixel, &want);
+            const bool hits =
+                tracer.MakePrimary(camera.GenerateAt(col, row, ox, oy), pixel, &want);
             int tracers = 0, missers = 0, in_footprints = 0;
             for (int i = 0; i < layout.slabs(); ++i) {
               in_footprints += layout.Footprint(i).Contains(col, row);
               RayDescriptor ray;
-              switch (layout.Primary(i, col, row, tracer, &ray)) {
+              switch (layout.Primary(i, col, row, sample, samples, tracer, &ray)) {
                 case PrimaryRole::kTrace:
                   ++tracers;
                   EXPECT_EQ(i, layout.SlabOf(want.cell[1]));

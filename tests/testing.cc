@@ -44,20 +44,23 @@ Image RenderSlabs(const Scene& whole, const std::vector<int>& cuts, const Camera
   for (size_t i = 0; i + 1 < bounds.size(); ++i)
     slabs.push_back(whole.Slab(bounds[i], bounds[i + 1]));
   for (const Scene& s : slabs) tracers.emplace_back(s, settings, camera);
-  Framebuffer fb(camera.width(), camera.height());
+  Framebuffer fb(camera.width(), camera.height(), settings.samples);
   std::vector<std::deque<RayDescriptor>> queues(slabs.size());
   TraceCounters counters;
   // Each slab makes its own primary rays by the rule the workers use
   // (RingLayout::Primary): only for the pixels of its footprint, keeping
   // the rays that enter the volume in its slab; each miss is deposited by
-  // one slab. Every pixel must be taken care of exactly once.
+  // one slab. Every sample of every pixel must be taken care of exactly
+  // once.
+  const int samples = settings.samples;
   std::vector<int> taken(static_cast<size_t>(camera.width()) * camera.height(), 0);
   for (int i = 0; i < layout.slabs(); ++i) {
     for (int py = 0; py < camera.height(); ++py) {
       for (int px = 0; px < camera.width(); ++px) {
+       for (int s = 0; s < samples; ++s) {
         const uint32_t pixel = static_cast<uint32_t>(py) * camera.width() + px;
         RayDescriptor ray;
-        switch (layout.Primary(i, px, py, tracers[i], &ray)) {
+        switch (layout.Primary(i, px, py, s, samples, tracers[i], &ray)) {
           case RingLayout::PrimaryRole::kTrace:
             EXPECT_EQ(layout.SlabOf(ray.cell[1]), i);
             EXPECT_EQ(ray.pixel, pixel);
@@ -71,11 +74,12 @@ Image RenderSlabs(const Scene& whole, const std::vector<int>& cuts, const Camera
           case RingLayout::PrimaryRole::kNone:
             break;
         }
+       }
       }
     }
   }
   for (size_t p = 0; p < taken.size(); ++p) {
-    EXPECT_EQ(taken[p], 1) << "pixel " << p % camera.width() << "," << p / camera.width();
+    EXPECT_EQ(taken[p], samples) << "pixel " << p % camera.width() << "," << p / camera.width();
   }
   uint64_t moved = 0;
   std::vector<RayDescriptor> spawned;

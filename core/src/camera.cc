@@ -75,10 +75,20 @@ absl::StatusOr<Camera> Camera::Create(const CameraSpec& spec, const Vec3& volume
   return c;
 }
 
-WorldRay Camera::Generate(int px, int py) const {
+std::array<double, 2> SampleOffset(int sample, int samples) {
+  if (samples <= 1) return {0.5, 0.5};
+  const int side = static_cast<int>(std::lround(std::sqrt(static_cast<double>(samples))));
+  if (side * side == samples) {
+    return {(sample % side + 0.5) / side, (sample / side + 0.5) / side};
+  }
+  const double y = 0.5 + sample * 0.6180339887498949;
+  return {(sample + 0.5) / samples, y - std::floor(y)};
+}
+
+WorldRay Camera::GenerateAt(int px, int py, double ox, double oy) const {
   const double aspect = static_cast<double>(width_) / height_;
-  const double sx = (2.0 * (px + 0.5) / width_ - 1.0) * aspect * half_height_;
-  const double sy = (1.0 - 2.0 * (py + 0.5) / height_) * half_height_;
+  const double sx = (2.0 * (px + ox) / width_ - 1.0) * aspect * half_height_;
+  const double sy = (1.0 - 2.0 * (py + oy) / height_) * half_height_;
   if (projection_ == Projection::kPerspective) {
     return {eye_, Normalize(forward_ + right_ * sx + up_ * sy)};
   }

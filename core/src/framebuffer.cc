@@ -37,12 +37,14 @@ inline int32_t WrappingAdd(int32_t a, int32_t b) {
 
 }  // namespace
 
-Framebuffer::Framebuffer(int width, int height)
+Framebuffer::Framebuffer(int width, int height, int samples)
     : width_(width),
       height_(height),
+      samples_(samples),
       pixels_(static_cast<size_t>(width) * height, Pixel{{0, 0, 0}, 0, 0, 0}) {}
 
-void Framebuffer::Clear() {
+void Framebuffer::Clear(int samples) {
+  samples_ = samples;
   std::fill(pixels_.begin(), pixels_.end(), Pixel{{0, 0, 0}, 0, 0, 0});
   complete_.store(0, std::memory_order_relaxed);
 }
@@ -52,7 +54,7 @@ bool Framebuffer::Add(const Deposit& d) {
   Pixel& p = pixels_[d.pixel];
   for (int c = 0; c < 3; ++c) p.sum[c] = WrappingAdd(p.sum[c], ToFixed(d.color[c]));
   if (d.kind == RayKind::kPrimary) {
-    p.primary_seen = 1;
+    if (p.primary_seen < 255) ++p.primary_seen;
     p.owed = WrappingAdd(p.owed, int32_t{d.spawned});
   } else {
     p.owed = WrappingAdd(p.owed, int32_t{-1});
@@ -60,7 +62,7 @@ bool Framebuffer::Add(const Deposit& d) {
   // A pixel is counted once: deposits after its last one (which no
   // renderer sends) must not count it again, or complete_pixels() could
   // reach the image's size with pixels still missing.
-  if (p.primary_seen && p.owed == 0 && !p.counted) {
+  if (p.primary_seen == samples_ && p.owed == 0 && !p.counted) {
     p.counted = 1;
     complete_.fetch_add(1, std::memory_order_relaxed);
     return true;
@@ -83,8 +85,10 @@ void Framebuffer::ResolveRows(int row_begin, int row_end, float* rgb) const {
   TRANSTICK_DCHECK_LE(row_end, height_);
   const size_t begin = static_cast<size_t>(row_begin) * width_;
   const size_t end = static_cast<size_t>(row_end) * width_;
+  // The mean of the samples; one sample is its sum as it stands.
+  const double scale = kScale * samples_;
   for (size_t i = begin; i < end; ++i) {
-    for (int c = 0; c < 3; ++c) *rgb++ = static_cast<float>(pixels_[i].sum[c] / kScale);
+    for (int c = 0; c < 3; ++c) *rgb++ = static_cast<float>(pixels_[i].sum[c] / scale);
   }
 }
 

@@ -44,7 +44,7 @@ int SlopeRoots(const RayCubic& g, double lo, double hi, double out[2]) {
 // stalls, for at most 64 steps (bisection alone halves 2^-64 of the
 // interval's length).
 double Refine(const RayCubic& g, double lo, double glo, double hi, double ghi) {
-  const double tolerance = (hi - lo) * 1e-12;
+  const double tolerance = (hi - lo) * 1e-10;
   int side = 0;
   for (int step = 0; step < 64 && hi - lo > tolerance; ++step) {
     double t = lo - glo * (hi - lo) / (ghi - glo);
@@ -185,18 +185,51 @@ bool CrossingWalk::EnterCell() {
       lo_value_ = *mn;
       hi_value_ = *mx;
       hi_ = hi;
+      loaded_ = true;
       solved_ = false;
       cache_[0].edge = cache_[1].edge = -1;
       last_edge_ = -1;
       return true;
     }
-    if (t_out >= t1_) return false;
+    loaded_ = false;
+    if (t_out >= t1_) {
+      at_end_ = true;
+      return false;
+    }
     base_[exit_axis] += step_[exit_axis];
   }
 }
 
+void CrossingWalk::Extend(double new_t1) {
+  if (!(new_t1 > t1_)) return;
+  const double old_t1 = t1_;
+  t1_ = new_t1;
+  const double moves = (new_t1 - old_t1) * (std::abs(dir_[0]) + std::abs(dir_[1]) + std::abs(dir_[2]));
+  max_cells_ += 4 + static_cast<int>(std::min(moves, 1e7));
+  if (!done_) {
+    hi_ = std::min(t_out_, t1_);
+  } else if (at_end_) {
+    done_ = false;
+    at_end_ = false;
+    if (loaded_ && old_t1 < t_out_) {
+      // The current cell goes on into the new part: its roots up to the
+      // new end become eligible.
+      hi_ = std::min(t_out_, t1_);
+    } else if (loaded_) {
+      done_ = !AdvanceCell();
+    } else {
+      --cells_;  // the same cell again, now with a part before the new end
+      done_ = !EnterCell();
+    }
+  }
+}
+
 bool CrossingWalk::AdvanceCell() {
-  if (t_out_ >= t1_) return false;
+  if (t_out_ >= t1_) {
+    at_end_ = true;
+    return false;
+  }
+  loaded_ = false;
   base_[exit_axis_] += step_[exit_axis_];
   return EnterCell();
 }

@@ -14,22 +14,26 @@ void TraceRows(const Tracer& tracer, const Camera& camera, int row_begin, int ro
   std::vector<RayDescriptor> pending;
   Deposit deposit;
   const int width = camera.width();
+  const int samples = fb.samples();
   for (int py = row_begin; py < row_end; ++py) {
     for (int px = 0; px < width; ++px) {
       const uint32_t pixel = static_cast<uint32_t>(py) * width + px;
-      RayDescriptor ray;
-      if (!tracer.MakePrimary(camera.Generate(px, py), pixel, &ray)) {
-        fb.Add(tracer.MissDeposit(pixel));
-        continue;
-      }
-      ++counters.primary;
-      pending.push_back(ray);
-      while (!pending.empty()) {
-        RayDescriptor r = pending.back();
-        pending.pop_back();
-        // A whole-volume scene has no slab planes: every ray finishes here.
-        tracer.Trace(r, pending, deposit, counters);
-        fb.Add(deposit);
+      for (int s = 0; s < samples; ++s) {
+        const auto [ox, oy] = SampleOffset(s, samples);
+        RayDescriptor ray;
+        if (!tracer.MakePrimary(camera.GenerateAt(px, py, ox, oy), pixel, &ray)) {
+          fb.Add(tracer.MissDeposit(pixel));
+          continue;
+        }
+        ++counters.primary;
+        pending.push_back(ray);
+        while (!pending.empty()) {
+          RayDescriptor r = pending.back();
+          pending.pop_back();
+          // A whole-volume scene has no slab planes: every ray finishes here.
+          tracer.Trace(r, pending, deposit, counters);
+          fb.Add(deposit);
+        }
       }
     }
   }
@@ -49,7 +53,7 @@ absl::StatusOr<Image> RenderLocal(const Scene& scene, const Camera& camera,
   if (threads <= 0) threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   const auto start = std::chrono::steady_clock::now();
   const Tracer tracer(scene, settings, camera);
-  Framebuffer fb(camera.width(), camera.height());
+  Framebuffer fb(camera.width(), camera.height(), settings.samples);
   constexpr int kRowsPerTask = 2;
   std::atomic<int> next_row{0};
   std::atomic<int> rows_done{0};

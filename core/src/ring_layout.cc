@@ -45,8 +45,8 @@ int RingLayout::MissSlab(int col, int row) const {
   return 0;
 }
 
-RingLayout::PrimaryRole RingLayout::Primary(int slab, int col, int row, const Tracer& tracer,
-                                            RayDescriptor* ray) const {
+RingLayout::PrimaryRole RingLayout::Primary(int slab, int col, int row, int sample, int samples,
+                                            const Tracer& tracer, RayDescriptor* ray) const {
   TRANSTICK_DCHECK(slab >= 0 && slab < slabs());
   if (!footprints_[slab].Contains(col, row)) {
     // The ray cannot enter this slab. Slab 0 deposits the miss of a pixel
@@ -55,7 +55,9 @@ RingLayout::PrimaryRole RingLayout::Primary(int slab, int col, int row, const Tr
     return slab == 0 && MissSlab(col, row) == 0 ? PrimaryRole::kMiss : PrimaryRole::kNone;
   }
   const uint32_t pixel = static_cast<uint32_t>(row) * camera_.width() + col;
-  if (!tracer.MakePrimary(camera_.Generate(col, row), pixel, ray)) {
+  // The footprints' margin of two pixels holds every sample of a pixel.
+  const auto [ox, oy] = SampleOffset(sample, samples);
+  if (!tracer.MakePrimary(camera_.GenerateAt(col, row, ox, oy), pixel, ray)) {
     return MissSlab(col, row) == slab ? PrimaryRole::kMiss : PrimaryRole::kNone;
   }
   // MakePrimary clamps the entry cell into the volume.

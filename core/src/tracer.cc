@@ -32,7 +32,12 @@ constexpr double kRebase = kFar / 1000;
 absl::Status CheckRenderSettings(const RenderSettings& settings, RenderMode mode,
                                  const std::array<int, 3>& dims,
                                  const std::array<double, 3>& spacing, int64_t pixels) {
+  if (settings.samples < 1 || settings.samples > kMaxSamplesPerPixel) {
+    return absl::InvalidArgumentError(absl::StrCat("samples ", settings.samples,
+                                                   " must be in [1, ", kMaxSamplesPerPixel, "]"));
+  }
   if (mode != RenderMode::kDvr) return absl::OkStatus();
+  pixels *= settings.samples;
   const double min_spacing = std::min({spacing[0], spacing[1], spacing[2]});
   if (!std::isfinite(settings.step) || settings.step < 0) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -296,6 +301,17 @@ bool Tracer::Shade(RayDescriptor& ray, uint8_t m, const Vec3& p, const Vec3& vie
   return ray.transmittance < settings_.min_transmittance;
 }
 
+void Tracer::CrossingsOf(std::optional<CrossingWalk>& walk, const RayDescriptor& ray,
+                  const Segment& seg) const {
+  // A candidate segment right after another goes on with the same walk:
+  // the cell across the plane between them keeps its roots.
+  if (walk && walk->t1() == seg.t0) {
+    walk->Extend(seg.t1);
+  } else {
+    walk.emplace(scene_, bands_, ray.origin, ray.direction, seg.t0, seg.t1, ray.band);
+  }
+}
+
 uint16_t Tracer::BandAt(const Vec3& p, const std::array<int32_t, 3>& cell, uint8_t label) const {
   const float value = label == Classification::kCandidate ? Sample(p)
                                                           : scene_.Scalar(cell[0], cell[1], cell[2]);
@@ -306,6 +322,7 @@ Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescrip
                                       TraceCounters& counters) const {
   Walker walker = MakeWalker(ray);
   const Vec3 view = Normalize(-(ray.direction / inv_spacing_));
+  std::optional<CrossingWalk> walk;  // through consecutive candidate segments
   Outcome outcome;
   while (auto step = Walk(walker, &outcome, counters)) {
     const Segment& seg = step->seg;
@@ -317,6 +334,7 @@ Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescrip
       // field here. Entering a material this way is a surface where the
       // volume's faces clip it; its shadow ray starts at the same point, in
       // that material (no root lies there to hit).
+      if (m != Classification::kCandidate) walk.reset();
       if (ray.band == RayDescriptor::kNoBand ||
           (m != Classification::kCandidate && m != bands_.material(ray.band))) {
         const Vec3 p = ClampToCell(ray.origin + ray.direction * seg.t0, cell);
@@ -330,8 +348,8 @@ Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescrip
         ray.material = n;
       }
       if (m != Classification::kCandidate) continue;  // one band throughout
-      CrossingWalk walk(scene_, bands_, ray.origin, ray.direction, seg.t0, seg.t1, ray.band);
-      while (auto c = walk.Next()) {
+      CrossingsOf(walk, ray, seg);
+      while (auto c = walk->Next()) {
         const uint16_t before = ray.band;
         const uint8_t n = bands_.material(c->band);
         ray.band = static_cast<uint16_t>(c->band);
@@ -386,11 +404,13 @@ Tracer::Outcome Tracer::TraceShadow(RayDescriptor& ray, TraceCounters& counters)
     return true;
   };
   Walker walker = MakeWalker(ray);
+  std::optional<CrossingWalk> walk;
   Outcome outcome;
   while (auto step = Walk(walker, &outcome, counters)) {
     const uint8_t m = step->seg.material;
     if (smooth_) {
       // As in TraceSurfaces.
+      if (m != Classification::kCandidate) walk.reset();
       if (ray.band == RayDescriptor::kNoBand ||
           (m != Classification::kCandidate && m != bands_.material(ray.band))) {
         const Vec3 p = ClampToCell(ray.origin + ray.direction * step->seg.t0, step->cell);
@@ -401,9 +421,8 @@ Tracer::Outcome Tracer::TraceShadow(RayDescriptor& ray, TraceCounters& counters)
         if (dark) return walker.Stop(ray, Outcome::kFinished);
       }
       if (m != Classification::kCandidate) continue;
-      CrossingWalk walk(scene_, bands_, ray.origin, ray.direction, step->seg.t0, step->seg.t1,
-                        ray.band);
-      while (auto c = walk.Next()) {
+      CrossingsOf(walk, ray, step->seg);
+      while (auto c = walk->Next()) {
         const uint8_t n = bands_.material(c->band);
         ray.band = static_cast<uint16_t>(c->band);
         const bool dark = n != 0 && n != ray.material && enter(n);

@@ -11,6 +11,7 @@
 #include "refused.h"
 #include "rpc_status.h"
 #include "security.h"
+#include "transtick/camera.h"
 #include "transtick/ray_codec.h"
 
 namespace transtick {
@@ -66,6 +67,11 @@ grpc::Status DisplayService::Begin(const v1::DisplayFrame& req) {
     return ToGrpc(absl::InvalidArgumentError(
         absl::StrCat("display: frame size ", req.width(), "x", req.height(), " is out of range")));
   }
+  const int samples = req.samples() == 0 ? 1 : req.samples();
+  if (samples < 1 || samples > kMaxSamplesPerPixel) {
+    return ToGrpc(absl::InvalidArgumentError(absl::StrCat(
+        "display: ", req.samples(), " samples per pixel, not in [1, ", kMaxSamplesPerPixel, "]")));
+  }
   const uint64_t bytes = Framebuffer::MemoryBytes(req.width(), req.height());
   std::shared_ptr<FrameState> evicted;
   std::string why;
@@ -112,13 +118,13 @@ grpc::Status DisplayService::Begin(const v1::DisplayFrame& req) {
     std::unique_ptr<Framebuffer> fb;
     if (spare_ && spare_->width() == req.width() && spare_->height() == req.height()) {
       fb = std::move(spare_);
-      fb->Clear();
+      fb->Clear(samples);
     } else {
       if (spare_ && open + bytes + Framebuffer::MemoryBytes(spare_->width(), spare_->height()) >
                         options_.max_bytes) {
         spare_.reset();
       }
-      fb = std::make_unique<Framebuffer>(req.width(), req.height());
+      fb = std::make_unique<Framebuffer>(req.width(), req.height(), samples);
     }
     frames_[req.frame_id()] = std::make_shared<FrameState>(req.frame_id(), std::move(fb));
   }

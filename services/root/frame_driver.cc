@@ -138,6 +138,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
   df.set_frame_id(frame_id);
   df.set_width(view.width());
   df.set_height(view.height());
+  df.set_samples(view.has_samples() ? view.samples() : 1);
   std::vector<grpc::Status> prepared = CallAll(
       members.size() + 1, kStartDeadline, [&](size_t i, grpc::ClientContext* ctx, auto done) {
         if (i == members.size()) {

@@ -402,6 +402,7 @@ Frame::Frame(const v1::FrameSpec& spec, std::shared_ptr<const Scene> scene, Came
       camera_(std::move(camera)),
       options_(options),
       tracer_(*scene_, settings, camera_),
+      samples_(settings.samples),
       pixel_limit_(static_cast<uint32_t>(camera_.width()) * camera_.height()),
       pixels_in_rows_(
           static_cast<int64_t>((spec.row_end() - spec.row_begin() + spec.row_step() - 1) /
@@ -562,16 +563,18 @@ bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>*
   for (int64_t k = k0; k < k1; ++k) {
     const int row = spec_.row_begin() + static_cast<int>(k / width) * spec_.row_step();
     const int col = static_cast<int>(k % width);
-    RayDescriptor ray;
-    switch (layout_.Primary(me, col, row, tracer_, &ray)) {
-      case RingLayout::PrimaryRole::kTrace:
-        out->push_back(ray);
-        break;
-      case RingLayout::PrimaryRole::kMiss:
-        misses->push_back(tracer_.MissDeposit(static_cast<uint32_t>(row) * width + col));
-        break;
-      case RingLayout::PrimaryRole::kNone:
-        break;
+    for (int s = 0; s < samples_; ++s) {
+      RayDescriptor ray;
+      switch (layout_.Primary(me, col, row, s, samples_, tracer_, &ray)) {
+        case RingLayout::PrimaryRole::kTrace:
+          out->push_back(ray);
+          break;
+        case RingLayout::PrimaryRole::kMiss:
+          misses->push_back(tracer_.MissDeposit(static_cast<uint32_t>(row) * width + col));
+          break;
+        case RingLayout::PrimaryRole::kNone:
+          break;
+      }
     }
   }
   return true;

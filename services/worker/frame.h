@@ -210,6 +210,7 @@ class Frame : public std::enable_shared_from_this<Frame> {
   const Camera camera_;
   const FrameOptions options_;
   const Tracer tracer_;
+  const int samples_;  // primary rays per pixel
   const uint32_t pixel_limit_;
   const int64_t pixels_in_rows_;  // pixels of this ring's rows
   // The ring's slabs under this frame's view: which primary rays this

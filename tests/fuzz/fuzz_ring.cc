@@ -104,7 +104,7 @@ void FuzzRing::RunPixel(int col, int row, std::vector<Deposit>* out) {
   int roles = 0;
   for (int i = 0; i < slabs(); ++i) {
     RayDescriptor ray;
-    switch (layout_.Primary(i, col, row, tracers_[i], &ray)) {
+    switch (layout_.Primary(i, col, row, 0, 1, tracers_[i], &ray)) {
       case RingLayout::PrimaryRole::kTrace:
         ++roles;
         TRANSTICK_CHECK_EQ(layout_.SlabOf(ray.cell[1]), i);

@@ -39,6 +39,17 @@ struct WorldRay {
   Vec3 direction;  // unit length
 };
 
+// The most primary rays per pixel (RenderSettings::samples).
+inline constexpr int kMaxSamplesPerPixel = 64;
+
+// Where primary ray `sample` of `samples` crosses its pixel, in [0, 1)^2: a
+// fixed stratified pattern, the same on every node. One sample is the
+// centre; a square number a grid of cell centres; any other number a
+// Fibonacci lattice (x stratified in `samples` columns, y by the golden
+// ratio), which leaves no two samples close.
+// REQUIRES: 0 <= sample < samples <= kMaxSamplesPerPixel.
+std::array<double, 2> SampleOffset(int sample, int samples);
+
 // Pixels [x0, x1) x [y0, y1) of an image.
 struct ImageRect {
   int x0 = 0, x1 = 0, y0 = 0, y1 = 0;
@@ -54,7 +65,10 @@ class Camera {
   static absl::StatusOr<Camera> Create(const CameraSpec& spec, const Vec3& volume_extent);
 
   // The ray through the centre of pixel (px, py); py = 0 is the top row.
-  WorldRay Generate(int px, int py) const;
+  WorldRay Generate(int px, int py) const { return GenerateAt(px, py, 0.5, 0.5); }
+  // The ray through point (px + ox, py + oy) of the image, ox and oy in
+  // [0, 1) across the pixel.
+  WorldRay GenerateAt(int px, int py, double ox, double oy) const;
 
   // Pixels whose rays may meet the world-space box [lo, hi]: a conservative
   // rectangle (the box's corners projected, plus a margin against

@@ -28,7 +28,9 @@ class Framebuffer {
   // units before overflow, so sums of many contributions are safe.
   static constexpr double kScale = 4294967296.0;
 
-  Framebuffer(int width, int height);
+  // A pixel is complete after `samples` primary deposits and the shadow
+  // deposits they announce; its value is their sum over `samples`.
+  Framebuffer(int width, int height, int samples = 1);
 
   // The memory a framebuffer of `width` x `height` holds: what the display
   // counts against its limit before it makes one.
@@ -36,8 +38,8 @@ class Framebuffer {
     return static_cast<uint64_t>(width) * static_cast<uint64_t>(height) * sizeof(Pixel);
   }
 
-  // Back to no deposits, keeping the memory.
-  void Clear();
+  // Back to no deposits, keeping the memory, for frames of `samples`.
+  void Clear(int samples = 1);
 
   // Adds a deposit. Returns true when this deposit completed its pixel;
   // each pixel completes once, whatever arrives after (sums wrap rather
@@ -50,6 +52,7 @@ class Framebuffer {
   bool Complete() const { return complete_pixels() == static_cast<uint64_t>(width_) * height_; }
   int width() const { return width_; }
   int height() const { return height_; }
+  int samples() const { return samples_; }
 
   Image Resolve() const;
   // Rows [row_begin, row_end) of Resolve()'s image into `rgb`, which holds
@@ -60,13 +63,14 @@ class Framebuffer {
 
  private:
   int width_, height_;
+  int samples_;
   // Everything a deposit touches, in one 32-byte record: one cache line
   // per deposit, however the pixels of different workers interleave.
   struct alignas(32) Pixel {
     std::array<int64_t, 3> sum;
     // Shadow deposits still owed: the primary's count minus shadows seen.
     int32_t owed;
-    uint8_t primary_seen;
+    uint8_t primary_seen;  // primary deposits, up to 255
     uint8_t counted;  // in complete_ already
   };
   std::vector<Pixel> pixels_;

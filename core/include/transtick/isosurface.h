@@ -92,6 +92,14 @@ class CrossingWalk {
 
   std::optional<Crossing> Next();
 
+  // Goes on past t1 to a new end: the crossings of [t1, new_t1) follow as
+  // a walk started at t1 in the band the last crossing entered would give
+  // them, but the cell the walk is in keeps its solved roots (consecutive
+  // segments of a ray share the cells across the planes between them).
+  // REQUIRES: new_t1 >= t1(), and every crossing before t1 was taken.
+  void Extend(double new_t1);
+  double t1() const { return t1_; }
+
  private:
   // The roots of one edge in the current cell, in increasing t.
   struct EdgeRoots {
@@ -117,6 +125,8 @@ class CrossingWalk {
   int max_cells_;
   int cells_ = 0;
   bool done_ = false;
+  bool at_end_ = false;  // done because the current cell reaches past t1
+  bool loaded_ = false;  // the current cell's corners are read
   int band_;
   double t_;               // where the ray is: crossings before it are behind
   int last_edge_ = -1;     // the edge of the crossing just taken, in this cell

@@ -75,7 +75,9 @@ class RingLayout {
   // REQUIRES: 0 <= slab < slabs(), the pixel inside the image, `tracer`
   // traces a scene of this layout's dims and spacing.
   enum class PrimaryRole { kNone, kTrace, kMiss };
-  PrimaryRole Primary(int slab, int col, int row, const Tracer& tracer, RayDescriptor* ray) const;
+  // Of primary ray `sample` of `samples` (SampleOffset) of the pixel.
+  PrimaryRole Primary(int slab, int col, int row, int sample, int samples, const Tracer& tracer,
+                      RayDescriptor* ray) const;
 
   // The slab that deposits the miss of pixel (col, row): the first slab
   // whose footprint holds the pixel, which makes its ray and finds the

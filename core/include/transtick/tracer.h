@@ -12,6 +12,7 @@
 #include "absl/status/status.h"
 #include "transtick/camera.h"
 #include "transtick/classification.h"
+#include "transtick/isosurface.h"
 #include "transtick/ray.h"
 #include "transtick/scene.h"
 #include "transtick/traversal.h"
@@ -27,6 +28,9 @@ struct RenderSettings {
   // Direction toward the (directional) light in world space, camera-relative:
   // x along the camera's right, y along its up, z toward the viewer.
   Vec3 light = {-0.35, 0.5, 1.0};
+  // Primary rays per pixel, at SampleOffset's pattern (camera.h), in
+  // [1, kMaxSamplesPerPixel]; the pixel is their mean.
+  int samples = 1;
 };
 
 // Counts a tracer adds to; one per thread, summed afterwards.
@@ -60,7 +64,7 @@ inline constexpr double kMaxSamplesPerVoxel = 32;
 inline constexpr double kMaxFrameSamples = 68719476736.0;
 
 // Checks settings against the volume they will render, before any ray is
-// traced: the dvr step (finite, not below 1/kMaxSamplesPerVoxel of the
+// traced: samples per pixel in [1, kMaxSamplesPerPixel], the dvr step (finite, not below 1/kMaxSamplesPerVoxel of the
 // smallest spacing) and the frame's estimated samples (at most
 // kMaxFrameSamples). Errors say what to change.
 absl::Status CheckRenderSettings(const RenderSettings& settings, RenderMode mode,
@@ -156,6 +160,10 @@ class Tracer {
   // ray that has none yet. In a candidate voxel the field's own value;
   // elsewhere the voxel's, which its whole voxel shares.
   uint16_t BandAt(const Vec3& p, const std::array<int32_t, 3>& cell, uint8_t label) const;
+  // The crossings of candidate segment `seg` of `ray`: `walk` extended to
+  // it when it ends where seg starts, else a new walk.
+  void CrossingsOf(std::optional<CrossingWalk>& walk, const RayDescriptor& ray,
+                   const Segment& seg) const;
   Outcome TraceShadow(RayDescriptor& ray, TraceCounters& counters) const;
   Outcome TraceDvr(RayDescriptor& ray, TraceCounters& counters) const;
 
