@@ -67,36 +67,9 @@ fi
 
 # --- ParaView -----------------------------------------------------------------
 
-install_paraview() {
-  local sudo=()
-  if [[ $(id -u) -ne 0 ]]; then
-    command -v sudo >/dev/null || die "pvbatch is missing and installing it needs root (or sudo)"
-    sudo=(sudo)
-  fi
-  command -v apt-get >/dev/null || die "pvbatch is missing and there is no apt-get to install it"
-  local packages=(paraview python3-paraview xvfb xauth)
-  note "installing ${packages[*]} with apt-get (a few minutes, ~1 GB)"
-  export DEBIAN_FRONTEND=noninteractive
-  # Without package lists (fresh container) there is no candidate: update first.
-  if ! apt-cache policy paraview 2>/dev/null | grep -q 'Candidate: [0-9]'; then
-    "${sudo[@]}" apt-get update -q || die "apt-get update failed"
-  fi
-  if ! "${sudo[@]}" apt-get install -y -q --no-install-recommends "${packages[@]}"; then
-    note "install failed; updating the package lists and trying once more"
-    "${sudo[@]}" apt-get update -q || die "apt-get update failed"
-    "${sudo[@]}" apt-get install -y -q --no-install-recommends "${packages[@]}" ||
-      die "apt-get install ${packages[*]} failed"
-  fi
-}
-
-if ! command -v pvbatch >/dev/null || ! command -v xvfb-run >/dev/null ||
-   ! command -v xauth >/dev/null; then
-  install_paraview
-fi
-command -v pvbatch >/dev/null || die "pvbatch still missing after installing paraview"
-
-pv_version=$(pvbatch --version 2>/dev/null | grep -o '[0-9][0-9.]*' | head -n1 || true)
-[[ $pv_version == 5.11* ]] || echo "paraview_compare: warning: expected ParaView 5.11, found '${pv_version:-unknown}'" >&2
+# shellcheck source=bench/paraview_common.sh
+source "$script_dir/paraview_common.sh"
+ensure_paraview
 
 tmp=$(mktemp -d "${TMPDIR:-/tmp}/paraview_compare.XXXXXX")
 trap 'rm -rf "$tmp"' EXIT
@@ -104,11 +77,12 @@ trap 'rm -rf "$tmp"' EXIT
 cat >"$tmp/pv_bench.py" <<'PYEOF'
 # pvbatch script: times ParaView's CPU ray caster on one volume.
 #   pvbatch pv_bench.py VOLUME SIZE AZIMUTH REPEAT
-import math
 import statistics
 import sys
 import time
 
+import pv_transtick
+from pv_transtick import black_background, volume_geometry
 from paraview.simple import (ColorBy, GetActiveViewOrCreate, GetColorTransferFunction,
                              GetOpacityTransferFunction, OpenDataFile, Render, Show)
 
@@ -118,27 +92,17 @@ reader = OpenDataFile(volume)  # ParaView 5.11 picks its NrrdReader for .nrrd
 if reader is None:
     sys.exit("pv_bench: ParaView cannot open " + volume)
 reader.UpdatePipeline()
-info = reader.GetDataInformation()
-bounds = info.GetBounds()
+bounds, dims, spacing = volume_geometry(reader)
 arrays = reader.PointData.keys()
 if not arrays:
     sys.exit("pv_bench: " + volume + " has no point scalars")
 array = arrays[0]
-extent = info.GetExtent()
-dims = [extent[1] - extent[0] + 1, extent[3] - extent[2] + 1, extent[5] - extent[4] + 1]
-spacing = [(bounds[2 * a + 1] - bounds[2 * a]) / max(1, dims[a] - 1) for a in range(3)]
 print("pv_bench: %s %dx%dx%d, spacing %g %g %g, %s range %g .. %g" %
       (volume, dims[0], dims[1], dims[2], spacing[0], spacing[1], spacing[2], array,
        *reader.PointData[array].GetRange()))
 
 view = GetActiveViewOrCreate('RenderView')
-view.ViewSize = [size, size]
-view.OrientationAxesVisibility = 0
-try:
-    view.UseColorPaletteForBackground = 0  # 5.10+: else Background is ignored
-except AttributeError:
-    pass
-view.Background = [0, 0, 0]
+black_background(view, size)
 
 display = Show(reader, view)
 display.SetRepresentationType('Volume')
@@ -158,22 +122,11 @@ color.RGBPoints = [0, 0, 0, 0, 599.9, 0, 0, 0, 600, 0.92, 0.72, 0.6, 1349.9, 0.9
 color.ScalarRangeInitialized = 1
 opacity.ScalarRangeInitialized = 1
 
-# transtick's orbit camera (core/src/camera.cc): eye at distance
-# radius / sin(fov / 2) * 1.05 from the centre, radius half the diagonal of
-# dims * spacing, azimuth about +Y, 0 looking along -Z.
 centre = [(bounds[2 * a] + bounds[2 * a + 1]) / 2 for a in range(3)]
-radius = 0.5 * math.sqrt(sum((dims[a] * spacing[a]) ** 2 for a in range(3)))
-distance = radius / math.sin(math.radians(15)) * 1.05
 
 
 def place_camera(az_deg):
-    az = math.radians(az_deg)
-    view.CameraFocalPoint = centre
-    view.CameraPosition = [centre[0] + math.sin(az) * distance, centre[1],
-                           centre[2] + math.cos(az) * distance]
-    view.CameraViewUp = [0, 1, 0]
-    view.CameraViewAngle = 30
-    view.CameraParallelProjection = 0
+    pv_transtick.place_camera(view, bounds, dims, spacing, az_deg)
 
 
 place_camera(azimuth)
@@ -199,17 +152,9 @@ print("PV_MIN_MS %.3f" % min(times))
 PYEOF
 
 note "ParaView ${pv_version:-?}: ${size}x${size}, azimuth $azimuth, 'Ray Cast Only', $repeat frames after 1 warm-up"
-pv_cmd=(pvbatch "$tmp/pv_bench.py" "$volume" "$size" "$azimuth" "$repeat")
-if command -v xvfb-run >/dev/null; then
-  # Debian's ParaView has no EGL/OSMesa offscreen path: it needs an X server.
-  pv_cmd=(xvfb-run -a -s "-screen 0 1280x1024x24" "${pv_cmd[@]}")
-else
-  pv_cmd=(pvbatch --force-offscreen-rendering "${pv_cmd[@]:1}")
-fi
-if ! "${pv_cmd[@]}" >"$tmp/pv.out" 2>"$tmp/pv.err"; then
-  cat "$tmp/pv.out" "$tmp/pv.err" >&2
-  die "pvbatch failed (command: ${pv_cmd[*]})"
-fi
+pv_out=$tmp/pv.out
+pv_err=$tmp/pv.err
+run_pvbatch "$tmp/pv_bench.py" "$volume" "$size" "$azimuth" "$repeat"
 grep '^pv_bench:' "$tmp/pv.out" || true
 pv_ms=$(awk '/^PV_MEDIAN_MS/ {print $2}' "$tmp/pv.out")
 pv_min=$(awk '/^PV_MIN_MS/ {print $2}' "$tmp/pv.out")
