@@ -238,28 +238,46 @@ const CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
   // The two edges of a band differ in parity: one slot each.
   EdgeRoots& r = cache_[edge & 1];
   if (r.edge == edge) return r;
+  const double span = t_out_ - t_in_;
   if (!solved_) {
     // The field along the ray in s = t - t_in, from the entry point in
     // cell coordinates, so that the coefficients stay well scaled however
-    // far the ray's origin lies; and its monotonic pieces.
+    // far the ray's origin lies; and its Bernstein coefficients on
+    // [0, span], whose hull holds the cubic there.
     const Vec3 p = origin_ + Vec3{dir_[0], dir_[1], dir_[2]} * t_in_;
     const std::array<double, 3> entry = {p.x - (base_[0] + 0.5), p.y - (base_[1] + 0.5),
                                          p.z - (base_[2] + 0.5)};
     cubic_ = CellCubic(corners_, entry, dir_, 0);
-    const double span = t_out_ - t_in_;
+    const double p1 = cubic_.c * span, p2 = cubic_.b * span * span,
+                 p3 = cubic_.a * span * span * span;
+    hull_[0] = cubic_.d;
+    hull_[1] = cubic_.d + p1 / 3;
+    hull_[2] = cubic_.d + (2 * p1 + p2) / 3;
+    hull_[3] = cubic_.d + p1 + p2 + p3;
+    solved_ = true;
+    split_ = false;
+  }
+  const double e = bands_->edges()[edge];
+  r.edge = edge;
+  r.count = 0;
+  // Most cells whose corners straddle an edge are crossed by the ray
+  // without a root: when every Bernstein coefficient lies on one side of
+  // the edge, so does the cubic, and no monotonic piece is needed.
+  const bool below = hull_[0] - e < 0;
+  if ((hull_[1] - e < 0) == below && (hull_[2] - e < 0) == below && (hull_[3] - e < 0) == below) {
+    return r;
+  }
+  if (!split_) {
     double splits[2];
     splits_ = SlopeRoots(cubic_, 0, span, splits);
     at_[0] = 0;
     for (int k = 0; k < splits_; ++k) at_[k + 1] = splits[k];
     at_[splits_ + 1] = span;
     for (int k = 0; k <= splits_ + 1; ++k) value_[k] = cubic_(at_[k]);
-    solved_ = true;
+    split_ = true;
   }
-  const double e = bands_->edges()[edge];
   RayCubic g = cubic_;
   g.d -= e;
-  r.edge = edge;
-  r.count = 0;
   for (int k = 0; k <= splits_; ++k) {
     const double ga = value_[k] - e, gb = value_[k + 1] - e;
     if ((ga < 0) != (gb < 0)) {

@@ -136,8 +136,10 @@ class CrossingWalk {
   double t_in_ = 0, t_out_ = 0, hi_ = 0;  // its span, and the end of its part in [t0, t1)
   int exit_axis_ = -1;
   float lo_value_ = 0, hi_value_ = 0;  // its corners' least and greatest value
-  bool solved_ = false;                // the cubic below is set
+  bool solved_ = false;                // cubic_ and hull_ are set
+  bool split_ = false;                 // and splits_, at_ and value_
   RayCubic cubic_;                     // the field along the ray, s = t - t_in
+  double hull_[4];                     // its Bernstein coefficients on [0, t_out - t_in]
   int splits_ = 0;
   double at_[4];     // the ends of the monotonic pieces, in s
   double value_[4];  // the field there
