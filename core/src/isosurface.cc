@@ -148,6 +148,15 @@ CrossingWalk::CrossingWalk(const Scene& scene, const Bands& bands, const Vec3& o
     // beyond the faces the corners clamp as the field does.
     base_[a] = FloorClamped(start[a] - 0.5, -(1 << 30), 1 << 30);
   }
+  for (int a = 0; a < 3; ++a) {
+    if (step_[a] == 0) {
+      enter_[a] = -std::numeric_limits<double>::infinity();
+      leave_[a] = std::numeric_limits<double>::infinity();
+    } else {
+      enter_[a] = PlaneTime(a, step_[a] > 0 ? base_[a] : base_[a] + 1);
+      leave_[a] = PlaneTime(a, step_[a] > 0 ? base_[a] + 1 : base_[a]);
+    }
+  }
   // The cells a ray can cross in [t0, t1): one more per unit it moves
   // along each axis, and a few for the ends.
   const double span = t1 - t0;
@@ -158,21 +167,15 @@ CrossingWalk::CrossingWalk(const Scene& scene, const Bands& bands, const Vec3& o
 bool CrossingWalk::EnterCell() {
   for (;;) {
     if (++cells_ > max_cells_) return false;
-    // The cell's span along the ray, from its planes between voxel centres
-    // (each time from its plane, never by adding up steps): the entry
-    // times of the axes the ray moves on, the first of their exit times.
-    double t_in = -std::numeric_limits<double>::infinity();
-    double t_out = std::numeric_limits<double>::infinity();
-    int exit_axis = -1;
-    for (int a = 0; a < 3; ++a) {
-      if (step_[a] == 0) continue;
-      const int near = step_[a] > 0 ? base_[a] : base_[a] + 1;
-      t_in = std::max(t_in, (near + 0.5 - origin_[a]) * inv_[a]);
-      const double leave = (near + step_[a] + 0.5 - origin_[a]) * inv_[a];
-      // The lowest axis on a tie, so that every node takes the same path.
-      if (leave < t_out) t_out = leave, exit_axis = a;
-    }
-    if (exit_axis < 0) return false;  // a ray along no axis
+    // The cell's span along the ray: the last of the entry times of the
+    // axes the ray moves on, the first of their exit times (the lowest axis
+    // on a tie, so that every node takes the same path).
+    const double t_in = std::max({enter_[0], enter_[1], enter_[2]});
+    int exit_axis = 0;
+    if (leave_[1] < leave_[exit_axis]) exit_axis = 1;
+    if (leave_[2] < leave_[exit_axis]) exit_axis = 2;
+    const double t_out = leave_[exit_axis];
+    if (step_[exit_axis] == 0) return false;  // a ray along no axis
     t_in_ = t_in;
     t_out_ = t_out;
     exit_axis_ = exit_axis;
@@ -196,8 +199,16 @@ bool CrossingWalk::EnterCell() {
       at_end_ = true;
       return false;
     }
-    base_[exit_axis] += step_[exit_axis];
+    Step(exit_axis);
   }
+}
+
+void CrossingWalk::Step(int a) {
+  // Each time from its plane between voxel centres, never by adding up
+  // steps: the entry plane is the exit plane the ray just crossed.
+  base_[a] += step_[a];
+  enter_[a] = leave_[a];
+  leave_[a] = PlaneTime(a, step_[a] > 0 ? base_[a] + 1 : base_[a]);
 }
 
 void CrossingWalk::Extend(double new_t1) {
@@ -230,7 +241,7 @@ bool CrossingWalk::AdvanceCell() {
     return false;
   }
   loaded_ = false;
-  base_[exit_axis_] += step_[exit_axis_];
+  Step(exit_axis_);
   return EnterCell();
 }
 

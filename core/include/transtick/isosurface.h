@@ -110,6 +110,9 @@ class CrossingWalk {
   };
   bool EnterCell();    // sets up the current cell; false when the walk is done
   bool AdvanceCell();  // to the next cell; false when the walk is done
+  void Step(int axis);  // base_ one cell along `axis`, and its plane times
+  // When the ray crosses the plane between voxel centres k + 0.5.
+  double PlaneTime(int axis, int k) const { return (k + 0.5 - origin_[axis]) * inv_[axis]; }
   const EdgeRoots& Roots(int edge);
   // The first root of `edge` going `up` at or after t_, past the root just
   // taken when it is this edge's.
@@ -133,6 +136,9 @@ class CrossingWalk {
   int last_index_ = -1;    // and its index among that edge's roots
   // The current cell.
   std::array<int, 3> base_;
+  // Along each axis, when the ray enters and leaves the cell's slab
+  // (-inf and inf on an axis it does not move along).
+  double enter_[3], leave_[3];
   double t_in_ = 0, t_out_ = 0, hi_ = 0;  // its span, and the end of its part in [t0, t1)
   int exit_axis_ = -1;
   float lo_value_ = 0, hi_value_ = 0;  // its corners' least and greatest value
