@@ -39,6 +39,15 @@ Case RandomCase(std::mt19937_64& rng) {
   return c;
 }
 
+// The trilinear interpolant of `corners` at `p` (cell coordinates).
+double Trilinear(const CellCorners& c, const std::array<double, 3>& p) {
+  const double x = p[0], y = p[1], z = p[2];
+  const double c00 = c[0] * (1 - x) + c[1] * x, c10 = c[2] * (1 - x) + c[3] * x;
+  const double c01 = c[4] * (1 - x) + c[5] * x, c11 = c[6] * (1 - x) + c[7] * x;
+  const double c0 = c00 * (1 - y) + c10 * y, c1 = c01 * (1 - y) + c11 * y;
+  return c0 * (1 - z) + c1 * z;
+}
+
 TEST(IsosurfaceTest, TheCubicIsTheTrilinearFieldAlongTheRay) {
   std::mt19937_64 rng(1);
   for (int i = 0; i < 10000; ++i) {
@@ -59,33 +68,48 @@ TEST(IsosurfaceTest, NoCrossingIsMissedAndEveryRootIsARoot) {
   for (int i = 0; i < 20000; ++i) {
     const Case c = RandomCase(rng);
     const RayCubic g = CellCubic(c.corners, c.o, c.d, c.iso);
-    const double t0 = 0, t1 = 1.2;
-    // Dense sampling: the first sample interval whose ends differ in sign.
+    const double t1 = 1.2;
+    // Dense sampling: the first sample interval whose ends lie on different
+    // sides (g < 0, g >= 0).
     int first = -1;
-    double prev = g(t0);
+    double prev = g(0);
     for (int k = 1; k <= kSamples && first < 0; ++k) {
-      const double v = g(t0 + (t1 - t0) * k / kSamples);
-      if (prev == 0 || (v < 0) != (prev < 0)) first = k;
+      const double v = g(t1 * k / kSamples);
+      if ((v < 0) != (prev < 0)) first = k;
       prev = v;
     }
-    const std::optional<double> root = FirstRoot(g, t0, t1);
+    SideChange changes[3];
+    const int n = SideChanges(g, t1, changes);
+    ASSERT_LE(n, 3);
     const double scale = std::abs(g.a) + std::abs(g.b) + std::abs(g.c) + std::abs(g.d) + 1;
-    if (root) {
-      ASSERT_GE(*root, t0) << i;
-      ASSERT_LE(*root, t1) << i;
-      ASSERT_LE(std::abs(g(*root)), 1e-9 * scale) << "case " << i << " root " << *root;
-      // Deterministic: the same bits again.
-      ASSERT_EQ(*FirstRoot(g, t0, t1), *root);
+    for (int k = 0; k < n; ++k) {
+      ASSERT_GE(changes[k].t, 0) << i;
+      ASSERT_LE(changes[k].t, t1) << i;
+      if (k > 0) {
+        ASSERT_GE(changes[k].t, changes[k - 1].t) << i;
+        ASSERT_NE(changes[k].up, changes[k - 1].up) << i;  // sides alternate
+      }
+      ASSERT_LE(std::abs(g(changes[k].t)), 1e-9 * scale) << "case " << i << " root " << k;
+    }
+    // The first change enters the side the start is not on.
+    if (n > 0) {
+      ASSERT_EQ(changes[0].up, g(0) < 0) << i;
+    }
+    // Deterministic: the same bits again.
+    SideChange again[3];
+    ASSERT_EQ(SideChanges(g, t1, again), n);
+    for (int k = 0; k < n; ++k) {
+      ASSERT_EQ(again[k].t, changes[k].t);
     }
     if (first >= 0) {
       ++crossings;
-      ASSERT_TRUE(root.has_value()) << "case " << i << ": a crossing by sample " << first;
+      ASSERT_GT(n, 0) << "case " << i << ": a crossing by sample " << first;
       // Not after the crossing dense sampling found (an earlier pair of
       // crossings between two samples may come first).
-      ASSERT_LE(*root, t0 + (t1 - t0) * first / kSamples + 1e-12) << i;
-      if (*root < t0 + (t1 - t0) * (first - 1) / kSamples) ++extra;
-    } else if (root) {
-      ++extra;  // two crossings between samples, or a touch
+      ASSERT_LE(changes[0].t, t1 * first / kSamples + 1e-12) << i;
+      if (changes[0].t < t1 * (first - 1) / kSamples) ++extra;
+    } else if (n > 0) {
+      ++extra;  // two crossings between samples
     }
   }
   // The cases are not degenerate: most rays cross.
@@ -102,17 +126,24 @@ TEST(IsosurfaceTest, ThinFeaturesBetweenAnySamplingAreFound) {
   g.b = r0 + r1 + 3;
   g.c = -(r0 * r1 + 3 * r0 + 3 * r1);
   g.d = 3 * r0 * r1;
-  const auto root = FirstRoot(g, 0, 1);
-  ASSERT_TRUE(root.has_value());
-  EXPECT_NEAR(*root, r0, 1e-12);
-  // A ray starting on the surface hits at once; one that ends before it, never.
-  RayCubic on;  // zero at t = 0 exactly
+  SideChange changes[3];
+  ASSERT_EQ(SideChanges(g, 1, changes), 2);
+  EXPECT_NEAR(changes[0].t, r0, 1e-12);
+  EXPECT_FALSE(changes[0].up);
+  EXPECT_NEAR(changes[1].t, r1, 1e-12);
+  EXPECT_TRUE(changes[1].up);
+  // A ray starting on the surface, going up, is on the side >= 0 already:
+  // its first change is where it goes down again.
+  RayCubic on;  // t^3 - 2t^2 + t/2: zero at 0, 1 - sqrt(1/2) and 1 + sqrt(1/2)
   on.a = 1;
   on.b = -2;
   on.c = 0.5;
-  EXPECT_EQ(FirstRoot(on, 0, 1), 0.0);
-  EXPECT_FALSE(FirstRoot(g, 0, 0.4).has_value());
-  EXPECT_FALSE(FirstRoot(g, 1, 0).has_value());
+  ASSERT_EQ(SideChanges(on, 1, changes), 1);
+  EXPECT_NEAR(changes[0].t, 1 - std::sqrt(0.5), 1e-12);
+  EXPECT_FALSE(changes[0].up);
+  // One that ends before the feature meets nothing; nor does an empty span.
+  EXPECT_EQ(SideChanges(g, 0.4, changes), 0);
+  EXPECT_EQ(SideChanges(g, -1, changes), 0);
 }
 
 

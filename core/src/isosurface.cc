@@ -89,14 +89,6 @@ RayCubic CellCubic(const CellCorners& c, const std::array<double, 3>& o,
   return g;
 }
 
-double Trilinear(const CellCorners& c, const std::array<double, 3>& p) {
-  const double x = p[0], y = p[1], z = p[2];
-  const double c00 = c[0] * (1 - x) + c[1] * x, c10 = c[2] * (1 - x) + c[3] * x;
-  const double c01 = c[4] * (1 - x) + c[5] * x, c11 = c[6] * (1 - x) + c[7] * x;
-  const double c0 = c00 * (1 - y) + c10 * y, c1 = c01 * (1 - y) + c11 * y;
-  return c0 * (1 - z) + c1 * z;
-}
-
 double FieldAt(const Scene& scene, const Vec3& p) {
   const double q[3] = {p.x - 0.5, p.y - 0.5, p.z - 0.5};
   int i0[3];
@@ -114,21 +106,20 @@ double FieldAt(const Scene& scene, const Vec3& p) {
   return v;
 }
 
-std::optional<double> FirstRoot(const RayCubic& g, double t_begin, double t_end) {
-  if (!(t_begin <= t_end)) return std::nullopt;  // also NaN
+int SideChanges(const RayCubic& g, double span, SideChange out[3]) {
+  if (!(span >= 0)) return 0;  // also NaN
   double splits[2];
-  const int n = SlopeRoots(g, t_begin, t_end, splits);
-  double lo = t_begin, glo = g(lo);
-  if (glo == 0) return lo;
-  for (int i = 0; i <= n; ++i) {
-    const double hi = i < n ? splits[i] : t_end;
-    const double ghi = g(hi);
-    if (ghi == 0) return hi;
-    if ((ghi < 0) != (glo < 0)) return Refine(g, lo, glo, hi, ghi);
-    lo = hi;
-    glo = ghi;
+  const int n = SlopeRoots(g, 0, span, splits);
+  int count = 0;
+  double a = 0, ga = g(a);
+  for (int k = 0; k <= n; ++k) {
+    const double b = k < n ? splits[k] : span;
+    const double gb = g(b);
+    if ((ga < 0) != (gb < 0)) out[count++] = {Refine(g, a, ga, b, gb), gb >= 0};
+    a = b;
+    ga = gb;
   }
-  return std::nullopt;
+  return count;
 }
 
 CrossingWalk::CrossingWalk(const Scene& scene, const Bands& bands, const Vec3& origin,
@@ -266,47 +257,31 @@ const CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
     hull_[2] = cubic_.d + (2 * p1 + p2) / 3;
     hull_[3] = cubic_.d + p1 + p2 + p3;
     solved_ = true;
-    split_ = false;
   }
   const double e = bands_->edges()[edge];
   r.edge = edge;
   r.count = 0;
   // Most cells whose corners straddle an edge are crossed by the ray
   // without a root: when every Bernstein coefficient lies on one side of
-  // the edge, so does the cubic, and no monotonic piece is needed.
+  // the edge, so does the cubic, and no extremum is needed.
   const bool below = hull_[0] - e < 0;
   if ((hull_[1] - e < 0) == below && (hull_[2] - e < 0) == below && (hull_[3] - e < 0) == below) {
     return r;
   }
-  if (!split_) {
-    double splits[2];
-    splits_ = SlopeRoots(cubic_, 0, span, splits);
-    at_[0] = 0;
-    for (int k = 0; k < splits_; ++k) at_[k + 1] = splits[k];
-    at_[splits_ + 1] = span;
-    for (int k = 0; k <= splits_ + 1; ++k) value_[k] = cubic_(at_[k]);
-    split_ = true;
-  }
   RayCubic g = cubic_;
   g.d -= e;
-  for (int k = 0; k <= splits_; ++k) {
-    const double ga = value_[k] - e, gb = value_[k + 1] - e;
-    if ((ga < 0) != (gb < 0)) {
-      r.t[r.count] = t_in_ + Refine(g, at_[k], ga, at_[k + 1], gb);
-      r.up[r.count] = gb >= 0;
-      ++r.count;
-    }
-  }
+  r.count = SideChanges(g, span, r.at);
+  for (int k = 0; k < r.count; ++k) r.at[k].t += t_in_;
   return r;
 }
 
 std::optional<std::pair<double, int>> CrossingWalk::Candidate(int edge, bool up) {
   const EdgeRoots& r = Roots(edge);
   for (int k = 0; k < r.count; ++k) {
-    if (r.up[k] != up) continue;
+    if (r.at[k].up != up) continue;
     // One edge's roots alternate in direction: past the one just taken
     // by index, so that a double root (up and down at one t) is taken twice.
-    if (edge == last_edge_ ? k > last_index_ : r.t[k] >= t_) return std::pair{r.t[k], k};
+    if (edge == last_edge_ ? k > last_index_ : r.at[k].t >= t_) return std::pair{r.at[k].t, k};
   }
   return std::nullopt;
 }

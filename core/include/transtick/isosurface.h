@@ -39,9 +39,6 @@ using CellCorners = std::array<float, 8>;
 RayCubic CellCubic(const CellCorners& corners, const std::array<double, 3>& o,
                    const std::array<double, 3>& d, double iso);
 
-// The trilinear interpolant of `corners` at `p` (cell coordinates).
-double Trilinear(const CellCorners& corners, const std::array<double, 3>& p);
-
 // The trilinear field of `scene`'s scalars at index-space point p, in
 // double: samples at voxel centres, indices clamped at the faces (what
 // Tracer::Sample reads, without its float rounding, and what the cubics
@@ -49,12 +46,21 @@ double Trilinear(const CellCorners& corners, const std::array<double, 3>& p);
 // REQUIRES: the planes around p are stored.
 double FieldAt(const Scene& scene, const Vec3& p);
 
-// The first t in [t_begin, t_end] where the cubic is zero or changes sign,
-// or none. A root exactly at t_begin counts (a ray that starts on the
-// surface); a double root that only touches zero counts only where a
-// split point lands on it exactly. Within the interval found, the answer
-// is within 1e-9 of the interval's length of the root.
-std::optional<double> FirstRoot(const RayCubic& g, double t_begin, double t_end);
+// Where a cubic changes side between g < 0 and g >= 0 (a value of 0 is on
+// the side >= 0, as a value on an edge is in the band above).
+struct SideChange {
+  double t;
+  bool up;  // into g >= 0
+};
+
+// Every change of side of g in [0, span], in increasing t; returns how many
+// (at most three). The cubic's extrema split [0, span] into monotonic
+// pieces; a piece whose ends lie on different sides holds one change,
+// which Illinois steps refine (bisection when they stall, at most 64
+// steps, to 1e-10 of the piece). No fixed step: a thin feature between any
+// two samples is found. A pure function of its arguments with a fixed
+// sequence of operations.
+int SideChanges(const RayCubic& g, double span, SideChange out[3]);
 
 // Where a ray's field changes band (classification.h, Bands): at t the
 // field crosses an interval edge and the ray enters `band`.
@@ -71,8 +77,7 @@ struct Crossing {
 // the volume's faces, as Tracer::Sample reads it) that the ray crosses.
 //
 // Each cell's roots are those of its cubic over the cell's whole span
-// [t_in, t_out] along the ray, split at the cubic's extrema and refined by
-// FirstRoot's method: a function of the ray and the cell's eight samples
+// [t_in, t_out] along the ray (SideChanges): a function of the ray and the cell's eight samples
 // only, the same for every node and every segment that touches the cell.
 // So the crossings a ray meets do not depend on how its walk is cut into
 // segments or slabs, as long as each piece starts in the band the last
@@ -105,8 +110,7 @@ class CrossingWalk {
   struct EdgeRoots {
     int edge = -1;
     int count = 0;
-    double t[3];
-    bool up[3];
+    SideChange at[3];  // t along the ray
   };
   bool EnterCell();    // sets up the current cell; false when the walk is done
   bool AdvanceCell();  // to the next cell; false when the walk is done
@@ -143,12 +147,8 @@ class CrossingWalk {
   int exit_axis_ = -1;
   float lo_value_ = 0, hi_value_ = 0;  // its corners' least and greatest value
   bool solved_ = false;                // cubic_ and hull_ are set
-  bool split_ = false;                 // and splits_, at_ and value_
   RayCubic cubic_;                     // the field along the ray, s = t - t_in
   double hull_[4];                     // its Bernstein coefficients on [0, t_out - t_in]
-  int splits_ = 0;
-  double at_[4];     // the ends of the monotonic pieces, in s
-  double value_[4];  // the field there
   CellCorners corners_;
   EdgeRoots cache_[2];
 };
