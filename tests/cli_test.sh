@@ -75,6 +75,10 @@ expect 2 "c.bmp' is not an image format transtick writes (.png, .jpg" -- render 
 
 expect 2 "9000x10" -- render --volume "$dir/cube.nrrd" --materials "$dir/m.json" --size 9000x10
 expect 2 "WxH" -- render --volume "$dir/cube.nrrd" --materials "$dir/m.json" --size big
+expect 2 "samples 0 must be in" -- render --local 0 --volume "$dir/cube.nrrd" \
+  --materials "$dir/m.json" --samples 0
+expect 2 "--surface must be smooth or voxel" -- render --local 0 --volume "$dir/cube.nrrd" \
+  --materials "$dir/m.json" --surface bumpy
 expect 2 "needs --materials" -- render --volume "$dir/cube.nrrd"
 expect 2 "unknown flag --colour" -- render --volume "$dir/cube.nrrd" --colour red
 expect 2 "shadows" -- render --volume "$dir/cube.nrrd" --materials "$dir/m.json" --shadows maybe

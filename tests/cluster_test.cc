@@ -180,6 +180,9 @@ TEST_F(ClusterTest, BadJobsGetClearErrorsAndTheClusterGoesOn) {
   v1::Job zero = MakeJob({View(0, 0, true, "x.png")});
   zero.mutable_datasets(0)->mutable_views(0)->set_width(0);
   expect_error(zero, "0x56");
+  v1::Job samples = MakeJob({View(0, 0, true, "x.png")});
+  samples.mutable_datasets(0)->mutable_views(0)->set_samples(65);
+  expect_error(samples, "samples 65 must be in [1, 64]");
   v1::Job huge = MakeJob({View(0, 0, true, "x.png")});
   huge.mutable_datasets(0)->mutable_views(0)->set_width(100000);
   expect_error(huge, "100000x56");
