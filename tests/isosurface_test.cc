@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <algorithm>
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -216,6 +217,9 @@ TEST(IsosurfaceTest, CrossingWalkWalksTheFieldsCells) {
       // The same crossings, bit for bit, with the span cut at random points.
       std::vector<double> cuts = {0, t1};
       for (int k = rng() % 5; k > 0; --k) cuts.push_back(unit(rng) * t1);
+      // Empty pieces too: a ray through an edge or a corner of its column
+      // has a segment of length 0.
+      if (rng() % 3 == 0) cuts.push_back(cuts[rng() % cuts.size()]);
       std::sort(cuts.begin(), cuts.end());
       std::vector<Crossing> pieces;
       int band = start_band;
@@ -226,11 +230,30 @@ TEST(IsosurfaceTest, CrossingWalkWalksTheFieldsCells) {
           band = x->band;
         }
       }
+      // And as the tracer walks consecutive candidate segments: one walk
+      // extended piece by piece, begun afresh now and then.
+      std::vector<Crossing> extended;
+      std::optional<CrossingWalk> walker;
+      band = start_band;
+      for (size_t k = 0; k + 1 < cuts.size(); ++k) {
+        if (!walker || rng() % 4 == 0) {
+          walker.emplace(*scene, bands, o, d, cuts[k], cuts[k + 1], band);
+        } else {
+          walker->Extend(cuts[k + 1]);
+        }
+        while (auto x = walker->Next()) {
+          extended.push_back(*x);
+          band = x->band;
+        }
+      }
       cut_rays += cuts.size() > 2;
       ASSERT_EQ(pieces.size(), all.size()) << "trial " << trial << " ray " << r;
+      ASSERT_EQ(extended.size(), all.size()) << "trial " << trial << " ray " << r;
       for (size_t k = 0; k < all.size(); ++k) {
         ASSERT_EQ(pieces[k].t, all[k].t);
         ASSERT_EQ(pieces[k].band, all[k].band);
+        ASSERT_EQ(extended[k].t, all[k].t);
+        ASSERT_EQ(extended[k].band, all[k].band);
       }
     }
   }

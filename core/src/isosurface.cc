@@ -152,7 +152,11 @@ CrossingWalk::CrossingWalk(const Scene& scene, const Bands& bands, const Vec3& o
   // along each axis, and a few for the ends.
   const double span = t1 - t0;
   max_cells_ = 4 + static_cast<int>(span > 0 ? std::min(span * moves, 1e7) : 0);
-  done_ = !(t0 < t1) || !EnterCell();
+  // An empty segment (a ray through an edge or a corner of its column)
+  // holds no crossing, but a walk extended from it must go on as one begun
+  // at t0 with the new end would: done at its end, with no cell entered.
+  at_end_ = !(t0 < t1);
+  done_ = at_end_ || !EnterCell();
 }
 
 bool CrossingWalk::EnterCell() {
@@ -220,7 +224,9 @@ void CrossingWalk::Extend(double new_t1) {
     } else if (loaded_) {
       done_ = !AdvanceCell();
     } else {
-      --cells_;  // the same cell again, now with a part before the new end
+      // The same cell again, now with a part before the new end (none yet
+      // when the walk began empty).
+      if (cells_ > 0) --cells_;
       done_ = !EnterCell();
     }
   }
