@@ -357,7 +357,8 @@ int Forward(const Options& o) {
     for (int c = 0; c < 3; ++c) m->add_color(1);
     h->set_y_begin(32);
     h->set_y_end(64);
-    h->set_brick_map(std::string(slab.bricks().bytes().begin(), slab.bricks().bytes().end()));
+    const std::vector<uint8_t> bricks = slab.bricks().bytes();
+    h->set_brick_map(std::string(bricks.begin(), bricks.end()));
     for (int bx = 0; bx < 2; ++bx) chunk.add_blocks(slab.sticks().EncodeBlock(bx, 1));
     h->set_scalar_count(slab.scalars().size());
     AppendFloats(slab.scalars().data(), slab.scalars().size(), chunk.mutable_scalars());

@@ -84,6 +84,41 @@ TEST(ResumeTest, SurfacesAcrossSlabsAreBitIdentical) {
                    {{0, 0}, {45, 0}, {30, 40}, {0, 90}, {10, -89}, {200, -30}}, 64);
 }
 
+// Content in a band of planes with wide empty space beside it, as
+// balancing cuts it: the walk crosses the empty space by cubes of void
+// bricks that reach over several slabs.
+TEST(ResumeTest, EmptySpaceAcrossSlabsIsBitIdentical) {
+  const std::array<int, 3> dims = {64, 96, 128};
+  Volume v = MakeRandom(dims, 3, 2);
+  for (int z = 0; z < dims[2]; ++z)
+    for (int y = 0; y < dims[1]; ++y)
+      for (int x = 0; x < dims[0]; ++x) {
+        float& value = v.values[v.Index(x, y, z)];
+        value = y < 24 && value > 0.5f ? 30.0f : 0.0f;
+      }
+  for (SurfaceModel model : {SurfaceModel::kSmooth, SurfaceModel::kVoxel}) {
+    Classification c;
+    c.surface = model;
+    c.materials = {Material{.name = "faint", .min = 20, .max = 45, .opacity = 0.04f}};
+    const Scene scene = *Scene::ForSurfaces(v, c);
+    for (bool shadows : {true, false}) {
+      RenderSettings settings;
+      settings.shadows = shadows;
+      for (const View& view : std::vector<View>{{0, 0}, {30, 20}, {0, 80}, {120, -40}}) {
+        const Camera cam = MakeCamera(dims, 80, view.azimuth, view.elevation);
+        const Image whole = RenderWhole(scene, cam, settings);
+        for (const std::vector<int>& cuts :
+             {std::vector<int>{6, 13, 19}, {24}, {3, 30, 50, 70}, {40, 41, 90}}) {
+          ASSERT_EQ(whole.rgb, RenderSlabs(scene, cuts, cam, settings).rgb)
+              << (model == SurfaceModel::kSmooth ? "smooth" : "voxel") << " azimuth "
+              << view.azimuth << " elevation " << view.elevation << " shadows " << shadows
+              << ", cuts at " << cuts[0] << "...";
+        }
+      }
+    }
+  }
+}
+
 TEST(ResumeTest, VoxelSurfacesAcrossSlabsAreBitIdentical) {
   ExpectSlabsMatch(PhantomSurfaces({40, 34, 38}, SurfaceModel::kVoxel),
                    {{0, 0}, {45, 0}, {30, 40}, {0, 90}, {200, -30}}, 64);

@@ -36,7 +36,8 @@ class BrickMap {
   // must stay within the column they are taken in.
   static BrickMap Build(std::span<const uint8_t> labels, std::array<int, 3> dims,
                         bool uniform_materials);
-  // Rebuilds from bytes (one per brick, x fastest). Fails on a size mismatch.
+  // Rebuilds from the bytes of bytes() (docs/formats.md, "Brick map"). Fails
+  // on a size that does not match the dims and the mixed bricks.
   static absl::StatusOr<BrickMap> FromBytes(std::array<int, 3> dims, std::vector<uint8_t> bytes);
 
   // The brick's material, or kMixed. REQUIRES: (x, y, z) inside the volume.
@@ -45,15 +46,41 @@ class BrickMap {
     TRANSTICK_DCHECK_LT(x >> kShift, bdims_[0]);
     TRANSTICK_DCHECK_LT(y >> kShift, bdims_[1]);
     TRANSTICK_DCHECK_LT(z >> kShift, bdims_[2]);
-    return bricks_[(static_cast<size_t>(z >> kShift) * bdims_[1] + (y >> kShift)) * bdims_[0] +
-                   (x >> kShift)];
+    return bricks_[Index(x, y, z)];
   }
-  const std::vector<uint8_t>& bytes() const { return bricks_; }
+  // The serialised map: one byte per brick (x fastest), then for each mixed
+  // brick in that order its void mask, 8 bytes little-endian.
+  std::vector<uint8_t> bytes() const;
   const std::array<int, 3>& brick_dims() const { return bdims_; }
+  size_t MemoryBytes() const { return bricks_.size() * (1 + 1 + sizeof(uint64_t)); }
+
+  // Which 2^3 cells of a mixed brick are all void: bit i for the cell whose
+  // corner is 2 (i & 3, (i >> 2) & 3, i >> 4) from the brick's, cells past
+  // the volume's faces counting as void. 0 for a brick that is not mixed.
+  // REQUIRES: as At.
+  uint64_t Voids(int x, int y, int z) const { return voids_[Index(x, y, z)]; }
+
+  // How far the void around a void brick reaches: every brick within this
+  // many bricks of it along each axis (a cube of side 2 r + 1 in bricks,
+  // clipped to the volume) is void. 0 for a void brick beside an occupied
+  // one, and for any occupied brick; at most kMaxClear. Derived from the
+  // bricks alone (a chessboard distance transform), so every node holding
+  // the brick map has the same.
+  // REQUIRES: as At.
+  static constexpr int kMaxClear = 254;
+  int Clear(int x, int y, int z) const { return clear_[Index(x, y, z)]; }
 
  private:
+  size_t Index(int x, int y, int z) const {
+    return (static_cast<size_t>(z >> kShift) * bdims_[1] + (y >> kShift)) * bdims_[0] +
+           (x >> kShift);
+  }
+  void ComputeClear();
+
   std::array<int, 3> bdims_ = {0, 0, 0};
   std::vector<uint8_t> bricks_;
+  std::vector<uint8_t> clear_;    // Clear() per brick, in the order of bricks_
+  std::vector<uint64_t> voids_;  // Voids() per brick, likewise
 };
 
 // Scalars of planes [y_begin, y_end) of a volume: x fastest, then y, then z.

@@ -87,10 +87,12 @@ class Traversal {
       step_[a] = moves ? (d > 0 ? 1 : -1) : 0;
       inv_[a] = moves ? 1.0 / d : 0.0;
       dir_[a] = moves ? d : 0.0;
+      moves_[a] = std::abs(dir_[a]);
       TRANSTICK_DCHECK(std::abs(origin[a]) <= 1e9 + scene.dims()[a]);
       TRANSTICK_DCHECK(origin[a] + direction[a] * t >= cell[a] - 1.0 &&
                        origin[a] + direction[a] * t <= cell[a] + 2.0);
     }
+    across_tracks_ = moves_[2] <= std::max(moves_[0], moves_[1]);
   }
   // Resumes a ray from its descriptor's origin, direction, cell and t.
   Traversal(const Scene& scene, const RayDescriptor& ray)
@@ -121,12 +123,36 @@ class Traversal {
     if (!Inside(cell_, dims)) return std::nullopt;
     const uint8_t brick = scene_->bricks().At(cell_[0], cell_[1], cell_[2]);
     if (brick != BrickMap::kMixed) {
+      // A void brick is left by the cube of void bricks around it.
+      const int r = brick == 0 ? scene_->bricks().Clear(cell_[0], cell_[1], cell_[2]) : 0;
       std::array<int, 3> lo, hi;
       for (int a = 0; a < 3; ++a) {
-        lo[a] = (cell_[a] >> BrickMap::kShift) << BrickMap::kShift;
-        hi[a] = std::min(lo[a] + BrickMap::kBrick, dims[a]);
+        const int b = cell_[a] >> BrickMap::kShift;
+        lo[a] = std::max(b - r, 0) << BrickMap::kShift;
+        hi[a] = std::min((b + r + 1) << BrickMap::kShift, dims[a]);
       }
       return Leave(lo, hi, brick);
+    }
+    // A void 4^3 or 2^3 cell of the brick is left in one step, unless the
+    // ray runs mostly along the track, where the track's void gap reaches
+    // further.
+    const uint64_t voids = scene_->bricks().Voids(cell_[0], cell_[1], cell_[2]);
+    if (voids != 0 && across_tracks_) {
+      const int ox = cell_[0] & (BrickMap::kBrick - 1), oy = cell_[1] & (BrickMap::kBrick - 1),
+                oz = cell_[2] & (BrickMap::kBrick - 1);
+      if ((voids >> ((ox >> 1) | ((oy >> 1) << 2) | ((oz >> 1) << 4))) & 1) {
+        // The eight 2^3 cells of the 4^3 cell: bits 0, 1, 4, 5, 16, 17, 20,
+        // 21 shifted to its corner.
+        const uint64_t octant = uint64_t{0x330033} << (((ox >> 2) << 1) | ((oy >> 2) << 3) |
+                                                       ((oz >> 2) << 5));
+        const int size = (voids & octant) == octant ? 4 : 2;
+        std::array<int, 3> lo, hi;
+        for (int a = 0; a < 3; ++a) {
+          lo[a] = cell_[a] & ~(size - 1);
+          hi[a] = std::min(lo[a] + size, dims[a]);
+        }
+        return Leave(lo, hi, 0);
+      }
     }
     StickSpan span = scene_->sticks().Find(cell_[0], cell_[1], cell_[2]);
     std::array<int, 3> lo = {cell_[0], cell_[1], span.begin};
@@ -203,6 +229,8 @@ class Traversal {
   Vec3 dir_;
   Vec3 inv_;
   int step_[3];
+  double moves_[3];     // |dir_|
+  bool across_tracks_;  // the ray moves along x or y at least as fast as along z
   // Where the walk is.
   std::array<int32_t, 3> cell_;
   double t_;
