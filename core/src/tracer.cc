@@ -497,11 +497,10 @@ float Tracer::Sample(const Vec3& p) const {
   const float fx = static_cast<float>(qx - x0), fy = static_cast<float>(qy - y0),
               fz = static_cast<float>(qz - z0);
   auto lerp = [](float a, float b, float f) { return a + f * (b - a); };
-  const Scene& s = scene_;
-  float c00 = lerp(s.Scalar(x0, y0, z0), s.Scalar(x0 + 1, y0, z0), fx);
-  float c10 = lerp(s.Scalar(x0, y0 + 1, z0), s.Scalar(x0 + 1, y0 + 1, z0), fx);
-  float c01 = lerp(s.Scalar(x0, y0, z0 + 1), s.Scalar(x0 + 1, y0, z0 + 1), fx);
-  float c11 = lerp(s.Scalar(x0, y0 + 1, z0 + 1), s.Scalar(x0 + 1, y0 + 1, z0 + 1), fx);
+  float c[8];  // corner x + 2y + 4z, clamped as Scalar does
+  scene_.Corners(x0, y0, z0, c);
+  const float c00 = lerp(c[0], c[1], fx), c10 = lerp(c[2], c[3], fx);
+  const float c01 = lerp(c[4], c[5], fx), c11 = lerp(c[6], c[7], fx);
   return lerp(lerp(c00, c10, fy), lerp(c01, c11, fy), fz);
 }
 
