@@ -4,6 +4,7 @@
 #include "transtick/partition.h"
 
 #include <numeric>
+#include <random>
 
 #include "gtest/gtest.h"
 #include "testing.h"
@@ -38,6 +39,70 @@ TEST(PartitionTest, CostRuleEqualisesPiecewiseUniformCost) {
             (std::vector<int>{0, 25, 50, 75, 100}));
   EXPECT_EQ(BalancedCuts({0, 50, 100}, {30, 10}, BalanceRule::kCost),
             (std::vector<int>{0, 33, 100}));
+}
+
+// With a work profile, the cost of a slab goes to its planes in
+// proportion to their work: a slab whose cost sits in a few of its planes
+// is cut there, not evenly.
+TEST(PartitionTest, CostRuleFollowsTheWorkProfile) {
+  // Two slabs of 50 planes, costs 30 and 10; the first slab's work all in
+  // planes 40-49, the second's even: per-plane costs 3 (x10) then 0.2
+  // (x50), total 40, so the cut at 20 falls two thirds into plane 46.
+  std::vector<double> first(50, 0.0), second(50, 1.0);
+  for (int k = 40; k < 50; ++k) first[k] = 7;
+  EXPECT_EQ(BalancedCuts({0, 50, 100}, {30, 10}, BalanceRule::kCost, {first, second}),
+            (std::vector<int>{0, 47, 100}));
+  // A profile of the wrong size, negative or all zero counts as even.
+  for (const auto& bad : {std::vector<double>(49, 1.0), std::vector<double>(50, 0.0),
+                          std::vector<double>(50, -1.0)}) {
+    EXPECT_EQ(BalancedCuts({0, 50, 100}, {30, 10}, BalanceRule::kCost, {bad, second}),
+              (std::vector<int>{0, 33, 100}));
+  }
+}
+
+// Property: for random slabs, costs and profiles, every new slab's cost
+// (the per-plane costs the rule assumes, summed) is within one plane's
+// cost of the mean.
+TEST(PartitionTest, CostRuleWithProfilesEqualisesWithinAPlane) {
+  std::mt19937 rng(9);
+  for (int trial = 0; trial < 2000; ++trial) {
+    const int n = 2 + static_cast<int>(rng() % 7);
+    const int planes = n + static_cast<int>(rng() % 300);
+    std::vector<int> cuts = UniformCuts(planes, n);
+    std::vector<double> costs(n);
+    std::vector<std::vector<double>> profiles(n);
+    std::vector<double> plane_cost(planes);
+    double total = 0;
+    for (int i = 0; i < n; ++i) {
+      costs[i] = 1 + rng() % 1000;
+      total += costs[i];
+      const int size = cuts[i + 1] - cuts[i];
+      double weight = 0;
+      for (int k = 0; k < size; ++k) {
+        profiles[i].push_back(rng() % 4 == 0 ? 0.0 : static_cast<double>(rng() % 100));
+        weight += profiles[i].back();
+      }
+      for (int k = 0; k < size; ++k) {
+        plane_cost[cuts[i] + k] =
+            costs[i] * (weight > 0 ? profiles[i][k] / weight : 1.0 / size);
+      }
+    }
+    const std::vector<int> got = BalancedCuts(cuts, costs, BalanceRule::kCost, profiles);
+    ASSERT_TRUE(ValidCuts(got, planes, n));
+    double biggest = 0;
+    for (double c : plane_cost) biggest = std::max(biggest, c);
+    const double floor = 1e-3 * total / planes;
+    for (int i = 0; i < n; ++i) {
+      double c = 0;
+      for (int y = got[i]; y < got[i + 1]; ++y) c += std::max(plane_cost[y], floor);
+      // Rounding moves each cut by at most half a plane, and a slab kept
+      // one plane thick may hold more.
+      if (got[i + 1] - got[i] > 1) {
+        EXPECT_LE(std::abs(c - total / n), biggest + floor * planes + 1e-9)
+            << "trial " << trial << " slab " << i;
+      }
+    }
+  }
 }
 
 TEST(PartitionTest, PaperRuleIsTheLinearUpdate) {

@@ -44,7 +44,7 @@ bool ValidCuts(const std::vector<int>& cuts, int planes, int slabs) {
 }
 
 std::vector<int> BalancedCuts(const std::vector<int>& cuts, const std::vector<double>& costs,
-                              BalanceRule rule) {
+                              BalanceRule rule, const std::vector<std::vector<double>>& profiles) {
   const int n = static_cast<int>(costs.size());
   TRANSTICK_CHECK(n >= 1 && cuts.size() == costs.size() + 1);
   const int planes = cuts.back();
@@ -70,26 +70,44 @@ std::vector<int> BalancedCuts(const std::vector<int>& cuts, const std::vector<do
     for (int i = 1; i < n; ++i) real[i] = real[i - 1] + size[i - 1] * planes / sum;
     return RoundCuts(real, planes);
   }
-  // Cost density per plane in each slab, with a floor so that a slab
-  // measured at zero still has some (traversing empty space is not free)
-  // and the running sum is strictly increasing.
+  // The cost of each plane: its slab's cost shared by the slab's profile
+  // (evenly without one), with a floor so that a plane measured at zero
+  // still has some (traversing empty space is not free) and the running
+  // sum is strictly increasing.
   const double floor = 1e-3 * total / planes;
-  std::vector<double> density(n);
-  double sum = 0;
+  std::vector<double> plane_cost(planes);
   for (int i = 0; i < n; ++i) {
-    density[i] = std::max(floor, costs[i] / (cuts[i + 1] - cuts[i]));
-    sum += density[i] * (cuts[i + 1] - cuts[i]);
+    const int size = cuts[i + 1] - cuts[i];
+    double weight = 0;
+    const bool profiled = i < static_cast<int>(profiles.size()) &&
+                          static_cast<int>(profiles[i].size()) == size;
+    if (profiled) {
+      for (double w : profiles[i]) {
+        if (!std::isfinite(w) || w < 0) {
+          weight = 0;
+          break;
+        }
+        weight += w;
+      }
+    }
+    for (int k = 0; k < size; ++k) {
+      const double share = weight > 0 ? profiles[i][k] / weight : 1.0 / size;
+      plane_cost[cuts[i] + k] = std::max(floor, costs[i] * share);
+    }
   }
-  // Walk the running sum and place cut k where it reaches k / n of the total.
-  int slab = 0;
-  double before = 0;  // running sum at cuts[slab]
+  double sum = 0;
+  for (double c : plane_cost) sum += c;
+  // Walk the running sum and place cut k where it reaches k / n of the
+  // total, within a plane in proportion to its cost.
+  int plane = 0;
+  double before = 0;  // running sum up to plane `plane`
   for (int k = 1; k < n; ++k) {
     const double target = sum * k / n;
-    while (slab < n - 1 && before + density[slab] * (cuts[slab + 1] - cuts[slab]) < target) {
-      before += density[slab] * (cuts[slab + 1] - cuts[slab]);
-      ++slab;
+    while (plane < planes - 1 && before + plane_cost[plane] < target) {
+      before += plane_cost[plane];
+      ++plane;
     }
-    real[k] = cuts[slab] + (target - before) / density[slab];
+    real[k] = plane + std::clamp((target - before) / plane_cost[plane], 0.0, 1.0);
   }
   return RoundCuts(real, planes);
 }

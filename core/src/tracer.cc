@@ -214,6 +214,9 @@ Deposit Tracer::MissDeposit(uint32_t pixel) const {
 
 Tracer::Outcome Tracer::Trace(RayDescriptor& ray, std::vector<RayDescriptor>& spawned,
                               Deposit& deposit, TraceCounters& counters) const {
+  if (counters.plane_work && ray.cell[1] >= scene_.y_begin() && ray.cell[1] < scene_.y_end()) {
+    counters.plane_work[ray.cell[1] - scene_.y_begin()] += kRayWork;
+  }
   Outcome outcome;
   if (ray.kind == RayKind::kShadow) {
     outcome = TraceShadow(ray, counters);
@@ -260,6 +263,7 @@ TRANSTICK_INLINE std::optional<Tracer::Step> Tracer::Walk(Walker& w, Outcome* ou
     return std::nullopt;
   }
   ++counters.segments;
+  if (counters.plane_work) counters.plane_work[cell[1] - w.y_begin] += kSegmentWork;
   return Step{*seg, cell};
 }
 
@@ -268,6 +272,10 @@ bool Tracer::Shade(RayDescriptor& ray, uint8_t m, const Vec3& p, const Vec3& vie
                    uint16_t shadow_band, uint8_t shadow_material,
                    std::vector<RayDescriptor>& spawned, TraceCounters& counters) const {
   ++counters.surface_hits;
+  if (counters.plane_work) {
+    counters.plane_work[FloorClamped(p.y, scene_.y_begin(), scene_.y_end() - 1) -
+                        scene_.y_begin()] += kHitWork;
+  }
   const Material& mat = scene_.classification().materials[m - 1];
   float diffuse, specular;
   Light(Gradient(p), view, &diffuse, &specular, mat.shininess);
@@ -301,15 +309,25 @@ bool Tracer::Shade(RayDescriptor& ray, uint8_t m, const Vec3& p, const Vec3& vie
   return ray.transmittance < settings_.min_transmittance;
 }
 
-void Tracer::CrossingsOf(std::optional<CrossingWalk>& walk, const RayDescriptor& ray,
-                  const Segment& seg) const {
+bool Tracer::CrossingsOf(std::optional<CrossingWalk>& walk, const RayDescriptor& ray,
+                         const Segment& seg) const {
   // A candidate segment right after another goes on with the same walk:
   // the cell across the plane between them keeps its roots.
   if (walk && walk->t1() == seg.t0) {
     walk->Extend(seg.t1);
-  } else {
-    walk.emplace(scene_, bands_, ray.origin, ray.direction, seg.t0, seg.t1, ray.band);
+    return false;
   }
+  walk.emplace(scene_, bands_, ray.origin, ray.direction, seg.t0, seg.t1, ray.band);
+  return true;
+}
+
+void Tracer::CountCells(const CrossingWalk& walk, int plane, int& counted,
+                        TraceCounters& counters) {
+  // (An extended walk may count the cell it was in once more, or once less.)
+  if (counters.plane_work && walk.cells() > counted) {
+    counters.plane_work[plane] += static_cast<uint64_t>(walk.cells() - counted) * kCellWork;
+  }
+  counted = walk.cells();
 }
 
 uint16_t Tracer::BandAt(const Vec3& p, const std::array<int32_t, 3>& cell, uint8_t label) const {
@@ -323,6 +341,7 @@ Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescrip
   Walker walker = MakeWalker(ray);
   const Vec3 view = Normalize(-(ray.direction / inv_spacing_));
   std::optional<CrossingWalk> walk;  // through consecutive candidate segments
+  int counted = 0;                   // its cells in the work profile so far
   Outcome outcome;
   while (auto step = Walk(walker, &outcome, counters)) {
     const Segment& seg = step->seg;
@@ -348,7 +367,7 @@ Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescrip
         ray.material = n;
       }
       if (m != Classification::kCandidate) continue;  // one band throughout
-      CrossingsOf(walk, ray, seg);
+      if (CrossingsOf(walk, ray, seg)) counted = 0;
       while (auto c = walk->Next()) {
         const uint16_t before = ray.band;
         const uint8_t n = bands_.material(c->band);
@@ -368,10 +387,14 @@ Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescrip
           const bool finished = Shade(ray, n, p, view, at, 0, before, bands_.material(before),
                                       spawned, counters);
           ray.material = n;
-          if (finished) return walker.Stop(ray, Outcome::kFinished);
+          if (finished) {
+            CountCells(*walk, cell[1] - walker.y_begin, counted, counters);
+            return walker.Stop(ray, Outcome::kFinished);
+          }
         }
         ray.material = n;
       }
+      CountCells(*walk, cell[1] - walker.y_begin, counted, counters);
       continue;
     }
     if (m != 0 && m != ray.material) {
@@ -405,6 +428,7 @@ Tracer::Outcome Tracer::TraceShadow(RayDescriptor& ray, TraceCounters& counters)
   };
   Walker walker = MakeWalker(ray);
   std::optional<CrossingWalk> walk;
+  int counted = 0;
   Outcome outcome;
   while (auto step = Walk(walker, &outcome, counters)) {
     const uint8_t m = step->seg.material;
@@ -421,14 +445,19 @@ Tracer::Outcome Tracer::TraceShadow(RayDescriptor& ray, TraceCounters& counters)
         if (dark) return walker.Stop(ray, Outcome::kFinished);
       }
       if (m != Classification::kCandidate) continue;
-      CrossingsOf(walk, ray, step->seg);
+      if (CrossingsOf(walk, ray, step->seg)) counted = 0;
+      const int plane = step->cell[1] - walker.y_begin;
       while (auto c = walk->Next()) {
         const uint8_t n = bands_.material(c->band);
         ray.band = static_cast<uint16_t>(c->band);
         const bool dark = n != 0 && n != ray.material && enter(n);
         ray.material = n;
-        if (dark) return walker.Stop(ray, Outcome::kFinished);
+        if (dark) {
+          CountCells(*walk, plane, counted, counters);
+          return walker.Stop(ray, Outcome::kFinished);
+        }
       }
+      CountCells(*walk, plane, counted, counters);
       continue;
     }
     if (m != 0 && m != ray.material) {
@@ -470,6 +499,7 @@ Tracer::Outcome Tracer::TraceDvr(RayDescriptor& ray, TraceCounters& counters) co
       const TableEntry& e = Lookup(Sample(p));
       if (e.alpha <= 0) continue;
       ++counters.samples;
+      if (counters.plane_work) counters.plane_work[cell[1] - walker.y_begin] += kSampleWork;
       std::array<float, 3> rgb = e.color;
       if (tf.shading) {
         float diffuse, specular;

@@ -38,13 +38,49 @@ std::vector<std::vector<double>> RingCosts(const FrameResult& frame,
   return costs;
 }
 
+// The work profiles of the workers of each ring (docs/balancing.md, "The
+// work profile"), in ring order; empty for a worker that sent none.
+std::vector<std::vector<std::vector<double>>> RingProfiles(const FrameResult& frame,
+                                                           const std::vector<size_t>& ring_sizes) {
+  std::vector<std::vector<std::vector<double>>> profiles(ring_sizes.size());
+  size_t k = 0;
+  for (size_t r = 0; r < ring_sizes.size(); ++r) {
+    for (size_t i = 0; i < ring_sizes[r]; ++i, ++k) {
+      std::vector<double> p;
+      if (k < frame.workers.size()) {
+        for (uint64_t w : frame.workers[k].plane_work()) p.push_back(static_cast<double>(w));
+      }
+      profiles[r].push_back(std::move(p));
+    }
+  }
+  return profiles;
+}
+
 std::vector<std::vector<int>> Recut(const Layout& layout, const FrameResult& frame,
                                     BalanceRule rule) {
   const auto sizes = layout.RingSizes();
-  const auto costs = RingCosts(frame, sizes);
+  auto costs = RingCosts(frame, sizes);
+  const auto profiles = RingProfiles(frame, sizes);
+  if (rule == BalanceRule::kCost) {
+    // A slab's cost is its work profile's total when it sent one: counted,
+    // not timed, so the same rays give the same cuts on a busy machine,
+    // where a prerender's CPU times (a millisecond or two each) were
+    // mostly noise and each thread's fixed costs.
+    // A ring some of whose workers sent none keeps its CPU times.
+    for (size_t r = 0; r < sizes.size(); ++r) {
+      bool profiled = true;
+      for (const auto& p : profiles[r]) profiled = profiled && !p.empty();
+      if (!profiled) continue;
+      for (size_t i = 0; i < costs[r].size(); ++i) {
+        double work = 0;
+        for (double w : profiles[r][i]) work += w;
+        costs[r][i] = work;
+      }
+    }
+  }
   std::vector<std::vector<int>> cuts;
   for (size_t r = 0; r < sizes.size(); ++r) {
-    cuts.push_back(BalancedCuts(layout.rings[r].cuts, costs[r], rule));
+    cuts.push_back(BalancedCuts(layout.rings[r].cuts, costs[r], rule, profiles[r]));
   }
   return cuts;
 }

@@ -554,7 +554,8 @@ void Frame::Reject(uint64_t count, const char* side, const std::string& why) {
   });
 }
 
-bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>* misses) {
+bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>* misses,
+                          uint64_t* plane_work) {
   const int64_t k0 = next_pixel_.fetch_add(static_cast<int64_t>(kWorkUnit));
   if (k0 >= pixels_in_rows_) return false;
   const int64_t k1 = std::min<int64_t>(k0 + kWorkUnit, pixels_in_rows_);
@@ -571,6 +572,9 @@ bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>*
           break;
         case RingLayout::PrimaryRole::kMiss:
           misses->push_back(tracer_.MissDeposit(static_cast<uint32_t>(row) * width + col));
+          // Only the first slab deposits misses: their cost stays with
+          // its first plane wherever the cuts go.
+          plane_work[0] += kRayWork;
           break;
         case RingLayout::PrimaryRole::kNone:
           break;
@@ -583,6 +587,8 @@ bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>*
 void Frame::TraceLoop(int thread_index) {
   NameThread("tt-tracer");
   ThreadStats& st = thread_stats_[thread_index];
+  st.plane_work.assign(scene_->y_end() - scene_->y_begin(), 0);
+  st.counters.plane_work = st.plane_work.data();
   std::vector<RayDescriptor> work;
   std::vector<Deposit> misses;
   std::string to_left, to_right, deposits;
@@ -600,7 +606,7 @@ void Frame::TraceLoop(int thread_index) {
     const double cpu0 = ThreadCpuMs();
     work.clear();
     // Rays from neighbours first: they free the nodes waiting on them.
-    bool got = inbox_.TryPop(kWorkUnit, &work) || NextPrimaries(&work, &misses);
+    bool got = inbox_.TryPop(kWorkUnit, &work) || NextPrimaries(&work, &misses, st.plane_work.data());
     for (const Deposit& d : misses) AppendDeposit(d, &deposits);
     misses.clear();
     if (!got) {
@@ -726,6 +732,12 @@ v1::WorkerFrameStats Frame::Finish(bool cancel) {
   }
   stats.set_rays_truncated(truncated);
   stats.set_rays_rejected(rejected_);
+  // A tracer that never started has no profile yet: its planes count 0.
+  std::vector<uint64_t> work(scene_->y_end() - scene_->y_begin(), 0);
+  for (const ThreadStats& t : thread_stats_) {
+    for (size_t y = 0; y < t.plane_work.size() && y < work.size(); ++y) work[y] += t.plane_work[y];
+  }
+  for (uint64_t w : work) stats.add_plane_work(w);
   stats.set_elapsed_ms(elapsed);
   stats.set_active_ms(std::max(0.0, elapsed - idle / std::max<size_t>(1, thread_stats_.size())));
   stats.set_cpu_ms(cpu);

@@ -188,9 +188,12 @@ class Frame : public std::enable_shared_from_this<Frame> {
   void TracerStopped();
   // Closes the streams and gathers the statistics. REQUIRES: no tracer runs.
   v1::WorkerFrameStats Finish(bool cancel);
-  // Fills `out` with the next primary rays entering this slab; false when
-  // every pixel has been generated.
-  bool NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>* misses);
+  // Fills `out` with the next primary rays entering this slab, and
+  // `misses` with the deposits of rays that miss the volume (counted in
+  // the work profile `plane_work`); false when every pixel has been
+  // generated.
+  bool NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>* misses,
+                     uint64_t* plane_work);
   void ReceiveBatch(const v1::RayBatch& batch, Link& from);
   // Counts `count` invalid records from the `side` neighbour; the first
   // time, logs why and aborts the frame at the display.
@@ -257,6 +260,7 @@ class Frame : public std::enable_shared_from_this<Frame> {
     double cpu_ms = 0;  // CPU time (CLOCK_THREAD_CPUTIME_ID) spent tracing
     TraceCounters counters;
     uint64_t primary = 0, shadow = 0;
+    std::vector<uint64_t> plane_work;  // counters.plane_work points here
   };
   std::vector<ThreadStats> thread_stats_;
 };

@@ -104,6 +104,8 @@ class CrossingWalk {
   // REQUIRES: new_t1 >= t1(), and every crossing before t1 was taken.
   void Extend(double new_t1);
   double t1() const { return t1_; }
+  // The cells of the field the walk has entered so far.
+  int cells() const { return cells_; }
 
  private:
   // The roots of one edge in the current cell, in increasing t.

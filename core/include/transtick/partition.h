@@ -17,9 +17,10 @@ namespace transtick {
 std::vector<int> UniformCuts(int planes, int slabs);
 
 enum class BalanceRule {
-  // Each slab's cost spread evenly over its planes; the running sum of cost
-  // cut into n equal parts. Exact when cost per plane is uniform within
-  // each slab, whatever it is across slabs.
+  // Each slab's cost spread over its planes by its work profile (evenly
+  // without one); the running sum of cost cut into n equal parts. Exact
+  // when the profile is in proportion to the cost within each slab,
+  // whatever the cost is across slabs.
   kCost,
   // The 1991 rule: size[i] += (t_mean - t_i) / t_plane with t_plane =
   // sum(t) / planes, i.e. one global cost per plane.
@@ -28,11 +29,15 @@ enum class BalanceRule {
 
 
 // New cuts for the same number of slabs and planes, from the measured cost
-// of each slab under `cuts`. Returns `cuts` unchanged when the costs carry no
-// information (all zero, or a negative or non-finite one).
+// of each slab under `cuts` and, for kCost, how the work was spread over
+// each slab's planes (profiles[i][k] for plane cuts[i] + k; a profile that
+// is missing, of another size or all zero counts as even). Returns `cuts`
+// unchanged when the costs carry no information (all zero, or a negative
+// or non-finite one).
 // REQUIRES: cuts valid (see above); costs.size() + 1 == cuts.size().
 std::vector<int> BalancedCuts(const std::vector<int>& cuts, const std::vector<double>& costs,
-                              BalanceRule rule);
+                              BalanceRule rule,
+                              const std::vector<std::vector<double>>& profiles = {});
 
 // True when `cuts` are valid cuts of `planes` planes into `slabs` slabs.
 bool ValidCuts(const std::vector<int>& cuts, int planes, int slabs);

@@ -44,6 +44,13 @@ struct TraceCounters {
   // (Tracer::Trace). The termination argument says this never happens; a
   // non-zero count is a defect, reported in the frame's statistics.
   uint64_t truncated = 0;
+  // When set, the work done in each plane of the tracer's slab (docs/
+  // balancing.md, "The work profile"): plane_work[y - y_begin] for plane y,
+  // in units of kSegmentWork per traversal step, kCellWork per cell of the
+  // field a crossing walk enters, kHitWork per shaded point and
+  // kSampleWork per dvr sample. The caller owns the array (one entry per
+  // plane of the slab); Add leaves it alone.
+  uint64_t* plane_work = nullptr;
   void Add(const TraceCounters& o) {
     primary += o.primary;
     shadow += o.shadow;
@@ -53,6 +60,18 @@ struct TraceCounters {
     truncated += o.truncated;
   }
 };
+
+// Units of the work profile (TraceCounters::plane_work), about 10 ns of a
+// worker's tracer CPU each (fitted to measured workers: docs/balancing.md,
+// "The work profile"): a traversal step, a crossing walk's cell, the
+// gradient, light and shadow ray of a shaded point, a dvr sample, and what
+// a ray costs a node apart from its steps (taking it, its deposit or its
+// hand-over; a miss's deposit too).
+inline constexpr uint64_t kSegmentWork = 6;
+inline constexpr uint64_t kCellWork = 12;
+inline constexpr uint64_t kHitWork = 36;
+inline constexpr uint64_t kSampleWork = 5;
+inline constexpr uint64_t kRayWork = 15;
 
 // Limits that keep every frame finite (docs/design.md, "Why every ray ends").
 // The finest dvr step: this many samples per voxel along the smallest
@@ -161,9 +180,13 @@ class Tracer {
   // elsewhere the voxel's, which its whole voxel shares.
   uint16_t BandAt(const Vec3& p, const std::array<int32_t, 3>& cell, uint8_t label) const;
   // The crossings of candidate segment `seg` of `ray`: `walk` extended to
-  // it when it ends where seg starts, else a new walk.
-  void CrossingsOf(std::optional<CrossingWalk>& walk, const RayDescriptor& ray,
+  // it when it ends where seg starts, else a new walk (returns true).
+  bool CrossingsOf(std::optional<CrossingWalk>& walk, const RayDescriptor& ray,
                    const Segment& seg) const;
+  // Adds the cells `walk` entered since `counted` of them were counted to
+  // the work profile at `plane` (an index into plane_work).
+  static void CountCells(const CrossingWalk& walk, int plane, int& counted,
+                         TraceCounters& counters);
   Outcome TraceShadow(RayDescriptor& ray, TraceCounters& counters) const;
   Outcome TraceDvr(RayDescriptor& ray, TraceCounters& counters) const;
 
