@@ -71,7 +71,7 @@ inline constexpr uint64_t kSegmentWork = 6;
 inline constexpr uint64_t kCellWork = 12;
 inline constexpr uint64_t kHitWork = 36;
 inline constexpr uint64_t kSampleWork = 5;
-inline constexpr uint64_t kRayWork = 15;
+inline constexpr uint64_t kRayWork = 9;
 
 // Limits that keep every frame finite (docs/design.md, "Why every ray ends").
 // The finest dvr step: this many samples per voxel along the smallest
