@@ -39,7 +39,8 @@ std::vector<std::vector<double>> RingCosts(const FrameResult& frame,
 }
 
 // The work profiles of the workers of each ring (docs/balancing.md, "The
-// work profile"), in ring order; empty for a worker that sent none.
+// work profile"), in ring order; empty for a worker that sent none or one
+// that does not fit its slab.
 std::vector<std::vector<std::vector<double>>> RingProfiles(const FrameResult& frame,
                                                            const std::vector<size_t>& ring_sizes) {
   std::vector<std::vector<std::vector<double>>> profiles(ring_sizes.size());
@@ -47,8 +48,12 @@ std::vector<std::vector<std::vector<double>>> RingProfiles(const FrameResult& fr
   for (size_t r = 0; r < ring_sizes.size(); ++r) {
     for (size_t i = 0; i < ring_sizes[r]; ++i, ++k) {
       std::vector<double> p;
+      // Only a profile of one entry per plane of the worker's slab counts.
       if (k < frame.workers.size()) {
-        for (uint64_t w : frame.workers[k].plane_work()) p.push_back(static_cast<double>(w));
+        const v1::WorkerFrameStats& w = frame.workers[k];
+        if (w.slab_size() == 2 && w.plane_work_size() == w.slab(1) - w.slab(0)) {
+          for (uint64_t x : w.plane_work()) p.push_back(static_cast<double>(x));
+        }
       }
       profiles[r].push_back(std::move(p));
     }
