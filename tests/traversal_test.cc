@@ -211,18 +211,27 @@ TEST(TraversalTest, SparseScenesMatchBruteForceSampling) {
   EXPECT_GT(checked, 200000);
 }
 
-// Clear and Voids against their definitions, on random brick maps of
-// random sizes; the serialised map decodes to the same, and a map of any
-// other size is refused.
-TEST(BrickMapTest, ClearAndVoidsMatchTheirDefinitions) {
+// Cell and Reach against their definitions, on random brick maps of
+// random sizes with a few materials; the serialised map decodes to the
+// same, and a map of any other size is refused.
+TEST(BrickMapTest, CellsAndReachMatchTheirDefinitions) {
   std::mt19937 rng(5);
   for (int trial = 0; trial < 40; ++trial) {
-    const std::array<int, 3> dims = {1 + static_cast<int>(rng() % 90),
-                                     1 + static_cast<int>(rng() % 90),
-                                     1 + static_cast<int>(rng() % 90)};
+    const std::array<int, 3> dims = {1 + static_cast<int>(rng() % 50),
+                                     1 + static_cast<int>(rng() % 50),
+                                     1 + static_cast<int>(rng() % 50)};
     const size_t n = static_cast<size_t>(dims[0]) * dims[1] * dims[2];
-    // Occupied voxels in a few clusters, or none at all.
+    // Voxels of material 1 or 2 in a few clusters, sometimes inside a
+    // block of material 1, or none at all.
+    const bool dvr = trial % 2 == 1;
     std::vector<uint8_t> labels(n, 0);
+    if (trial % 3 == 0) {
+      const int x0 = rng() % dims[0], y0 = rng() % dims[1], z0 = rng() % dims[2];
+      for (int z = z0; z < dims[2]; ++z)
+        for (int y = y0; y < dims[1]; ++y)
+          for (int x = x0; x < dims[0]; ++x)
+            labels[(static_cast<size_t>(z) * dims[1] + y) * dims[0] + x] = 1;
+    }
     const int clusters = static_cast<int>(rng() % 4);
     for (int c = 0; c < clusters; ++c) {
       const int cx = rng() % dims[0], cy = rng() % dims[1], cz = rng() % dims[2];
@@ -230,61 +239,65 @@ TEST(BrickMapTest, ClearAndVoidsMatchTheirDefinitions) {
         const int x = std::clamp(cx + static_cast<int>(rng() % 9) - 4, 0, dims[0] - 1);
         const int y = std::clamp(cy + static_cast<int>(rng() % 9) - 4, 0, dims[1] - 1);
         const int z = std::clamp(cz + static_cast<int>(rng() % 9) - 4, 0, dims[2] - 1);
-        labels[(static_cast<size_t>(z) * dims[1] + y) * dims[0] + x] = 1 + rng() % 2;
+        labels[(static_cast<size_t>(z) * dims[1] + y) * dims[0] + x] = rng() % 3;
       }
     }
-    const BrickMap map = BrickMap::Build(labels, dims, trial % 2 == 0);
-    const auto& bd = map.brick_dims();
-    auto label = [&](int x, int y, int z) {
-      return labels[(static_cast<size_t>(z) * dims[1] + y) * dims[0] + x];
+    const BrickMap map = BrickMap::Build(labels, dims, /*uniform_materials=*/!dvr);
+    auto label = [&](int x, int y, int z) -> uint8_t {
+      const uint8_t m = labels[(static_cast<size_t>(z) * dims[1] + y) * dims[0] + x];
+      return dvr && m != 0 ? BrickMap::kMixed : m;
     };
-    for (int bz = 0; bz < bd[2]; ++bz) {
-      for (int by = 0; by < bd[1]; ++by) {
-        for (int bx = 0; bx < bd[0]; ++bx) {
-          const int x = bx * 8, y = by * 8, z = bz * 8;
-          const uint8_t brick = map.At(x, y, z);
-          // Clear: the largest r for which every brick within r is void.
+    // Cell: the one material of the voxels of the 2^3 cell inside the
+    // volume, or kMixed.
+    const std::array<int, 3> cd = {(dims[0] + 1) / 2, (dims[1] + 1) / 2, (dims[2] + 1) / 2};
+    std::vector<int> cell(static_cast<size_t>(cd[0]) * cd[1] * cd[2]);
+    auto at = [&](int cx, int cy, int cz) -> int& {
+      return cell[(static_cast<size_t>(cz) * cd[1] + cy) * cd[0] + cx];
+    };
+    for (int cz = 0; cz < cd[2]; ++cz)
+      for (int cy = 0; cy < cd[1]; ++cy)
+        for (int cx = 0; cx < cd[0]; ++cx) {
+          int m = -1;
+          for (int k = 0; k < 8; ++k) {
+            const int x = 2 * cx + (k & 1), y = 2 * cy + ((k >> 1) & 1), z = 2 * cz + (k >> 2);
+            if (x >= dims[0] || y >= dims[1] || z >= dims[2]) continue;
+            const int l = label(x, y, z);
+            m = m < 0 || m == l ? l : BrickMap::kMixed;
+          }
+          at(cx, cy, cz) = m;
+          ASSERT_EQ(map.Cell(2 * cx, 2 * cy, 2 * cz), m) << cx << " " << cy << " " << cz;
+        }
+    // Reach: the largest r for which every cell within r (inside the
+    // volume) has the cell's material; 0 for a mixed cell.
+    for (int cz = 0; cz < cd[2]; ++cz)
+      for (int cy = 0; cy < cd[1]; ++cy)
+        for (int cx = 0; cx < cd[0]; ++cx) {
+          const int m = at(cx, cy, cz);
           int want = 0;
-          if (brick == 0) {
-            int nearest = BrickMap::kMaxClear + 1;
-            for (int qz = 0; qz < bd[2]; ++qz)
-              for (int qy = 0; qy < bd[1]; ++qy)
-                for (int qx = 0; qx < bd[0]; ++qx)
-                  if (map.At(qx * 8, qy * 8, qz * 8) != 0)
-                    nearest = std::min(nearest, std::max({std::abs(qx - bx), std::abs(qy - by),
-                                                          std::abs(qz - bz)}));
+          if (m != BrickMap::kMixed) {
+            int nearest = BrickMap::kMaxReach + 1;
+            for (int qz = 0; qz < cd[2]; ++qz)
+              for (int qy = 0; qy < cd[1]; ++qy)
+                for (int qx = 0; qx < cd[0]; ++qx)
+                  if (at(qx, qy, qz) != m)
+                    nearest = std::min(nearest, std::max({std::abs(qx - cx), std::abs(qy - cy),
+                                                          std::abs(qz - cz)}));
             want = nearest - 1;
           }
-          ASSERT_EQ(map.Clear(x, y, z), want) << "brick " << bx << " " << by << " " << bz;
-          // Voids: a bit for each 2^3 cell without an occupied voxel.
-          uint64_t voids = 0;
-          if (brick == BrickMap::kMixed) {
-            for (int i = 0; i < 64; ++i) {
-              bool empty = true;
-              for (int k = 0; k < 8; ++k) {
-                const int vx = x + 2 * (i & 3) + (k & 1), vy = y + 2 * ((i >> 2) & 3) + ((k >> 1) & 1),
-                          vz = z + 2 * (i >> 4) + (k >> 2);
-                if (vx < dims[0] && vy < dims[1] && vz < dims[2] && label(vx, vy, vz) != 0)
-                  empty = false;
-              }
-              if (empty) voids |= uint64_t{1} << i;
-            }
-          }
-          ASSERT_EQ(map.Voids(x, y, z), voids) << "brick " << bx << " " << by << " " << bz;
+          ASSERT_EQ(map.Reach(2 * cx, 2 * cy, 2 * cz), want) << cx << " " << cy << " " << cz;
         }
-      }
-    }
     std::vector<uint8_t> bytes = map.bytes();
     auto decoded = BrickMap::FromBytes(dims, bytes);
     ASSERT_TRUE(decoded.ok()) << decoded.status();
     EXPECT_EQ(decoded->bytes(), bytes);
-    for (int z = 0; z < dims[2]; z += 8)
-      for (int y = 0; y < dims[1]; y += 8)
-        for (int x = 0; x < dims[0]; x += 8) {
-          ASSERT_EQ(decoded->Clear(x, y, z), map.Clear(x, y, z));
-          ASSERT_EQ(decoded->Voids(x, y, z), map.Voids(x, y, z));
+    for (int z = 0; z < dims[2]; z += 2)
+      for (int y = 0; y < dims[1]; y += 2)
+        for (int x = 0; x < dims[0]; x += 2) {
+          ASSERT_EQ(decoded->At(x, y, z), map.At(x, y, z));
+          ASSERT_EQ(decoded->Cell(x, y, z), map.Cell(x, y, z));
+          ASSERT_EQ(decoded->Reach(x, y, z), map.Reach(x, y, z));
         }
-    for (int cut : {-1, 1, 8}) {
+    for (int cut : {-1, 1, 64}) {
       std::vector<uint8_t> wrong = bytes;
       if (cut < 0) {
         wrong.pop_back();

@@ -82,80 +82,134 @@ BrickMap BrickMap::Build(std::span<const uint8_t> labels, std::array<int, 3> dim
   if (!uniform_materials) {
     for (uint8_t& m : b.bricks_) m = m == 0 ? 0 : kMixed;
   }
-  // The void 2^3 cells of mixed bricks: every bit set, then cleared by each
-  // voxel that is not void.
-  b.voids_.assign(n, 0);
-  for (size_t k = 0; k < n; ++k) {
-    if (b.bricks_[k] == kMixed) b.voids_[k] = ~uint64_t{0};
+  // The cells of mixed bricks, likewise; a cell with no voxel inside the
+  // volume is void.
+  for (int a = 0; a < 3; ++a) {
+    b.cdims_[a] = b.bdims_[a] * (kBrick / 2);
+    b.cinside_[a] = (dims[a] + 1) / 2;
   }
+  b.cells_.assign(static_cast<size_t>(b.cdims_[0]) * b.cdims_[1] * b.cdims_[2], 0);
+  std::vector<uint8_t> cell_seen(b.cells_.size(), 0);
   i = 0;
   for (int z = 0; z < dims[2]; ++z) {
     for (int y = 0; y < dims[1]; ++y) {
-      const size_t row =
-          (static_cast<size_t>(z >> kShift) * b.bdims_[1] + (y >> kShift)) * b.bdims_[0];
-      const int cell_yz = (((y & (kBrick - 1)) >> 1) << 2) | (((z & (kBrick - 1)) >> 1) << 4);
+      const size_t row = b.CellIndex(0, y, z);
       for (int x = 0; x < dims[0]; ++x, ++i) {
-        if (labels[i] == 0) continue;
-        const int bit = cell_yz | ((x & (kBrick - 1)) >> 1);
-        b.voids_[row + (x >> kShift)] &= ~(uint64_t{1} << bit);
+        const size_t k = row + (x >> 1);
+        const uint8_t m = uniform_materials || labels[i] == 0 ? labels[i] : kMixed;
+        if (!cell_seen[k]) {
+          cell_seen[k] = 1;
+          b.cells_[k] = m;
+        } else if (b.cells_[k] != m) {
+          b.cells_[k] = kMixed;
+        }
       }
     }
   }
-  b.ComputeClear();
+  b.ComputeReach();
   return b;
 }
 
 std::vector<uint8_t> BrickMap::bytes() const {
   std::vector<uint8_t> out = bricks_;
-  for (size_t k = 0; k < bricks_.size(); ++k) {
-    if (bricks_[k] != kMixed) continue;
-    for (int i = 0; i < 8; ++i) out.push_back(static_cast<uint8_t>(voids_[k] >> (8 * i)));
-  }
-  return out;
-}
-
-void BrickMap::ComputeClear() {
-  // The chessboard distance from each brick to the nearest occupied one, by
-  // the two-pass transform with the 26 neighbours (exact for this metric:
-  // Rosenfeld and Pfaltz 1966), capped; Clear is that distance less one.
-  const int nx = bdims_[0], ny = bdims_[1], nz = bdims_[2];
-  constexpr int kFar = kMaxClear + 1;
-  std::vector<uint8_t> d(bricks_.size());
-  for (size_t k = 0; k < d.size(); ++k) d[k] = bricks_[k] == 0 ? kFar : 0;
-  auto index = [&](int x, int y, int z) {
-    return (static_cast<size_t>(z) * ny + y) * nx + x;
-  };
-  // Forward over the 13 neighbours before a brick in raster order, then
-  // backward over the 13 after it.
-  for (int pass = 0; pass < 2; ++pass) {
-    const int s = pass == 0 ? 1 : -1;
-    for (int zi = 0; zi < nz; ++zi) {
-      const int z = pass == 0 ? zi : nz - 1 - zi;
-      for (int yi = 0; yi < ny; ++yi) {
-        const int y = pass == 0 ? yi : ny - 1 - yi;
-        for (int xi = 0; xi < nx; ++xi) {
-          const int x = pass == 0 ? xi : nx - 1 - xi;
-          uint8_t& here = d[index(x, y, z)];
-          if (here == 0) continue;
-          int best = here;
-          for (int dz = -1; dz <= 0; ++dz) {
-            for (int dy = -1; dy <= 1; ++dy) {
-              for (int dx = -1; dx <= 1; ++dx) {
-                // The neighbours that come earlier in this pass's order.
-                if (dz == 0 && (dy > 0 || (dy == 0 && dx >= 0))) continue;
-                const int qx = x + s * dx, qy = y + s * dy, qz = z + s * dz;
-                if (qx < 0 || qy < 0 || qz < 0 || qx >= nx || qy >= ny || qz >= nz) continue;
-                best = std::min(best, d[index(qx, qy, qz)] + 1);
-              }
-            }
-          }
-          here = static_cast<uint8_t>(std::min(best, kFar));
+  for (int bz = 0; bz < bdims_[2]; ++bz) {
+    for (int by = 0; by < bdims_[1]; ++by) {
+      for (int bx = 0; bx < bdims_[0]; ++bx) {
+        if (bricks_[(static_cast<size_t>(bz) * bdims_[1] + by) * bdims_[0] + bx] != kMixed) continue;
+        for (int c = 0; c < 64; ++c) {
+          out.push_back(cells_[CellIndex(8 * bx + 2 * (c & 3), 8 * by + 2 * ((c >> 2) & 3),
+                                         8 * bz + 2 * (c >> 4))]);
         }
       }
     }
   }
-  clear_.resize(d.size());
-  for (size_t k = 0; k < d.size(); ++k) clear_[k] = d[k] == 0 ? 0 : static_cast<uint8_t>(d[k] - 1);
+  return out;
+}
+
+uint8_t BrickMap::MaxMaterial() const {
+  uint8_t most = 0;
+  for (uint8_t m : cells_) {
+    if (m != kMixed) most = std::max(most, m);
+  }
+  return most;
+}
+
+void BrickMap::ComputeReach() {
+  // The cells of uniform bricks have the brick's material.
+  for (int bz = 0; bz < bdims_[2]; ++bz) {
+    for (int by = 0; by < bdims_[1]; ++by) {
+      for (int bx = 0; bx < bdims_[0]; ++bx) {
+        const uint8_t m = bricks_[(static_cast<size_t>(bz) * bdims_[1] + by) * bdims_[0] + bx];
+        if (m == kMixed) continue;
+        for (int c = 0; c < 64; ++c) {
+          cells_[CellIndex(8 * bx + 2 * (c & 3), 8 * by + 2 * ((c >> 2) & 3),
+                           8 * bz + 2 * (c >> 4))] = m;
+        }
+      }
+    }
+  }
+  // The chessboard distance from each uniform cell to the nearest cell of
+  // another material or mixed, by the two-pass transform with the 26
+  // neighbours (exact for this metric, Rosenfeld and Pfaltz 1966: the
+  // cells on a shortest way to the nearest such cell all have the cell's
+  // material), capped; Reach is that distance less one. Cells past the
+  // volume's faces, and a border around the grid that keeps every neighbour
+  // in bounds, match anything: the traversal clips its cubes to the volume.
+  const int nx = cdims_[0] + 2, ny = cdims_[1] + 2, nz = cdims_[2] + 2;
+  constexpr int kFar = kMaxReach + 1;
+  constexpr uint16_t kAny = 0xffff;
+  const size_t n = static_cast<size_t>(nx) * ny * nz;
+  std::vector<uint8_t> d(n, kFar);
+  std::vector<uint16_t> m(n, kAny);
+  auto index = [&](int x, int y, int z) { return (static_cast<size_t>(z) * ny + y) * nx + x; };
+  size_t k = 0;
+  for (int z = 1; z + 1 < nz; ++z)
+    for (int y = 1; y + 1 < ny; ++y)
+      for (int x = 1; x + 1 < nx; ++x, ++k) {
+        if (x > cinside_[0] || y > cinside_[1] || z > cinside_[2]) continue;
+        m[index(x, y, z)] = cells_[k];
+        if (cells_[k] == kMixed) d[index(x, y, z)] = 0;
+      }
+  // The 13 neighbours that come before a cell in raster order, as offsets;
+  // the backward pass takes the same offsets negated.
+  std::vector<ptrdiff_t> before;
+  for (int dz = -1; dz <= 0; ++dz)
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dx = -1; dx <= 1; ++dx)
+        if (dz < 0 || dy < 0 || (dy == 0 && dx < 0))
+          before.push_back((static_cast<ptrdiff_t>(dz) * ny + dy) * nx + dx);
+  for (int pass = 0; pass < 2; ++pass) {
+    const ptrdiff_t s = pass == 0 ? 1 : -1;
+    for (int zi = 1; zi + 1 < nz; ++zi) {
+      const int z = pass == 0 ? zi : nz - 1 - zi;
+      for (int yi = 1; yi + 1 < ny; ++yi) {
+        const int y = pass == 0 ? yi : ny - 1 - yi;
+        for (int xi = 1; xi + 1 < nx; ++xi) {
+          const int x = pass == 0 ? xi : nx - 1 - xi;
+          const size_t here = index(x, y, z);
+          if (d[here] == 0 || m[here] == kAny) continue;
+          int best = d[here];
+          for (ptrdiff_t o : before) {
+            const size_t q = here + s * o;
+            if (m[q] == m[here]) {
+              best = std::min(best, d[q] + 1);
+            } else if (m[q] != kAny) {
+              best = 1;
+            }
+          }
+          d[here] = static_cast<uint8_t>(std::min(best, kFar));
+        }
+      }
+    }
+  }
+  reach_.resize(cells_.size());
+  k = 0;
+  for (int z = 1; z + 1 < nz; ++z)
+    for (int y = 1; y + 1 < ny; ++y)
+      for (int x = 1; x + 1 < nx; ++x, ++k) {
+        const uint8_t v = d[index(x, y, z)];
+        reach_[k] = v == 0 ? 0 : static_cast<uint8_t>(v - 1);
+      }
 }
 
 absl::StatusOr<BrickMap> BrickMap::FromBytes(std::array<int, 3> dims, std::vector<uint8_t> bytes) {
@@ -164,23 +218,32 @@ absl::StatusOr<BrickMap> BrickMap::FromBytes(std::array<int, 3> dims, std::vecto
   const size_t n = static_cast<size_t>(b.bdims_[0]) * b.bdims_[1] * b.bdims_[2];
   const size_t mixed =
       bytes.size() < n ? 0 : static_cast<size_t>(std::count(bytes.begin(), bytes.begin() + n, kMixed));
-  const size_t want = n + 8 * mixed;
+  const size_t want = n + 64 * mixed;
   if (bytes.size() != want) {
     return absl::InvalidArgumentError(absl::StrCat(
         "brick map: ", bytes.size(), " bytes, expected ", bytes.size() < n ? n : want, " (", n,
         " bricks", bytes.size() < n ? "" : absl::StrCat(", ", mixed, " mixed"), ")"));
   }
   b.bricks_.assign(bytes.begin(), bytes.begin() + n);
-  b.voids_.assign(n, 0);
-  const uint8_t* masks = bytes.data() + n;
-  for (size_t k = 0; k < n; ++k) {
-    if (b.bricks_[k] != kMixed) continue;
-    uint64_t v = 0;
-    for (int i = 0; i < 8; ++i) v |= uint64_t{masks[i]} << (8 * i);
-    b.voids_[k] = v;
-    masks += 8;
+  for (int a = 0; a < 3; ++a) {
+    b.cdims_[a] = b.bdims_[a] * (kBrick / 2);
+    b.cinside_[a] = (dims[a] + 1) / 2;
   }
-  b.ComputeClear();
+  b.cells_.assign(static_cast<size_t>(b.cdims_[0]) * b.cdims_[1] * b.cdims_[2], 0);
+  const uint8_t* cells = bytes.data() + n;
+  for (int bz = 0; bz < b.bdims_[2]; ++bz) {
+    for (int by = 0; by < b.bdims_[1]; ++by) {
+      for (int bx = 0; bx < b.bdims_[0]; ++bx) {
+        if (b.bricks_[(static_cast<size_t>(bz) * b.bdims_[1] + by) * b.bdims_[0] + bx] != kMixed)
+          continue;
+        for (int c = 0; c < 64; ++c) {
+          b.cells_[b.CellIndex(8 * bx + 2 * (c & 3), 8 * by + 2 * ((c >> 2) & 3),
+                               8 * bz + 2 * (c >> 4))] = *cells++;
+        }
+      }
+    }
+  }
+  b.ComputeReach();
   return b;
 }
 
@@ -366,6 +429,13 @@ absl::StatusOr<Scene> Scene::FromParts(RenderMode mode, std::array<int, 3> dims,
     if (auto s = classification.Validate(); !s.ok()) return s;
   } else {
     if (auto s = transfer.Validate(); !s.ok()) return s;
+  }
+  // The walk hands a uniform brick's or cell's material to the tracer,
+  // which looks it up in the classification.
+  const size_t materials = mode == RenderMode::kSurfaces ? classification.materials.size() : 0;
+  if (bricks.MaxMaterial() > materials) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("brick map: material ", int{bricks.MaxMaterial()}, " of ", materials));
   }
   scene.sticks_ = std::move(sticks);
   scene.scalars_ = std::move(scalars);

@@ -6,8 +6,12 @@
 //                handed on mid-flight, shadow rays) and deposit batches as
 //                workers send them, each for the batch fuzzer's
 //                configurations (batch_setup.h), through the codec's Append
-//                functions.
+//                functions;
+//   DIR/sticks/  brick maps of a sphere and a shell at the sticks fuzzer's
+//                dims, for surfaces and for dvr (the sticks fuzzer reads
+//                its whole input as a brick map too).
 // Usage: fuzz_seeds DIR
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -19,6 +23,7 @@
 #include "batch_setup.h"
 #include "fuzz_volumes.h"
 #include "transtick/ray_codec.h"
+#include "transtick/scene.h"
 #include "transtick/synthetic.h"
 #include "transtick/volume_io.h"
 
@@ -147,6 +152,32 @@ bool WriteBatches(const fs::path& dir) {
 }  // namespace
 }  // namespace transtick::fuzz
 
+namespace transtick::fuzz {
+namespace {
+
+bool WriteBrickMaps(const std::filesystem::path& dir) {
+  const std::array<int, 3> dims = {40, 70, 36};  // as sticks_fuzzer.cc
+  std::vector<uint8_t> labels(static_cast<size_t>(dims[0]) * dims[1] * dims[2]);
+  size_t i = 0;
+  for (int z = 0; z < dims[2]; ++z)
+    for (int y = 0; y < dims[1]; ++y)
+      for (int x = 0; x < dims[0]; ++x, ++i) {
+        const double r = std::hypot(x - 20.0, y - 35.0, z - 18.0);
+        labels[i] = r < 12 ? 1 : (r < 16 ? 2 : 0);
+      }
+  for (bool surfaces : {true, false}) {
+    const std::vector<uint8_t> bytes = BrickMap::Build(labels, dims, surfaces).bytes();
+    if (!Write(dir / (surfaces ? "bricks-surfaces" : "bricks-dvr"),
+               std::string(bytes.begin(), bytes.end()))) {
+      return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+}  // namespace transtick::fuzz
+
 int main(int argc, char** argv) {
   namespace fs = std::filesystem;
   if (argc != 2) {
@@ -156,8 +187,10 @@ int main(int argc, char** argv) {
   const fs::path dir = argv[1];
   fs::create_directories(dir / "volume");
   fs::create_directories(dir / "batch");
+  fs::create_directories(dir / "sticks");
   if (!transtick::fuzz::WriteVolumes(dir / "volume") ||
-      !transtick::fuzz::WriteBatches(dir / "batch")) {
+      !transtick::fuzz::WriteBatches(dir / "batch") ||
+      !transtick::fuzz::WriteBrickMaps(dir / "sticks")) {
     std::fprintf(stderr, "fuzz_seeds: cannot write under %s\n", argv[1]);
     return 1;
   }

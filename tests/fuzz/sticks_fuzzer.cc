@@ -5,7 +5,10 @@
 // truncates or drops blocks, and changes the slab's range and the largest
 // material. Sticks::FromBlocks must give a status or sticks whose every
 // track is sorted, disjoint and in range, and that encode and decode again
-// to the same bytes; BrickMap::FromBytes must refuse any size but its own.
+// to the same bytes; BrickMap::FromBytes must refuse any size but its own,
+// and a map it accepts must encode to the same bytes and keep Reach's
+// promise.
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -101,6 +104,33 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   // The brick map from the input's bytes: only its own size is accepted.
   std::vector<uint8_t> bytes(data, data + size);
   auto bricks = BrickMap::FromBytes(kDims, bytes);
-  if (!bricks.ok()) TRANSTICK_CHECK(!bricks.status().message().empty());
+  if (!bricks.ok()) {
+    TRANSTICK_CHECK(!bricks.status().message().empty());
+    return 0;
+  }
+  // An accepted map encodes to the same bytes, and a uniform cell's reach
+  // holds: every cell within it (up to 2, for speed) has its material.
+  TRANSTICK_CHECK(bricks->bytes() == bytes);
+  for (int z = 0; z < kDims[2]; z += 2)
+    for (int y = 0; y < kDims[1]; y += 2)
+      for (int x = (y + z) % 14; x < kDims[0]; x += 14) {
+        const uint8_t m = bricks->Cell(x, y, z);
+        const int r = bricks->Reach(x, y, z);
+        TRANSTICK_CHECK(r >= 0 && r <= BrickMap::kMaxReach);
+        if (m == BrickMap::kMixed) {
+          TRANSTICK_CHECK(r == 0);
+          continue;
+        }
+        const int reach = std::min(r, 2);
+        for (int dz = -reach; dz <= reach; ++dz)
+          for (int dy = -reach; dy <= reach; ++dy)
+            for (int dx = -reach; dx <= reach; ++dx) {
+              const int qx = x + 2 * dx, qy = y + 2 * dy, qz = z + 2 * dz;
+              if (qx < 0 || qy < 0 || qz < 0 || qx >= kDims[0] || qy >= kDims[1] ||
+                  qz >= kDims[2])
+                continue;
+              TRANSTICK_CHECK(bricks->Cell(qx, qy, qz) == m);
+            }
+      }
   return 0;
 }

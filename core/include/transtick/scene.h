@@ -21,9 +21,10 @@ enum class RenderMode { kSurfaces, kDvr };
 // "surfaces" or "dvr", for logs and messages.
 const char* RenderModeName(RenderMode mode);
 
-// The material of each 8x8x8 brick of the whole volume when all its voxels
-// share one (void included), else kMixed. Small (a byte per brick), so every
-// worker holds all of it: skipping a uniform brick in one step is then the
+// The material of each 8x8x8 brick of the whole volume, and of each 2x2x2
+// cell of the mixed ones, when all its voxels share one (void included),
+// else kMixed. Small (a byte per brick, 64 per mixed brick), so every
+// worker holds all of it: crossing uniform space in one step is then the
 // same decision on every node.
 class BrickMap {
  public:
@@ -32,8 +33,8 @@ class BrickMap {
   static constexpr uint8_t kMixed = 255;
 
   BrickMap() = default;
-  // With `uniform_materials` false only void bricks are uniform: dvr samples
-  // must stay within the column they are taken in.
+  // With `uniform_materials` false only void bricks and cells are uniform:
+  // dvr samples must stay within the column they are taken in.
   static BrickMap Build(std::span<const uint8_t> labels, std::array<int, 3> dims,
                         bool uniform_materials);
   // Rebuilds from the bytes of bytes() (docs/formats.md, "Brick map"). Fails
@@ -48,39 +49,49 @@ class BrickMap {
     TRANSTICK_DCHECK_LT(z >> kShift, bdims_[2]);
     return bricks_[Index(x, y, z)];
   }
+  // The material of the 2^3 cell holding voxel (x, y, z), or kMixed; voxels
+  // past the volume's faces do not count. A cell of a uniform brick has the
+  // brick's material. REQUIRES: as At.
+  uint8_t Cell(int x, int y, int z) const { return cells_[CellIndex(x, y, z)]; }
+
+  // How far the cell's material reaches around the 2^3 cell holding voxel
+  // (x, y, z): 0 for a mixed cell, else the largest r, at most kMaxReach,
+  // for which every cell within r cells of it along each axis (a cube of
+  // side 2 r + 1 in cells, clipped to the volume) has its material. A ray
+  // in a uniform cell leaves that cube in one step. Derived from the bytes
+  // alone (a chessboard distance transform), so every node holding the
+  // brick map has the same. REQUIRES: as At.
+  static constexpr int kMaxReach = 254;
+  int Reach(int x, int y, int z) const { return reach_[CellIndex(x, y, z)]; }
+
+  // The largest material of any brick or cell (kMixed aside), 0 when all
+  // are void or mixed: a scene checks that its classification has it.
+  uint8_t MaxMaterial() const;
+
   // The serialised map: one byte per brick (x fastest), then for each mixed
-  // brick in that order its void mask, 8 bytes little-endian.
+  // brick in that order the materials of its 64 cells, cell (i & 3,
+  // (i >> 2) & 3, i >> 4) at byte i.
   std::vector<uint8_t> bytes() const;
   const std::array<int, 3>& brick_dims() const { return bdims_; }
-  size_t MemoryBytes() const { return bricks_.size() * (1 + 1 + sizeof(uint64_t)); }
-
-  // Which 2^3 cells of a mixed brick are all void: bit i for the cell whose
-  // corner is 2 (i & 3, (i >> 2) & 3, i >> 4) from the brick's, cells past
-  // the volume's faces counting as void. 0 for a brick that is not mixed.
-  // REQUIRES: as At.
-  uint64_t Voids(int x, int y, int z) const { return voids_[Index(x, y, z)]; }
-
-  // How far the void around a void brick reaches: every brick within this
-  // many bricks of it along each axis (a cube of side 2 r + 1 in bricks,
-  // clipped to the volume) is void. 0 for a void brick beside an occupied
-  // one, and for any occupied brick; at most kMaxClear. Derived from the
-  // bricks alone (a chessboard distance transform), so every node holding
-  // the brick map has the same.
-  // REQUIRES: as At.
-  static constexpr int kMaxClear = 254;
-  int Clear(int x, int y, int z) const { return clear_[Index(x, y, z)]; }
+  size_t MemoryBytes() const { return bricks_.size() + cells_.size() + reach_.size(); }
 
  private:
   size_t Index(int x, int y, int z) const {
     return (static_cast<size_t>(z >> kShift) * bdims_[1] + (y >> kShift)) * bdims_[0] +
            (x >> kShift);
   }
-  void ComputeClear();
+  size_t CellIndex(int x, int y, int z) const {
+    return (static_cast<size_t>(z >> 1) * cdims_[1] + (y >> 1)) * cdims_[0] + (x >> 1);
+  }
+  // Fills cells_ of the uniform bricks and reach_.
+  void ComputeReach();
 
   std::array<int, 3> bdims_ = {0, 0, 0};
   std::vector<uint8_t> bricks_;
-  std::vector<uint8_t> clear_;    // Clear() per brick, in the order of bricks_
-  std::vector<uint64_t> voids_;  // Voids() per brick, likewise
+  std::array<int, 3> cdims_ = {0, 0, 0};    // 2^3 cells per axis: 4 per brick
+  std::array<int, 3> cinside_ = {0, 0, 0};  // of which hold voxels of the volume
+  std::vector<uint8_t> cells_;            // Cell() per 2^3 cell, x fastest
+  std::vector<uint8_t> reach_;            // Reach() per 2^3 cell, likewise
 };
 
 // Scalars of planes [y_begin, y_end) of a volume: x fastest, then y, then z.

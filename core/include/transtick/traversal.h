@@ -1,7 +1,8 @@
 // Traversal: the walk of a ray through the cells of a scene, one segment of
-// constant material at a time. Empty 8^3 bricks are skipped whole, void gaps
-// of a track a stick at a time, and within occupied bricks the walk moves
-// from track to track (an Amanatides-Woo walk over columns).
+// constant material at a time. Uniform space (void, or one material) is
+// crossed a cube of uniform 2^3 cells at a time (BrickMap::Reach), along a
+// track a stick or a gap at a time, and elsewhere in mixed bricks the walk
+// moves from track to track (an Amanatides-Woo walk over columns).
 //
 // Determinism is the contract here: the next segment is a pure function of
 // (ray origin, direction, cell, t) and the global volume data, every t is a
@@ -121,37 +122,30 @@ class Traversal {
   TRANSTICK_INLINE std::optional<Segment> Next() {
     const auto& dims = scene_->dims();
     if (!Inside(cell_, dims)) return std::nullopt;
-    const uint8_t brick = scene_->bricks().At(cell_[0], cell_[1], cell_[2]);
-    if (brick != BrickMap::kMixed) {
-      // A void brick is left by the cube of void bricks around it.
-      const int r = brick == 0 ? scene_->bricks().Clear(cell_[0], cell_[1], cell_[2]) : 0;
-      std::array<int, 3> lo, hi;
-      for (int a = 0; a < 3; ++a) {
-        const int b = cell_[a] >> BrickMap::kShift;
-        lo[a] = std::max(b - r, 0) << BrickMap::kShift;
-        hi[a] = std::min((b + r + 1) << BrickMap::kShift, dims[a]);
-      }
-      return Leave(lo, hi, brick);
-    }
-    // A void 4^3 or 2^3 cell of the brick is left in one step, unless the
-    // ray runs mostly along the track, where the track's void gap reaches
-    // further.
-    const uint64_t voids = scene_->bricks().Voids(cell_[0], cell_[1], cell_[2]);
-    if (voids != 0 && across_tracks_) {
-      const int ox = cell_[0] & (BrickMap::kBrick - 1), oy = cell_[1] & (BrickMap::kBrick - 1),
-                oz = cell_[2] & (BrickMap::kBrick - 1);
-      if ((voids >> ((ox >> 1) | ((oy >> 1) << 2) | ((oz >> 1) << 4))) & 1) {
-        // The eight 2^3 cells of the 4^3 cell: bits 0, 1, 4, 5, 16, 17, 20,
-        // 21 shifted to its corner.
-        const uint64_t octant = uint64_t{0x330033} << (((ox >> 2) << 1) | ((oy >> 2) << 3) |
-                                                       ((oz >> 2) << 5));
-        const int size = (voids & octant) == octant ? 4 : 2;
+    // A uniform 2^3 cell is left by the cube of cells of its material around
+    // it (a uniform brick by the brick, when that reaches further), unless
+    // the ray runs mostly along the track in a mixed brick, where the
+    // track's stick or gap reaches further.
+    const BrickMap& bricks = scene_->bricks();
+    const uint8_t brick = bricks.At(cell_[0], cell_[1], cell_[2]);
+    if (brick != BrickMap::kMixed || across_tracks_) {
+      const uint8_t m = bricks.Cell(cell_[0], cell_[1], cell_[2]);
+      if (m != BrickMap::kMixed) {
+        const int r = bricks.Reach(cell_[0], cell_[1], cell_[2]);
         std::array<int, 3> lo, hi;
-        for (int a = 0; a < 3; ++a) {
-          lo[a] = cell_[a] & ~(size - 1);
-          hi[a] = std::min(lo[a] + size, dims[a]);
+        if (brick != BrickMap::kMixed && r < 3) {
+          for (int a = 0; a < 3; ++a) {
+            lo[a] = cell_[a] & ~(BrickMap::kBrick - 1);
+            hi[a] = std::min(lo[a] + BrickMap::kBrick, dims[a]);
+          }
+        } else {
+          for (int a = 0; a < 3; ++a) {
+            const int c = cell_[a] >> 1;
+            lo[a] = std::max(c - r, 0) << 1;
+            hi[a] = std::min((c + r + 1) << 1, dims[a]);
+          }
         }
-        return Leave(lo, hi, 0);
+        return Leave(lo, hi, m);
       }
     }
     StickSpan span = scene_->sticks().Find(cell_[0], cell_[1], cell_[2]);
