@@ -566,7 +566,9 @@ TEST(SharedChannelTest, APeerBackAtTheSameAddressIsReached) {
 }
 
 TEST_F(ClusterTest, StressEveryRayCrossesEverySlab) {
-  // Looking along Y with 8 workers: every ray crosses every slab.
+  // Looking along Y with 8 workers: every ray that meets matter crosses
+  // slab after slab (through void a ray may pass several in one step, and
+  // is then routed straight to the slab holding its cell).
   auto cluster = StartCluster(8);
   ASSERT_TRUE(cluster.ok()) << cluster.status();
   v1::View v = View(0, 90, true, "top.exr");
@@ -578,7 +580,7 @@ TEST_F(ClusterTest, StressEveryRayCrossesEverySlab) {
     ASSERT_TRUE(stats.ok()) << stats.status();
     uint64_t sent = 0;
     for (const auto& w : stats->front().workers()) sent += w.rays_sent();
-    EXPECT_GT(sent, 96u * 96u);
+    EXPECT_GT(sent, 96u * 96u / 4);
     EXPECT_EQ(ReadImage(v.output())->rgb, want.rgb);
   }
 }

@@ -148,68 +148,66 @@ void BrickMap::ComputeReach() {
       }
     }
   }
-  // The chessboard distance from each uniform cell to the nearest cell of
-  // another material or mixed, by the two-pass transform with the 26
-  // neighbours (exact for this metric, Rosenfeld and Pfaltz 1966: the
-  // cells on a shortest way to the nearest such cell all have the cell's
-  // material), capped; Reach is that distance less one. Cells past the
-  // volume's faces, and a border around the grid that keeps every neighbour
-  // in bounds, match anything: the traversal clips its cubes to the volume.
+  // For each octant, the largest uniform box at each cell by the classic
+  // largest-square recurrence in 3D: the box of side r + 1 with the cell at
+  // its corner is uniform when the cell is and the boxes of side r at its
+  // seven neighbours toward the octant are, in its material. One pass per
+  // octant, from the octant's far corner back. Cells past the volume's
+  // faces, and a border around the grid that keeps every neighbour in
+  // bounds, match anything with reach kMaxReach: the traversal clips its
+  // boxes to the volume.
   const int nx = cdims_[0] + 2, ny = cdims_[1] + 2, nz = cdims_[2] + 2;
-  constexpr int kFar = kMaxReach + 1;
   constexpr uint16_t kAny = 0xffff;
   const size_t n = static_cast<size_t>(nx) * ny * nz;
-  std::vector<uint8_t> d(n, kFar);
   std::vector<uint16_t> m(n, kAny);
   auto index = [&](int x, int y, int z) { return (static_cast<size_t>(z) * ny + y) * nx + x; };
   size_t k = 0;
   for (int z = 1; z + 1 < nz; ++z)
     for (int y = 1; y + 1 < ny; ++y)
       for (int x = 1; x + 1 < nx; ++x, ++k) {
-        if (x > cinside_[0] || y > cinside_[1] || z > cinside_[2]) continue;
-        m[index(x, y, z)] = cells_[k];
-        if (cells_[k] == kMixed) d[index(x, y, z)] = 0;
+        if (x <= cinside_[0] && y <= cinside_[1] && z <= cinside_[2]) m[index(x, y, z)] = cells_[k];
       }
-  // The 13 neighbours that come before a cell in raster order, as offsets;
-  // the backward pass takes the same offsets negated.
-  std::vector<ptrdiff_t> before;
-  for (int dz = -1; dz <= 0; ++dz)
-    for (int dy = -1; dy <= 1; ++dy)
-      for (int dx = -1; dx <= 1; ++dx)
-        if (dz < 0 || dy < 0 || (dy == 0 && dx < 0))
-          before.push_back((static_cast<ptrdiff_t>(dz) * ny + dy) * nx + dx);
-  for (int pass = 0; pass < 2; ++pass) {
-    const ptrdiff_t s = pass == 0 ? 1 : -1;
+  reach_.assign(8 * cells_.size(), 0);
+  std::vector<uint8_t> r(n);
+  for (int octant = 0; octant < 8; ++octant) {
+    const int sx = octant & 1 ? -1 : 1, sy = octant & 2 ? -1 : 1, sz = octant & 4 ? -1 : 1;
+    ptrdiff_t ahead[7];
+    int count = 0;
+    for (int c = 1; c < 8; ++c) {
+      ahead[count++] = (static_cast<ptrdiff_t>(c & 4 ? sz : 0) * ny + (c & 2 ? sy : 0)) * nx +
+                       (c & 1 ? sx : 0);
+    }
+    std::fill(r.begin(), r.end(), static_cast<uint8_t>(kMaxReach));
+    // Toward the octant's far corner first: each cell after its neighbours.
     for (int zi = 1; zi + 1 < nz; ++zi) {
-      const int z = pass == 0 ? zi : nz - 1 - zi;
+      const int z = sz > 0 ? nz - 1 - zi : zi;
       for (int yi = 1; yi + 1 < ny; ++yi) {
-        const int y = pass == 0 ? yi : ny - 1 - yi;
+        const int y = sy > 0 ? ny - 1 - yi : yi;
         for (int xi = 1; xi + 1 < nx; ++xi) {
-          const int x = pass == 0 ? xi : nx - 1 - xi;
+          const int x = sx > 0 ? nx - 1 - xi : xi;
           const size_t here = index(x, y, z);
-          if (d[here] == 0 || m[here] == kAny) continue;
-          int best = d[here];
-          for (ptrdiff_t o : before) {
-            const size_t q = here + s * o;
-            if (m[q] == m[here]) {
-              best = std::min(best, d[q] + 1);
-            } else if (m[q] != kAny) {
-              best = 1;
+          const uint16_t mine = m[here];
+          if (mine == kAny) continue;
+          int best = kMaxReach;
+          if (mine == kMixed) {
+            best = 0;
+          } else {
+            for (ptrdiff_t o : ahead) {
+              const size_t q = here + o;
+              if (m[q] == kAny) continue;
+              best = std::min(best, m[q] == mine ? r[q] + 1 : 0);
             }
           }
-          d[here] = static_cast<uint8_t>(std::min(best, kFar));
+          r[here] = static_cast<uint8_t>(best);
         }
       }
     }
+    uint8_t* out = reach_.data() + octant * cells_.size();
+    k = 0;
+    for (int z = 1; z + 1 < nz; ++z)
+      for (int y = 1; y + 1 < ny; ++y)
+        for (int x = 1; x + 1 < nx; ++x, ++k) out[k] = m[index(x, y, z)] == kAny ? 0 : r[index(x, y, z)];
   }
-  reach_.resize(cells_.size());
-  k = 0;
-  for (int z = 1; z + 1 < nz; ++z)
-    for (int y = 1; y + 1 < ny; ++y)
-      for (int x = 1; x + 1 < nx; ++x, ++k) {
-        const uint8_t v = d[index(x, y, z)];
-        reach_[k] = v == 0 ? 0 : static_cast<uint8_t>(v - 1);
-      }
 }
 
 absl::StatusOr<BrickMap> BrickMap::FromBytes(std::array<int, 3> dims, std::vector<uint8_t> bytes) {

@@ -109,23 +109,26 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     return 0;
   }
   // An accepted map encodes to the same bytes, and a uniform cell's reach
-  // holds: every cell within it (up to 2, for speed) has its material.
+  // holds: every cell of its box (up to 3 ahead, for speed) has its
+  // material.
   TRANSTICK_CHECK(bricks->bytes() == bytes);
   for (int z = 0; z < kDims[2]; z += 2)
     for (int y = 0; y < kDims[1]; y += 2)
       for (int x = (y + z) % 14; x < kDims[0]; x += 14) {
         const uint8_t m = bricks->Cell(x, y, z);
-        const int r = bricks->Reach(x, y, z);
+        const int octant = (x + y + z) & 7;
+        const int r = bricks->Reach(x, y, z, octant);
         TRANSTICK_CHECK(r >= 0 && r <= BrickMap::kMaxReach);
         if (m == BrickMap::kMixed) {
           TRANSTICK_CHECK(r == 0);
           continue;
         }
-        const int reach = std::min(r, 2);
-        for (int dz = -reach; dz <= reach; ++dz)
-          for (int dy = -reach; dy <= reach; ++dy)
-            for (int dx = -reach; dx <= reach; ++dx) {
-              const int qx = x + 2 * dx, qy = y + 2 * dy, qz = z + 2 * dz;
+        const int reach = std::min(r, 3);
+        const int s[3] = {octant & 1 ? -2 : 2, octant & 2 ? -2 : 2, octant & 4 ? -2 : 2};
+        for (int k = 0; k <= reach; ++k)
+          for (int j = 0; j <= reach; ++j)
+            for (int i = 0; i <= reach; ++i) {
+              const int qx = x + s[0] * i, qy = y + s[1] * j, qz = z + s[2] * k;
               if (qx < 0 || qy < 0 || qz < 0 || qx >= kDims[0] || qy >= kDims[1] ||
                   qz >= kDims[2])
                 continue;

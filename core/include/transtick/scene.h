@@ -54,15 +54,23 @@ class BrickMap {
   // brick's material. REQUIRES: as At.
   uint8_t Cell(int x, int y, int z) const { return cells_[CellIndex(x, y, z)]; }
 
-  // How far the cell's material reaches around the 2^3 cell holding voxel
-  // (x, y, z): 0 for a mixed cell, else the largest r, at most kMaxReach,
-  // for which every cell within r cells of it along each axis (a cube of
-  // side 2 r + 1 in cells, clipped to the volume) has its material. A ray
-  // in a uniform cell leaves that cube in one step. Derived from the bytes
-  // alone (a chessboard distance transform), so every node holding the
-  // brick map has the same. REQUIRES: as At.
+  // How far the cell's material reaches ahead of the 2^3 cell holding voxel
+  // (x, y, z) toward `octant` (bit a set: toward -a along axis a, else +a):
+  // 0 for a mixed cell, else the largest r, at most kMaxReach, for which
+  // every cell of the box of (r + 1)^3 cells with this cell at its corner,
+  // extending toward the octant (clipped to the volume), has its material.
+  // A ray moving into the octant leaves that box in one step. Derived from
+  // the bytes alone, so every node holding the brick map has the same.
+  // REQUIRES: as At, 0 <= octant < 8.
   static constexpr int kMaxReach = 254;
-  int Reach(int x, int y, int z) const { return reach_[CellIndex(x, y, z)]; }
+  int Reach(int x, int y, int z, int octant) const {
+    return reach_[octant * cells_.size() + CellIndex(x, y, z)];
+  }
+  // The octant a direction with these axis steps (-1, 0, +1) moves into;
+  // an axis it does not move along counts as +.
+  static int OctantOf(const int step[3]) {
+    return (step[0] < 0 ? 1 : 0) | (step[1] < 0 ? 2 : 0) | (step[2] < 0 ? 4 : 0);
+  }
 
   // The largest material of any brick or cell (kMixed aside), 0 when all
   // are void or mixed: a scene checks that its classification has it.
@@ -91,7 +99,7 @@ class BrickMap {
   std::array<int, 3> cdims_ = {0, 0, 0};    // 2^3 cells per axis: 4 per brick
   std::array<int, 3> cinside_ = {0, 0, 0};  // of which hold voxels of the volume
   std::vector<uint8_t> cells_;            // Cell() per 2^3 cell, x fastest
-  std::vector<uint8_t> reach_;            // Reach() per 2^3 cell, likewise
+  std::vector<uint8_t> reach_;            // Reach() per octant, then per cell likewise
 };
 
 // Scalars of planes [y_begin, y_end) of a volume: x fastest, then y, then z.

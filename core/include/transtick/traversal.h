@@ -1,6 +1,6 @@
 // Traversal: the walk of a ray through the cells of a scene, one segment of
 // constant material at a time. Uniform space (void, or one material) is
-// crossed a cube of uniform 2^3 cells at a time (BrickMap::Reach), along a
+// crossed a box of uniform 2^3 cells at a time (BrickMap::Reach), along a
 // track a stick or a gap at a time, and elsewhere in mixed bricks the walk
 // moves from track to track (an Amanatides-Woo walk over columns).
 //
@@ -94,6 +94,7 @@ class Traversal {
                        origin[a] + direction[a] * t <= cell[a] + 2.0);
     }
     across_tracks_ = moves_[2] <= std::max(moves_[0], moves_[1]);
+    octant_ = BrickMap::OctantOf(step_);
   }
   // Resumes a ray from its descriptor's origin, direction, cell and t.
   Traversal(const Scene& scene, const RayDescriptor& ray)
@@ -122,16 +123,16 @@ class Traversal {
   TRANSTICK_INLINE std::optional<Segment> Next() {
     const auto& dims = scene_->dims();
     if (!Inside(cell_, dims)) return std::nullopt;
-    // A uniform 2^3 cell is left by the cube of cells of its material around
-    // it (a uniform brick by the brick, when that reaches further), unless
-    // the ray runs mostly along the track in a mixed brick, where the
+    // A uniform 2^3 cell is left by the box of cells of its material ahead
+    // of it (a uniform brick by the brick, when that reaches further),
+    // unless the ray runs mostly along the track in a mixed brick, where the
     // track's stick or gap reaches further.
     const BrickMap& bricks = scene_->bricks();
     const uint8_t brick = bricks.At(cell_[0], cell_[1], cell_[2]);
     if (brick != BrickMap::kMixed || across_tracks_) {
       const uint8_t m = bricks.Cell(cell_[0], cell_[1], cell_[2]);
       if (m != BrickMap::kMixed) {
-        const int r = bricks.Reach(cell_[0], cell_[1], cell_[2]);
+        const int r = bricks.Reach(cell_[0], cell_[1], cell_[2], octant_);
         std::array<int, 3> lo, hi;
         if (brick != BrickMap::kMixed && r < 3) {
           for (int a = 0; a < 3; ++a) {
@@ -141,8 +142,8 @@ class Traversal {
         } else {
           for (int a = 0; a < 3; ++a) {
             const int c = cell_[a] >> 1;
-            lo[a] = std::max(c - r, 0) << 1;
-            hi[a] = std::min((c + r + 1) << 1, dims[a]);
+            lo[a] = (step_[a] < 0 ? std::max(c - r, 0) : c) << 1;
+            hi[a] = std::min((step_[a] < 0 ? c + 1 : c + r + 1) << 1, dims[a]);
           }
         }
         return Leave(lo, hi, m);
@@ -225,6 +226,7 @@ class Traversal {
   int step_[3];
   double moves_[3];     // |dir_|
   bool across_tracks_;  // the ray moves along x or y at least as fast as along z
+  int octant_;          // the octant it moves into (BrickMap::Reach)
   // Where the walk is.
   std::array<int32_t, 3> cell_;
   double t_;
