@@ -168,37 +168,48 @@ void BrickMap::ComputeReach() {
         if (x <= cinside_[0] && y <= cinside_[1] && z <= cinside_[2]) m[index(x, y, z)] = cells_[k];
       }
   reach_.assign(8 * cells_.size(), 0);
-  std::vector<uint8_t> r(n);
+  // 16 bits like the materials, so that the loops over rows vectorise.
+  std::vector<uint16_t> r(n);
+  std::vector<uint16_t> rows(nx);  // the bound from the neighbours off the row
   for (int octant = 0; octant < 8; ++octant) {
     const int sx = octant & 1 ? -1 : 1, sy = octant & 2 ? -1 : 1, sz = octant & 4 ? -1 : 1;
-    ptrdiff_t ahead[7];
-    int count = 0;
-    for (int c = 1; c < 8; ++c) {
-      ahead[count++] = (static_cast<ptrdiff_t>(c & 4 ? sz : 0) * ny + (c & 2 ? sy : 0)) * nx +
-                       (c & 1 ? sx : 0);
-    }
-    std::fill(r.begin(), r.end(), static_cast<uint8_t>(kMaxReach));
+    std::fill(r.begin(), r.end(), static_cast<uint16_t>(kMaxReach));
     // Toward the octant's far corner first: each cell after its neighbours.
     for (int zi = 1; zi + 1 < nz; ++zi) {
       const int z = sz > 0 ? nz - 1 - zi : zi;
       for (int yi = 1; yi + 1 < ny; ++yi) {
         const int y = sy > 0 ? ny - 1 - yi : yi;
-        for (int xi = 1; xi + 1 < nx; ++xi) {
-          const int x = sx > 0 ? nx - 1 - xi : xi;
-          const size_t here = index(x, y, z);
-          const uint16_t mine = m[here];
-          if (mine == kAny) continue;
-          int best = kMaxReach;
-          if (mine == kMixed) {
-            best = 0;
-          } else {
-            for (ptrdiff_t o : ahead) {
-              const size_t q = here + o;
-              if (m[q] == kAny) continue;
-              best = std::min(best, m[q] == mine ? r[q] + 1 : 0);
+        const size_t row = index(0, y, z);
+        // The six neighbours in the rows ahead along y and z, at x and at
+        // x + sx: simple loops over rows, which the compiler vectorises.
+        const uint16_t* __restrict mrow = &m[row];
+        uint16_t* __restrict bounds = rows.data();
+        for (int x = 1; x + 1 < nx; ++x) bounds[x] = mrow[x] == kMixed ? 0 : kMaxReach;
+        const size_t ahead[3] = {index(0, y + sy, z), index(0, y, z + sz), index(0, y + sy, z + sz)};
+        for (size_t a : ahead) {
+          for (int dx : {0, sx}) {
+            const uint16_t* __restrict mq = &m[a + dx];
+            const uint16_t* __restrict rq = &r[a + dx];
+            for (int x = 1; x + 1 < nx; ++x) {
+              // rq + 1 for a neighbour of the same material, kMaxReach for
+              // one past the faces, else 0, without branches (a cell past
+              // the faces itself gets a meaningless bound, never used).
+              const uint16_t same = static_cast<uint16_t>(-(mq[x] == mrow[x]));
+              const uint16_t any = static_cast<uint16_t>(-(mq[x] == kAny));
+              const uint16_t bound =
+                  static_cast<uint16_t>(((rq[x] + 1) & same) | (kMaxReach & any));
+              bounds[x] = bounds[x] < bound ? bounds[x] : bound;
             }
           }
-          r[here] = static_cast<uint8_t>(best);
+        }
+        // The neighbour along the row, in order from the far end.
+        for (int xi = 1; xi + 1 < nx; ++xi) {
+          const int x = sx > 0 ? nx - 1 - xi : xi;
+          const size_t here = row + x, q = here + sx;
+          const uint16_t mine = m[here];
+          if (mine == kAny) continue;
+          const int bound = m[q] == kAny ? kMaxReach : (m[q] == mine ? r[q] + 1 : 0);
+          r[here] = static_cast<uint16_t>(std::min<int>(rows[x], bound));
         }
       }
     }
@@ -206,7 +217,8 @@ void BrickMap::ComputeReach() {
     k = 0;
     for (int z = 1; z + 1 < nz; ++z)
       for (int y = 1; y + 1 < ny; ++y)
-        for (int x = 1; x + 1 < nx; ++x, ++k) out[k] = m[index(x, y, z)] == kAny ? 0 : r[index(x, y, z)];
+        for (int x = 1; x + 1 < nx; ++x, ++k)
+          out[k] = m[index(x, y, z)] == kAny ? 0 : static_cast<uint8_t>(r[index(x, y, z)]);
   }
 }
 
