@@ -181,8 +181,9 @@ int Run(const Options& o) {
   std::printf("frames     %dx%d, shadows %s, %d timed after 1 warm-up, %d cores\n\n", o.width,
               o.height, o.shadows ? "on" : "off", o.repeat, cores);
 
-  std::printf("%-9s %7s %10s %10s %14s %8s %8s  %s\n", "view", "threads", "median ms", "min ms",
-              "rays/s", "Mrays/s", "speedup", "rays/frame (primary + shadow)");
+  std::printf("%-9s %7s %10s %10s %14s %8s %8s %9s %10s %9s  %s\n", "view", "threads",
+              "median ms", "min ms", "rays/s", "Mrays/s", "speedup", "Mrays/s/c", "steps/ray",
+              "ns/step", "rays/frame (primary + shadow)");
   std::fflush(stdout);
 
   Vec3 extent{volume->dims[0] * volume->spacing[0], volume->dims[1] * volume->spacing[1],
@@ -256,8 +257,15 @@ int Run(const Options& o) {
       if (threads != 1 && one_thread_median > 0) {
         std::snprintf(speedup, sizeof(speedup), "%.2fx", one_thread_median / median);
       }
-      std::printf("%-9s %7d %10.1f %10.1f %14.0f %8.2f %8s  %llu + %llu\n", view, threads, median,
-                  min, rays_per_s, rays_per_s / 1e6, speedup,
+      // Per core, and the whole frame's time (tracing, shading, pixels)
+      // spread over its traversal steps.
+      const double per_core = rays_per_s / threads;
+      const double steps_per_ray = rays ? static_cast<double>(counters.segments) / rays : 0;
+      const double ns_per_step =
+          counters.segments ? median * 1e6 * threads / static_cast<double>(counters.segments) : 0;
+      std::printf("%-9s %7d %10.1f %10.1f %14.0f %8.2f %8s %9.2f %10.1f %9.1f  %llu + %llu\n",
+                  view, threads, median, min, rays_per_s, rays_per_s / 1e6, speedup,
+                  per_core / 1e6, steps_per_ray, ns_per_step,
                   static_cast<unsigned long long>(counters.primary),
                   static_cast<unsigned long long>(counters.shadow));
       std::fflush(stdout);

@@ -132,6 +132,14 @@ TEST_F(ClusterTest, ImagesEqualTheInProcessRender) {
       ASSERT_TRUE(stats.ok()) << stats.status();
       ASSERT_EQ(stats->size(), views.size());
       EXPECT_EQ(stats->front().workers_size(), workers);
+      // Each frame starts after the job was submitted and after the frame
+      // before it ended.
+      EXPECT_GT(stats->front().since_submit_ms(), 0);
+      for (size_t i = 1; i < views.size(); ++i) {
+        EXPECT_GE((*stats)[i].since_submit_ms(),
+                  (*stats)[i - 1].since_submit_ms() + (*stats)[i - 1].frame_ms() - 1)
+            << "frame " << i;
+      }
       for (size_t i = 0; i < views.size(); ++i) {
         auto got = ReadImage(views[i].output());
         ASSERT_TRUE(got.ok()) << got.status();

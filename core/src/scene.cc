@@ -188,16 +188,17 @@ void BrickMap::ComputeReach() {
         const size_t ahead[3] = {index(0, y + sy, z), index(0, y, z + sz), index(0, y + sy, z + sz)};
         for (size_t a : ahead) {
           for (int dx : {0, sx}) {
-            const uint16_t* __restrict mq = &m[a + dx];
-            const uint16_t* __restrict rq = &r[a + dx];
+            // Offsets from the row's start, never before the array's.
+            const uint16_t* __restrict mq = m.data() + a;
+            const uint16_t* __restrict rq = r.data() + a;
             for (int x = 1; x + 1 < nx; ++x) {
               // rq + 1 for a neighbour of the same material, kMaxReach for
               // one past the faces, else 0, without branches (a cell past
               // the faces itself gets a meaningless bound, never used).
-              const uint16_t same = static_cast<uint16_t>(-(mq[x] == mrow[x]));
-              const uint16_t any = static_cast<uint16_t>(-(mq[x] == kAny));
+              const uint16_t same = static_cast<uint16_t>(-(mq[x + dx] == mrow[x]));
+              const uint16_t any = static_cast<uint16_t>(-(mq[x + dx] == kAny));
               const uint16_t bound =
-                  static_cast<uint16_t>(((rq[x] + 1) & same) | (kMaxReach & any));
+                  static_cast<uint16_t>(((rq[x + dx] + 1) & same) | (kMaxReach & any));
               bounds[x] = bounds[x] < bound ? bounds[x] : bound;
             }
           }

@@ -46,6 +46,8 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
                                              const ChunkFn& on_chunk) {
   const uint64_t frame_id = next_frame_id_++;
   const auto t0 = Clock::now();
+  const double started_unix =
+      std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
   auto display = v1::Display::NewStub(SharedChannel(display_, Role::kDisplay, "control"));
   struct Member {
     std::shared_ptr<WorkerEntry> worker;
@@ -260,6 +262,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
   }
   FrameResult result;
   result.frame_ms = MsSince(t0);
+  result.started_unix = started_unix;
   result.frame_id = frame_id;
   for (size_t i = 0; i < stats.size(); ++i) {
     if (stats[i].id().empty()) stats[i].set_id(members[i].worker->id);

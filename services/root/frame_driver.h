@@ -26,6 +26,7 @@ namespace transtick {
 struct FrameResult {
   uint64_t frame_id = 0;
   double frame_ms = 0;
+  double started_unix = 0;  // when Run began, in seconds since the Unix epoch
   std::vector<v1::WorkerFrameStats> workers;
 };
 

@@ -59,6 +59,8 @@ class Job {
   const std::string& id() const { return id_; }
   int64_t seq() const { return seq_; }
   const std::string& owner() const { return owner_; }
+  // When Submit accepted it, in seconds since the Unix epoch.
+  double submitted_unix() const { return submitted_unix_; }
   const v1::Job& spec() const { return spec_; }
   const JobPlan& plan() const { return plan_; }
   int frames_total() const { return static_cast<int>(keys_.size()); }

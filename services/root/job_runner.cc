@@ -198,6 +198,7 @@ absl::Status JobRunner::PublishStats(Job& job, int d, int v, const Layout& layou
   fs.set_dataset(d);
   fs.set_view(v);
   fs.set_frame_ms(frame.frame_ms);
+  fs.set_since_submit_ms((frame.started_unix - job.submitted_unix()) * 1e3);
   fs.set_width(view.width());
   fs.set_height(view.height());
   fs.set_rings(static_cast<int>(layout.rings.size()));

@@ -1,0 +1,101 @@
+#!/usr/bin/env bash
+# A turntable through the cluster, as a user runs it: a display, a root and
+# W worker daemons on loopback (each with a tracer thread per core), one
+# warm-up job that loads the dataset's slabs, then ROUNDS rounds of a
+# FRAMES-frame turntable job and a one-frame job on the loaded dataset.
+# Prints, per round and as medians: the turntable's steady frames per
+# second (frames / the submit command's wall time), its median frame time
+# at the root, the workers' summed tracer CPU per frame, and for the
+# one-frame job the time outside its frame (client start, submit, queue,
+# slab checks, image and statistics back) and the time from the root
+# accepting it to its frame's start (since_submit_ms).
+#
+# Usage: bench/turntable.sh [BUILD_DIR] [WORKERS] [FRAMES] [ROUNDS] [SURFACE] [BALANCE]
+#   defaults: build 2 30 3 smooth off; SURFACE smooth|voxel; BALANCE
+#   off|test-rays|previous-frame. Frames are 400x400 of cthead.nrrd from
+#   TRANSTICK_DATA_DIR (default ../shared/data), elevation 15, shadows on.
+set -euo pipefail
+src=$(cd "$(dirname "$0")/.." && pwd)
+build=${1:-$src/build}
+workers=${2:-2}
+frames=${3:-30}
+rounds=${4:-3}
+surface=${5:-smooth}
+balance=${6:-off}
+data=${TRANSTICK_DATA_DIR:-$src/../shared/data}
+[[ -f $data/cthead.nrrd ]] || { echo "turntable: no cthead.nrrd in $data" >&2; exit 1; }
+[[ $surface == smooth || $surface == voxel ]] || { echo "turntable: SURFACE is smooth or voxel" >&2; exit 2; }
+dir=$(mktemp -d /tmp/transtick-turntable.XXXXXX)
+pids=()
+stop() { kill "${pids[@]}" 2>/dev/null || true; wait "${pids[@]}" 2>/dev/null || true; pids=(); }
+trap 'stop; rm -rf "$dir"' EXIT
+free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
+
+python3 - "$dir" "$frames" "$src/examples/cthead_materials.json" "$surface" "$balance" <<'EOF'
+import json, sys
+d, frames, materials, surface, balance = sys.argv[1], int(sys.argv[2]), json.load(open(sys.argv[3])), sys.argv[4], sys.argv[5]
+materials["surface"] = surface.upper()
+def job(name, views):
+    return {"name": name, "balance": balance,
+            "datasets": [{"volume": "cthead.nrrd", "materials": materials, "views": views}]}
+def view(az, out):
+    return {"azimuth": az, "elevation": 15, "width": 400, "height": 400, "shadows": True,
+            "output": out}
+turn = [view(360.0 * i / frames, f"turn{i:03d}.png") for i in range(frames)]
+json.dump(job("turntable", turn), open(f"{d}/turntable.json", "w"))
+json.dump(job("one frame", [view(30, "one.png")]), open(f"{d}/one.json", "w"))
+EOF
+
+rport=$(free_port) dport=$(free_port)
+"$build/services/display/transtick-display" --listen 127.0.0.1:$dport >"$dir/display.log" 2>&1 &
+pids+=($!)
+"$build/services/root/transtick-root" --listen 127.0.0.1:$rport --data-dir "$data" \
+  --display 127.0.0.1:$dport >"$dir/root.log" 2>&1 &
+pids+=($!)
+for ((w = 0; w < workers; ++w)); do
+  "$build/services/worker/transtick-worker" --root 127.0.0.1:$rport --listen 127.0.0.1:0 \
+    >"$dir/worker$w.log" 2>&1 &
+  pids+=($!)
+done
+for _ in $(seq 100); do
+  "$build/cli/transtick" status --root 127.0.0.1:$rport 2>/dev/null | grep -q "^$workers workers" && break
+  sleep 0.1
+done
+submit() {  # submit JOB STATS: prints the wall time in seconds
+  local s e
+  s=$(date +%s.%N)
+  "$build/cli/transtick" submit "$dir/$1" --root 127.0.0.1:$rport --out-dir "$dir/out" \
+    --stats "$dir/$2" >/dev/null
+  e=$(date +%s.%N)
+  python3 -c "print($e - $s)"
+}
+submit one.json warm.json >/dev/null  # loads the slabs
+for ((i = 0; i < rounds; ++i)); do
+  submit turntable.json "turn-$i.json" >"$dir/turn-$i.wall"
+  submit one.json "one-$i.json" >"$dir/one-$i.wall"
+done
+
+python3 - "$dir" "$rounds" "$frames" "$workers" "$surface" "$balance" <<'EOF'
+import json, statistics, sys
+d, rounds, frames, workers, surface, balance = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), sys.argv[5], sys.argv[6]
+print(f"turntable: {workers} worker daemons, cthead 400x400, {surface} surfaces, shadows, "
+      f"balance {balance}, {frames} frames a job, {rounds} rounds")
+print(f"{'round':>5} {'frames/s':>9} {'frame ms':>9} {'tracer CPU ms':>14} {'1-frame job ms':>15} "
+      f"{'its frame ms':>13} {'outside':>8} {'to start':>9}")
+rows = []
+for i in range(rounds):
+    wall = float(open(f"{d}/turn-{i}.wall").read())
+    st = json.load(open(f"{d}/turn-{i}.json"))
+    fms = statistics.median(s["frame_ms"] for s in st)
+    cpu = statistics.median(sum(w["cpu_ms"] for w in s["workers"]) for s in st)
+    one_wall = float(open(f"{d}/one-{i}.wall").read()) * 1e3
+    first = json.load(open(f"{d}/one-{i}.json"))[0]
+    one, start = first["frame_ms"], first.get("since_submit_ms", 0)
+    rows.append((frames / wall, fms, cpu, one_wall, one, one_wall - one, start))
+    print(f"{i:>5} {rows[-1][0]:>9.1f} {fms:>9.1f} {cpu:>14.1f} {one_wall:>15.0f} {one:>13.1f} "
+          f"{one_wall - one:>8.0f} {start:>9.1f}")
+med = [statistics.median(r[k] for r in rows) for k in range(7)]
+print(f"median: {med[0]:.1f} frames/s steady, frame {med[1]:.1f} ms, tracer CPU {med[2]:.1f} ms a frame; "
+      f"a one-frame job on the loaded dataset takes {med[3]:.0f} ms, {med[5]:.0f} ms of it outside the frame, "
+      f"and its frame starts {med[6]:.1f} ms after the root accepts it")
+EOF
