@@ -65,7 +65,7 @@ submit() {  # submit JOB STATS: prints the wall time in seconds
   local s e
   s=$(date +%s.%N)
   "$build/cli/transtick" submit "$dir/$1" --root 127.0.0.1:$rport --out-dir "$dir/out" \
-    --stats "$dir/$2" >/dev/null
+    --stats "$dir/$2" >/dev/null 2>"$dir/submit.log" || { cat "$dir/submit.log" >&2; exit 1; }
   e=$(date +%s.%N)
   python3 -c "print($e - $s)"
 }
