@@ -26,8 +26,9 @@ const char* RenderModeName(RenderMode mode);
 // else kMixed. Small on the wire (a byte per brick, 64 per mixed brick),
 // so every worker holds all of it: crossing uniform space in one step is
 // then the same decision on every node. In memory, with the reach of each
-// cell toward each octant, it takes 9 bytes per 2^3 cell (9/8 of a byte
-// per voxel, against the 4 of the float scalars).
+// cell toward each octant, it takes 9 bytes per 2^3 cell of the whole
+// volume on every node (9/8 of a byte per voxel; a worker's float scalars
+// take 4 per voxel of its slab only).
 class BrickMap {
  public:
   static constexpr int kShift = 3;
