@@ -119,6 +119,40 @@ TEST(ResumeTest, EmptySpaceAcrossSlabsIsBitIdentical) {
   }
 }
 
+// Spacings far from 1: a ray's t is in world units, so with voxels 7e12
+// wide it passes 1e9 within a voxel of its entry, and every neighbour
+// refused the rays handed on (found by volume_fuzzer).
+TEST(ResumeTest, ExtremeSpacingsAcrossSlabsAreBitIdentical) {
+  for (double s : {7.3e12, 1e-9}) {
+    Volume v = MakeNoisyPhantom({12, 10, 9}, 23);
+    v.spacing = {s, s, s};
+    const auto range = v.Range();
+    Classification c;
+    c.materials = {Material{.name = "low", .min = range[1] * 0.3f, .max = range[1] * 0.6f,
+                            .opacity = 0.4f},
+                   Material{.name = "high", .min = range[1] * 0.6f, .max = range[1] + 1,
+                            .opacity = 1}};
+    for (SurfaceModel model : {SurfaceModel::kSmooth, SurfaceModel::kVoxel}) {
+      c.surface = model;
+      const Scene scene = *Scene::ForSurfaces(v, c);
+      RenderSettings settings;
+      for (const View& view : std::vector<View>{{0, 0}, {35, 25}, {0, 89}}) {
+        CameraSpec spec;
+        spec.width = spec.height = 24;
+        spec.azimuth_deg = view.azimuth;
+        spec.elevation_deg = view.elevation;
+        const auto& d = scene.dims();
+        const Camera cam = *Camera::Create(spec, Vec3{d[0] * s, d[1] * s, d[2] * s});
+        const Image whole = RenderWhole(scene, cam, settings);
+        uint64_t handoffs = 0;
+        ASSERT_EQ(whole.rgb, RenderSlabs(scene, {3, 6}, cam, settings, &handoffs).rgb)
+            << "spacing " << s << " azimuth " << view.azimuth;
+        if (view.elevation > 80) EXPECT_GT(handoffs, 0u) << "spacing " << s;
+      }
+    }
+  }
+}
+
 TEST(ResumeTest, VoxelSurfacesAcrossSlabsAreBitIdentical) {
   ExpectSlabsMatch(PhantomSurfaces({40, 34, 38}, SurfaceModel::kVoxel),
                    {{0, 0}, {45, 0}, {30, 40}, {0, 90}, {200, -30}}, 64);

@@ -22,7 +22,8 @@ Vec3 ClampToCell(Vec3 p, const std::array<int32_t, 3>& cell) {
 }
 
 // Far-away numbers would lose the cell in rounding (and overflow the
-// traversal's integer cells): Validate refuses origins and t beyond this.
+// traversal's integer cells): Validate refuses origins beyond this, and t
+// beyond it times the largest spacing (t is in world units).
 constexpr double kFar = 1e9;
 // A primary ray whose origin or entry lies beyond this starts at its entry.
 constexpr double kRebase = kFar / 1000;
@@ -153,9 +154,15 @@ absl::Status Tracer::Validate(const RayDescriptor& r) const {
              std::isfinite(r.color[a]);
   }
   if (!finite) return bad("non-finite origin, direction, t, colour or transmittance");
-  if (!(std::abs(r.t) <= kFar && std::abs(r.t_start) <= kFar && std::abs(r.origin.x) <= kFar &&
+  // The origin is in voxels; t is a distance in world units, so a voxel of
+  // spacing s is s units of t (with a huge spacing a ray's t passes kFar
+  // within a voxel of its entry: found by volume_fuzzer).
+  const auto& spacing = scene_.spacing();
+  const double far_t = kFar * std::max({1.0, spacing[0], spacing[1], spacing[2]});
+  if (!(std::abs(r.t) <= far_t && std::abs(r.t_start) <= far_t && std::abs(r.origin.x) <= kFar &&
         std::abs(r.origin.y) <= kFar && std::abs(r.origin.z) <= kFar)) {
-    return bad("origin or t further than ", kFar, " from the volume");
+    return bad("origin further than ", kFar, " voxels or t further than ", kFar,
+               " voxels' spacing from the volume");
   }
   if (r.kind != RayKind::kPrimary && r.kind != RayKind::kShadow) {
     return bad("unknown kind ", static_cast<int>(r.kind));
