@@ -310,6 +310,24 @@ TEST(BrickMapTest, CellsAndReachMatchTheirDefinitions) {
                 << cx << " " << cy << " " << cz << " octant " << octant;
           }
         }
+    // A slab's map: the same reach for the cells of its planes.
+    {
+      const int y0 = static_cast<int>(rng() % dims[1]);
+      const int y1 = y0 + 1 + static_cast<int>(rng() % (dims[1] - y0));
+      const BrickMap slab = map.ForSlab(y0, y1);
+      EXPECT_TRUE(slab.ReachCovers(y0, y1));
+      EXPECT_LT(slab.MemoryBytes(), map.MemoryBytes() + 1);
+      auto from_bytes = BrickMap::FromBytes(dims, map.bytes(), y0, y1);
+      ASSERT_TRUE(from_bytes.ok()) << from_bytes.status();
+      for (int z = 0; z < dims[2]; z += 2)
+        for (int y = y0; y < y1; ++y)
+          for (int x = 0; x < dims[0]; x += 2)
+            for (int octant = 0; octant < 8; ++octant) {
+              ASSERT_EQ(slab.Reach(x, y, z, octant), map.Reach(x, y, z, octant))
+                  << "slab [" << y0 << ", " << y1 << ") " << x << " " << y << " " << z;
+              ASSERT_EQ(from_bytes->Reach(x, y, z, octant), map.Reach(x, y, z, octant));
+            }
+    }
     std::vector<uint8_t> bytes = map.bytes();
     auto decoded = BrickMap::FromBytes(dims, bytes);
     ASSERT_TRUE(decoded.ok()) << decoded.status();

@@ -106,7 +106,19 @@ BrickMap BrickMap::Build(std::span<const uint8_t> labels, std::array<int, 3> dim
       }
     }
   }
-  b.ComputeReach();
+  b.FillCells();
+  b.ComputeReach(0, dims[1]);
+  return b;
+}
+
+BrickMap BrickMap::ForSlab(int y_begin, int y_end) const {
+  BrickMap b;
+  b.bdims_ = bdims_;
+  b.bricks_ = bricks_;
+  b.cdims_ = cdims_;
+  b.cinside_ = cinside_;
+  b.cells_ = cells_;
+  b.ComputeReach(y_begin, y_end);
   return b;
 }
 
@@ -134,7 +146,7 @@ uint8_t BrickMap::MaxMaterial() const {
   return most;
 }
 
-void BrickMap::ComputeReach() {
+void BrickMap::FillCells() {
   // The cells of uniform bricks have the brick's material.
   for (int bz = 0; bz < bdims_[2]; ++bz) {
     for (int by = 0; by < bdims_[1]; ++by) {
@@ -148,6 +160,13 @@ void BrickMap::ComputeReach() {
       }
     }
   }
+}
+
+void BrickMap::ComputeReach(int y_begin, int y_end) {
+  // The rows of cells that hold planes [y_begin, y_end).
+  row_begin_ = std::clamp(y_begin >> 1, 0, cdims_[1]);
+  rows_ = y_end > y_begin ? std::clamp((y_end + 1) >> 1, row_begin_, cdims_[1]) - row_begin_ : 0;
+  reach_cells_ = static_cast<size_t>(cdims_[0]) * rows_ * cdims_[2];
   // For each octant, the largest uniform box at each cell by the classic
   // largest-square recurrence in 3D: the box of side r + 1 with the cell at
   // its corner is uniform when the cell is and the boxes of side r at its
@@ -167,7 +186,7 @@ void BrickMap::ComputeReach() {
       for (int x = 1; x + 1 < nx; ++x, ++k) {
         if (x <= cinside_[0] && y <= cinside_[1] && z <= cinside_[2]) m[index(x, y, z)] = cells_[k];
       }
-  reach_.assign(8 * cells_.size(), 0);
+  reach_.assign(8 * reach_cells_, 0);
   // 16 bits like the materials, so that the loops over rows vectorise.
   std::vector<uint16_t> r(n);
   std::vector<uint16_t> rows(nx);  // the bound from the neighbours off the row
@@ -175,10 +194,14 @@ void BrickMap::ComputeReach() {
     const int sx = octant & 1 ? -1 : 1, sy = octant & 2 ? -1 : 1, sz = octant & 4 ? -1 : 1;
     std::fill(r.begin(), r.end(), static_cast<uint16_t>(kMaxReach));
     // Toward the octant's far corner first: each cell after its neighbours.
+    // Rows (padded, as y below) behind the kept ones toward the octant are
+    // not needed.
+    const int first_row = row_begin_ + 1, last_row = row_begin_ + rows_;
     for (int zi = 1; zi + 1 < nz; ++zi) {
       const int z = sz > 0 ? nz - 1 - zi : zi;
       for (int yi = 1; yi + 1 < ny; ++yi) {
         const int y = sy > 0 ? ny - 1 - yi : yi;
+        if (sy > 0 ? y < first_row : y > last_row) break;
         const size_t row = index(0, y, z);
         // The six neighbours in the rows ahead along y and z, at x and at
         // x + sx: simple loops over rows, which the compiler vectorises.
@@ -214,16 +237,17 @@ void BrickMap::ComputeReach() {
         }
       }
     }
-    uint8_t* out = reach_.data() + octant * cells_.size();
+    uint8_t* out = reach_.data() + octant * reach_cells_;
     k = 0;
     for (int z = 1; z + 1 < nz; ++z)
-      for (int y = 1; y + 1 < ny; ++y)
+      for (int y = first_row; y <= last_row; ++y)
         for (int x = 1; x + 1 < nx; ++x, ++k)
           out[k] = m[index(x, y, z)] == kAny ? 0 : static_cast<uint8_t>(r[index(x, y, z)]);
   }
 }
 
-absl::StatusOr<BrickMap> BrickMap::FromBytes(std::array<int, 3> dims, std::vector<uint8_t> bytes) {
+absl::StatusOr<BrickMap> BrickMap::FromBytes(std::array<int, 3> dims, std::vector<uint8_t> bytes,
+                                             int y_begin, int y_end) {
   BrickMap b;
   for (int a = 0; a < 3; ++a) b.bdims_[a] = (dims[a] + kBrick - 1) >> kShift;
   const size_t n = static_cast<size_t>(b.bdims_[0]) * b.bdims_[1] * b.bdims_[2];
@@ -254,7 +278,8 @@ absl::StatusOr<BrickMap> BrickMap::FromBytes(std::array<int, 3> dims, std::vecto
       }
     }
   }
-  b.ComputeReach();
+  b.FillCells();
+  b.ComputeReach(y_begin, y_end < 0 ? dims[1] : y_end);
   return b;
 }
 
@@ -448,6 +473,9 @@ absl::StatusOr<Scene> Scene::FromParts(RenderMode mode, std::array<int, 3> dims,
     return absl::InvalidArgumentError(
         absl::StrCat("brick map: material ", int{bricks.MaxMaterial()}, " of ", materials));
   }
+  if (!bricks.ReachCovers(sticks.y_begin(), sticks.y_end())) {
+    bricks = bricks.ForSlab(sticks.y_begin(), sticks.y_end());
+  }
   scene.sticks_ = std::move(sticks);
   scene.scalars_ = std::move(scalars);
   scene.bricks_ = std::move(bricks);
@@ -488,7 +516,7 @@ absl::StatusOr<Scene> Scene::Reslab(int y_begin, int y_end, const std::vector<st
   s.dims_ = dims_;
   s.spacing_ = spacing_;
   s.value_range_ = value_range_;
-  s.bricks_ = bricks_;
+  s.bricks_ = bricks_.ForSlab(y_begin, y_end);
   s.classification_ = classification_;
   s.transfer_ = transfer_;
   s.sticks_ = *std::move(sticks);

@@ -49,7 +49,8 @@ absl::StatusOr<std::shared_ptr<const Scene>> AssembleSlab(const v1::SlabHeader& 
   auto sticks = Sticks::FromBlocks(dims, h.y_begin(), h.y_end(), max_material, blocks);
   if (!sticks.ok()) return sticks.status();
   auto bricks =
-      BrickMap::FromBytes(dims, std::vector<uint8_t>(h.brick_map().begin(), h.brick_map().end()));
+      BrickMap::FromBytes(dims, std::vector<uint8_t>(h.brick_map().begin(), h.brick_map().end()),
+                          h.y_begin(), h.y_end());
   if (!bricks.ok()) return bricks.status();
   if (scalar_bytes.size() % 4 != 0) {
     return absl::InvalidArgumentError("slab scalars: not a whole number of floats");

@@ -25,10 +25,9 @@ const char* RenderModeName(RenderMode mode);
 // cell of the mixed ones, when all its voxels share one (void included),
 // else kMixed. Small on the wire (a byte per brick, 64 per mixed brick),
 // so every worker holds all of it: crossing uniform space in one step is
-// then the same decision on every node. In memory, with the reach of each
-// cell toward each octant, it takes 9 bytes per 2^3 cell of the whole
-// volume on every node (9/8 of a byte per voxel; a worker's float scalars
-// take 4 per voxel of its slab only).
+// then the same decision on every node. In memory it takes a byte per 2^3
+// cell of the whole volume, and 8 more (the reach toward each octant) per
+// cell of the slab it serves.
 class BrickMap {
  public:
   static constexpr int kShift = 3;
@@ -40,9 +39,19 @@ class BrickMap {
   // dvr samples must stay within the column they are taken in.
   static BrickMap Build(std::span<const uint8_t> labels, std::array<int, 3> dims,
                         bool uniform_materials);
-  // Rebuilds from the bytes of bytes() (docs/formats.md, "Brick map"). Fails
+  // Rebuilds from the bytes of bytes() (docs/formats.md, "Brick map"), with
+  // the reach of the cells of planes [y_begin, y_end) (y_end < 0: all). Fails
   // on a size that does not match the dims and the mixed bricks.
-  static absl::StatusOr<BrickMap> FromBytes(std::array<int, 3> dims, std::vector<uint8_t> bytes);
+  static absl::StatusOr<BrickMap> FromBytes(std::array<int, 3> dims, std::vector<uint8_t> bytes,
+                                            int y_begin = 0, int y_end = -1);
+  // The same map with the reach of the cells of planes [y_begin, y_end)
+  // instead: a slab's, which is all its walks look up.
+  BrickMap ForSlab(int y_begin, int y_end) const;
+  // Whether Reach holds the cells of planes [y_begin, y_end).
+  bool ReachCovers(int y_begin, int y_end) const {
+    return y_begin >= y_end ||
+           (y_begin >> 1 >= row_begin_ && ((y_end - 1) >> 1) < row_begin_ + rows_);
+  }
 
   // The brick's material, or kMixed. REQUIRES: (x, y, z) inside the volume.
   uint8_t At(int x, int y, int z) const {
@@ -63,11 +72,15 @@ class BrickMap {
   // every cell of the box of (r + 1)^3 cells with this cell at its corner,
   // extending toward the octant (clipped to the volume), has its material.
   // A ray moving into the octant leaves that box in one step. Derived from
-  // the bytes alone, so every node holding the brick map has the same.
-  // REQUIRES: as At, 0 <= octant < 8.
+  // the bytes alone, so every node holding the brick map has the same; a
+  // slab's map keeps it for the slab's planes only (ForSlab).
+  // REQUIRES: as At, 0 <= octant < 8, ReachCovers(y, y + 1).
   static constexpr int kMaxReach = 254;
   int Reach(int x, int y, int z, int octant) const {
-    return reach_[octant * cells_.size() + CellIndex(x, y, z)];
+    TRANSTICK_DCHECK(ReachCovers(y, y + 1));
+    return reach_[octant * reach_cells_ +
+                  (static_cast<size_t>(z >> 1) * rows_ + ((y >> 1) - row_begin_)) * cdims_[0] +
+                  (x >> 1)];
   }
   // The octant a direction with these axis steps (-1, 0, +1) moves into;
   // an axis it does not move along counts as +.
@@ -94,15 +107,22 @@ class BrickMap {
   size_t CellIndex(int x, int y, int z) const {
     return (static_cast<size_t>(z >> 1) * cdims_[1] + (y >> 1)) * cdims_[0] + (x >> 1);
   }
-  // Fills cells_ of the uniform bricks and reach_.
-  void ComputeReach();
+  // Fills cells_ of the uniform bricks.
+  void FillCells();
+  // Fills reach_ for the cells of planes [y_begin, y_end).
+  void ComputeReach(int y_begin, int y_end);
 
   std::array<int, 3> bdims_ = {0, 0, 0};
   std::vector<uint8_t> bricks_;
   std::array<int, 3> cdims_ = {0, 0, 0};    // 2^3 cells per axis: 4 per brick
   std::array<int, 3> cinside_ = {0, 0, 0};  // of which hold voxels of the volume
   std::vector<uint8_t> cells_;            // Cell() per 2^3 cell, x fastest
-  std::vector<uint8_t> reach_;            // Reach() per octant, then per cell likewise
+  // Reach() per octant, then per cell of rows [row_begin_, row_begin_ +
+  // rows_) of cells, x fastest.
+  int row_begin_ = 0;
+  int rows_ = 0;
+  size_t reach_cells_ = 0;  // cells per octant
+  std::vector<uint8_t> reach_;
 };
 
 // Scalars of planes [y_begin, y_end) of a volume: x fastest, then y, then z.
