@@ -147,7 +147,9 @@ TEST(ResumeTest, ExtremeSpacingsAcrossSlabsAreBitIdentical) {
         uint64_t handoffs = 0;
         ASSERT_EQ(whole.rgb, RenderSlabs(scene, {3, 6}, cam, settings, &handoffs).rgb)
             << "spacing " << s << " azimuth " << view.azimuth;
-        if (view.elevation > 80) EXPECT_GT(handoffs, 0u) << "spacing " << s;
+        if (view.elevation > 80) {
+          EXPECT_GT(handoffs, 0u) << "spacing " << s;
+        }
       }
     }
   }

@@ -249,6 +249,20 @@ TEST(BrickMapTest, CellsAndReachMatchTheirDefinitions) {
       const uint8_t m = labels[(static_cast<size_t>(z) * dims[1] + y) * dims[0] + x];
       return dvr && m != 0 ? BrickMap::kMixed : m;
     };
+    // At: the one material of the brick's voxels inside the volume, or
+    // kMixed.
+    for (int bz = 0; bz < dims[2]; bz += 8)
+      for (int by = 0; by < dims[1]; by += 8)
+        for (int bx = 0; bx < dims[0]; bx += 8) {
+          int m = -1;
+          for (int z = bz; z < std::min(bz + 8, dims[2]); ++z)
+            for (int y = by; y < std::min(by + 8, dims[1]); ++y)
+              for (int x = bx; x < std::min(bx + 8, dims[0]); ++x) {
+                const int l = label(x, y, z);
+                m = m < 0 || m == l ? l : BrickMap::kMixed;
+              }
+          ASSERT_EQ(map.At(bx, by, bz), m) << "brick at " << bx << " " << by << " " << bz;
+        }
     // Cell: the one material of the voxels of the 2^3 cell inside the
     // volume, or kMixed.
     const std::array<int, 3> cd = {(dims[0] + 1) / 2, (dims[1] + 1) / 2, (dims[2] + 1) / 2};

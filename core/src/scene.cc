@@ -55,50 +55,33 @@ std::vector<float> Filter3(const Volume& v, bool take_max) {
 
 }  // namespace
 
+void BrickMap::SetDims(std::array<int, 3> dims) {
+  for (int a = 0; a < 3; ++a) {
+    bdims_[a] = (dims[a] + kBrick - 1) >> kShift;
+    cdims_[a] = bdims_[a] * (kBrick / 2);
+    cinside_[a] = (dims[a] + 1) / 2;
+  }
+  bricks_.assign(static_cast<size_t>(bdims_[0]) * bdims_[1] * bdims_[2], 0);
+  cells_.assign(static_cast<size_t>(cdims_[0]) * cdims_[1] * cdims_[2], 0);
+}
+
 BrickMap BrickMap::Build(std::span<const uint8_t> labels, std::array<int, 3> dims,
                          bool uniform_materials) {
   BrickMap b;
-  for (int a = 0; a < 3; ++a) b.bdims_[a] = (dims[a] + kBrick - 1) >> kShift;
-  const size_t n = static_cast<size_t>(b.bdims_[0]) * b.bdims_[1] * b.bdims_[2];
-  // First voxel seen fixes the brick's material; any other makes it mixed.
-  std::vector<uint8_t> seen(n, 0);
-  b.bricks_.assign(n, 0);
+  b.SetDims(dims);
+  // The first voxel seen fixes a cell's material, any other makes it mixed;
+  // without uniform materials every voxel that is not void does. A cell with
+  // no voxel inside the volume stays void.
+  std::vector<uint8_t> seen(b.cells_.size(), 0);
   size_t i = 0;
-  for (int z = 0; z < dims[2]; ++z) {
-    for (int y = 0; y < dims[1]; ++y) {
-      size_t row = (static_cast<size_t>(z >> kShift) * b.bdims_[1] + (y >> kShift)) * b.bdims_[0];
-      for (int x = 0; x < dims[0]; ++x, ++i) {
-        size_t k = row + (x >> kShift);
-        uint8_t m = labels[i];
-        if (!seen[k]) {
-          seen[k] = 1;
-          b.bricks_[k] = m;
-        } else if (b.bricks_[k] != m) {
-          b.bricks_[k] = kMixed;
-        }
-      }
-    }
-  }
-  if (!uniform_materials) {
-    for (uint8_t& m : b.bricks_) m = m == 0 ? 0 : kMixed;
-  }
-  // The cells of mixed bricks, likewise; a cell with no voxel inside the
-  // volume is void.
-  for (int a = 0; a < 3; ++a) {
-    b.cdims_[a] = b.bdims_[a] * (kBrick / 2);
-    b.cinside_[a] = (dims[a] + 1) / 2;
-  }
-  b.cells_.assign(static_cast<size_t>(b.cdims_[0]) * b.cdims_[1] * b.cdims_[2], 0);
-  std::vector<uint8_t> cell_seen(b.cells_.size(), 0);
-  i = 0;
   for (int z = 0; z < dims[2]; ++z) {
     for (int y = 0; y < dims[1]; ++y) {
       const size_t row = b.CellIndex(0, y, z);
       for (int x = 0; x < dims[0]; ++x, ++i) {
         const size_t k = row + (x >> 1);
         const uint8_t m = uniform_materials || labels[i] == 0 ? labels[i] : kMixed;
-        if (!cell_seen[k]) {
-          cell_seen[k] = 1;
+        if (!seen[k]) {
+          seen[k] = 1;
           b.cells_[k] = m;
         } else if (b.cells_[k] != m) {
           b.cells_[k] = kMixed;
@@ -106,6 +89,17 @@ BrickMap BrickMap::Build(std::span<const uint8_t> labels, std::array<int, 3> dim
       }
     }
   }
+  // A brick has the material its cells with voxels share, else it is mixed.
+  std::vector<uint8_t> brick_seen(b.bricks_.size(), 0);
+  b.ForEachBrickCell([&](size_t brick, size_t cell) {
+    if (!seen[cell]) return;
+    if (!brick_seen[brick]) {
+      brick_seen[brick] = 1;
+      b.bricks_[brick] = b.cells_[cell];
+    } else if (b.bricks_[brick] != b.cells_[cell]) {
+      b.bricks_[brick] = kMixed;
+    }
+  });
   b.FillCells();
   b.ComputeReach(0, dims[1]);
   return b;
@@ -124,17 +118,9 @@ BrickMap BrickMap::ForSlab(int y_begin, int y_end) const {
 
 std::vector<uint8_t> BrickMap::bytes() const {
   std::vector<uint8_t> out = bricks_;
-  for (int bz = 0; bz < bdims_[2]; ++bz) {
-    for (int by = 0; by < bdims_[1]; ++by) {
-      for (int bx = 0; bx < bdims_[0]; ++bx) {
-        if (bricks_[(static_cast<size_t>(bz) * bdims_[1] + by) * bdims_[0] + bx] != kMixed) continue;
-        for (int c = 0; c < 64; ++c) {
-          out.push_back(cells_[CellIndex(8 * bx + 2 * (c & 3), 8 * by + 2 * ((c >> 2) & 3),
-                                         8 * bz + 2 * (c >> 4))]);
-        }
-      }
-    }
-  }
+  ForEachBrickCell([&](size_t brick, size_t cell) {
+    if (bricks_[brick] == kMixed) out.push_back(cells_[cell]);
+  });
   return out;
 }
 
@@ -148,18 +134,9 @@ uint8_t BrickMap::MaxMaterial() const {
 
 void BrickMap::FillCells() {
   // The cells of uniform bricks have the brick's material.
-  for (int bz = 0; bz < bdims_[2]; ++bz) {
-    for (int by = 0; by < bdims_[1]; ++by) {
-      for (int bx = 0; bx < bdims_[0]; ++bx) {
-        const uint8_t m = bricks_[(static_cast<size_t>(bz) * bdims_[1] + by) * bdims_[0] + bx];
-        if (m == kMixed) continue;
-        for (int c = 0; c < 64; ++c) {
-          cells_[CellIndex(8 * bx + 2 * (c & 3), 8 * by + 2 * ((c >> 2) & 3),
-                           8 * bz + 2 * (c >> 4))] = m;
-        }
-      }
-    }
-  }
+  ForEachBrickCell([&](size_t brick, size_t cell) {
+    if (bricks_[brick] != kMixed) cells_[cell] = bricks_[brick];
+  });
 }
 
 void BrickMap::ComputeReach(int y_begin, int y_end) {
@@ -249,8 +226,8 @@ void BrickMap::ComputeReach(int y_begin, int y_end) {
 absl::StatusOr<BrickMap> BrickMap::FromBytes(std::array<int, 3> dims, std::vector<uint8_t> bytes,
                                              int y_begin, int y_end) {
   BrickMap b;
-  for (int a = 0; a < 3; ++a) b.bdims_[a] = (dims[a] + kBrick - 1) >> kShift;
-  const size_t n = static_cast<size_t>(b.bdims_[0]) * b.bdims_[1] * b.bdims_[2];
+  b.SetDims(dims);
+  const size_t n = b.bricks_.size();
   const size_t mixed =
       bytes.size() < n ? 0 : static_cast<size_t>(std::count(bytes.begin(), bytes.begin() + n, kMixed));
   const size_t want = n + 64 * mixed;
@@ -259,25 +236,11 @@ absl::StatusOr<BrickMap> BrickMap::FromBytes(std::array<int, 3> dims, std::vecto
         "brick map: ", bytes.size(), " bytes, expected ", bytes.size() < n ? n : want, " (", n,
         " bricks", bytes.size() < n ? "" : absl::StrCat(", ", mixed, " mixed"), ")"));
   }
-  b.bricks_.assign(bytes.begin(), bytes.begin() + n);
-  for (int a = 0; a < 3; ++a) {
-    b.cdims_[a] = b.bdims_[a] * (kBrick / 2);
-    b.cinside_[a] = (dims[a] + 1) / 2;
-  }
-  b.cells_.assign(static_cast<size_t>(b.cdims_[0]) * b.cdims_[1] * b.cdims_[2], 0);
+  std::copy(bytes.begin(), bytes.begin() + n, b.bricks_.begin());
   const uint8_t* cells = bytes.data() + n;
-  for (int bz = 0; bz < b.bdims_[2]; ++bz) {
-    for (int by = 0; by < b.bdims_[1]; ++by) {
-      for (int bx = 0; bx < b.bdims_[0]; ++bx) {
-        if (b.bricks_[(static_cast<size_t>(bz) * b.bdims_[1] + by) * b.bdims_[0] + bx] != kMixed)
-          continue;
-        for (int c = 0; c < 64; ++c) {
-          b.cells_[b.CellIndex(8 * bx + 2 * (c & 3), 8 * by + 2 * ((c >> 2) & 3),
-                               8 * bz + 2 * (c >> 4))] = *cells++;
-        }
-      }
-    }
-  }
+  b.ForEachBrickCell([&](size_t brick, size_t cell) {
+    if (b.bricks_[brick] == kMixed) b.cells_[cell] = *cells++;
+  });
   b.FillCells();
   b.ComputeReach(y_begin, y_end < 0 ? dims[1] : y_end);
   return b;

@@ -107,6 +107,20 @@ class BrickMap {
   size_t CellIndex(int x, int y, int z) const {
     return (static_cast<size_t>(z >> 1) * cdims_[1] + (y >> 1)) * cdims_[0] + (x >> 1);
   }
+  // Sizes the grids of bricks and cells for a volume of `dims`, all void.
+  void SetDims(std::array<int, 3> dims);
+  // Calls f(brick, cell) for each brick's index into bricks_ and the
+  // indices into cells_ of its 64 cells, in the order bytes() writes them.
+  template <typename F>
+  void ForEachBrickCell(F f) const {
+    size_t brick = 0;
+    for (int bz = 0; bz < bdims_[2]; ++bz)
+      for (int by = 0; by < bdims_[1]; ++by)
+        for (int bx = 0; bx < bdims_[0]; ++bx, ++brick)
+          for (int c = 0; c < 64; ++c)
+            f(brick, CellIndex(8 * bx + 2 * (c & 3), 8 * by + 2 * ((c >> 2) & 3),
+                               8 * bz + 2 * (c >> 4)));
+  }
   // Fills cells_ of the uniform bricks.
   void FillCells();
   // Fills reach_ for the cells of planes [y_begin, y_end).
