@@ -4,15 +4,17 @@
 
 #include <bit>
 #include <cstdio>
-#include <filesystem>
 #include <chrono>
+#include <filesystem>
 #include <map>
 #include <set>
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "cluster.grpc.pb.h"
 #include "convert.h"
+#include "progress.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "rpc_channel.h"
 #include "rpc_status.h"
@@ -23,30 +25,84 @@
 namespace transtick {
 namespace fs = std::filesystem;
 
+namespace {
+
+// Where a frame's image goes: its view's output, or JOB-dD-vV.png; a
+// relative path beneath `out_dir`.
+fs::path ImagePath(const std::string& output, const std::string& job_id, int dataset, int view,
+                   const std::string& out_dir) {
+  std::string out = output;
+  if (out.empty()) out = absl::StrCat(job_id, "-d", dataset, "-v", view, ".png");
+  fs::path path(out);
+  if (path.is_relative() && !out_dir.empty()) path = fs::path(out_dir) / path;
+  return path;
+}
+
+absl::Status CheckDirectory(const fs::path& dir, const std::string& what) {
+  if (dir.empty()) return absl::OkStatus();
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) {
+    return absl::NotFoundError(absl::StrCat(what, ": directory '", dir.string(),
+                                            "' does not exist (transtick creates none)"));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::Status CheckOutputDirectories(const v1::Job& job, const std::string& out_dir) {
+  if (absl::Status s = CheckDirectory(out_dir, "--out-dir"); !s.ok()) return s;
+  for (int d = 0; d < job.datasets_size(); ++d) {
+    for (int v = 0; v < job.datasets(d).views_size(); ++v) {
+      const fs::path path = ImagePath(job.datasets(d).views(v).output(), "job", d, v, out_dir);
+      absl::Status s = CheckDirectory(path.parent_path(),
+                                      absl::StrCat("datasets[", d, "].views[", v, "] output '",
+                                                   path.string(), "'"));
+      if (!s.ok()) return s;
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<v1::SubmitReply> SubmitJob(const std::string& root, const v1::Job& job) {
+  auto stub = v1::Root::NewStub(MakeChannel(root, Role::kRoot));
+  v1::SubmitReply submitted;
+  grpc::ClientContext ctx;
+  ctx.set_deadline(Deadline(30));
+  absl::Status s = FromGrpc(stub->Submit(&ctx, job, &submitted));
+  if (absl::IsUnavailable(s)) {
+    return absl::UnavailableError(
+        absl::StrCat("cannot reach the root at ", root, ": ", s.message()));
+  }
+  if (!s.ok()) return s;
+  return submitted;
+}
+
 absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::string& root,
                                                                   const v1::Job& job,
                                                                   const WatchOptions& options) {
-  auto stub = v1::Root::NewStub(MakeChannel(root, Role::kRoot));
-  v1::SubmitReply submitted;
-  {
-    grpc::ClientContext ctx;
-    ctx.set_deadline(Deadline(30));
-    absl::Status s = FromGrpc(stub->Submit(&ctx, job, &submitted));
-    if (absl::IsUnavailable(s)) {
-      return absl::UnavailableError(
-          absl::StrCat("cannot reach the root at ", root, ": ", s.message()));
-    }
-    if (!s.ok()) return s;
-  }
+  auto submitted = SubmitJob(root, job);
+  if (!submitted.ok()) return submitted.status();
   if (options.progress) {
-    std::fprintf(stderr, "%s: %d frames, %d jobs ahead\n", submitted.job_id().c_str(),
-                 submitted.frames(), submitted.queue_position());
+    options.progress->Say(absl::StrCat(submitted->job_id(), ": ", submitted->frames(),
+                                       " frame", submitted->frames() == 1 ? "" : "s", ", ",
+                                       submitted->queue_position(), " job",
+                                       submitted->queue_position() == 1 ? "" : "s", " ahead"));
   }
+  return WatchJob(root, submitted->job_id(), options);
+}
+
+absl::StatusOr<std::vector<v1::ClusterFrameStats>> WatchJob(const std::string& root,
+                                                            const std::string& job_id,
+                                                            const WatchOptions& options) {
+  auto stub = v1::Root::NewStub(MakeChannel(root, Role::kRoot));
+  Progress* const progress = options.progress;
   // Watches until the job ends. A stream that breaks (the root restarted,
   // the network failed) is watched again with the frames already saved, so
   // the root sends (and if need be renders again) only the others.
   std::vector<v1::ClusterFrameStats> stats;
   std::set<int> have;
+  std::set<std::string> warned;
   v1::JobState state = v1::QUEUED;
   std::string error;
   absl::Status save_error;
@@ -55,7 +111,7 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::str
   while (true) {
     grpc::ClientContext ctx;
     v1::WatchRequest request;
-    request.set_job_id(submitted.job_id());
+    request.set_job_id(job_id);
     request.set_resume(true);
     for (int f : have) request.add_have_frames(f);
     auto reader = stub->Watch(&ctx, request);
@@ -67,6 +123,9 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::str
       backoff = std::chrono::milliseconds(250);
       state = e.state();
       error = e.error();
+      for (const std::string& w : e.warnings()) {
+        if (warned.insert(w).second && progress) progress->Warn("warning: " + w);
+      }
       if (e.has_image()) {
         const v1::ImageChunk& c = e.image();
         const int frame = e.frame();
@@ -88,55 +147,54 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::str
         }
         DecodeFloats(c.rgb(), img.rgb.data() + static_cast<size_t>(c.row_begin()) * img.width * 3);
         rows_in[frame] += c.row_end() - c.row_begin();
-        if (e.has_stats()) stats.push_back(e.stats());
-        if (rows_in[frame] == img.height) {
-          std::string out = c.output();
-          if (out.empty())
-            out = absl::StrCat(submitted.job_id(), "-d", e.dataset(), "-v", e.view(), ".png");
-          fs::path path(out);
-          if (path.is_relative() && !options.out_dir.empty())
-            path = fs::path(options.out_dir) / path;
-          if (path.has_parent_path()) {
-            std::error_code ec;
-            fs::create_directories(path.parent_path(), ec);
+        if (e.has_stats()) {
+          stats.push_back(e.stats());
+          for (const std::string& w : e.stats().warnings()) {
+            if (warned.insert(w).second && progress) progress->Warn("warning: " + w);
           }
-          absl::Status s = WriteImage(path.string(), img);
+        }
+        if (rows_in[frame] == img.height) {
+          const fs::path path = ImagePath(c.output(), job_id, e.dataset(), e.view(), options.out_dir);
+          absl::Status s = CheckDirectory(path.parent_path(), absl::StrCat("frame ", frame));
+          if (s.ok()) s = WriteImage(path.string(), img);
           if (!s.ok() && save_error.ok()) save_error = s;
           have.insert(frame);
-          if (options.progress) {
-            std::fprintf(stderr, "\r\033[K%s: frame %zu/%d saved to %s (%.1f ms)\n",
-                         submitted.job_id().c_str(), have.size(), e.frames_total(),
-                         path.c_str(), e.has_stats() ? e.stats().frame_ms() : 0.0);
+          if (progress) {
+            progress->Say(absl::StrFormat("%s: frame %d/%d saved to %s (%.1f ms)", job_id,
+                                          have.size(), e.frames_total(), path.string(),
+                                          e.has_stats() ? e.stats().frame_ms() : 0.0));
           }
           images.erase(frame);
           rows_in.erase(frame);
         }
-      } else if (options.progress && e.pixels_total() > 0) {
-        std::fprintf(stderr, "\r\033[K%s: frame %d/%d, %5.1f%% of %llu pixels",
-                     submitted.job_id().c_str(), e.frames_done() + 1, e.frames_total(),
-                     100.0 * e.pixels_done() / e.pixels_total(),
-                     static_cast<unsigned long long>(e.pixels_total()));
+      } else if (progress && e.pixels_total() > 0 && e.frames_total() > 0) {
+        const double frame_part = static_cast<double>(e.pixels_done()) / e.pixels_total();
+        progress->Update((have.size() + frame_part) / e.frames_total(),
+                         absl::StrFormat("%s frame %d/%d", job_id,
+                                         std::min<int>(have.size() + 1, e.frames_total()),
+                                         e.frames_total()));
       }
     }
     absl::Status s = FromGrpc(reader->Finish());
     const bool ended = state == v1::DONE || state == v1::FAILED || state == v1::CANCELLED;
     if (s.ok() && ended) break;
     if (absl::IsNotFound(s)) {
-      return absl::NotFoundError(absl::StrCat(
-          "the root no longer knows ", submitted.job_id(),
-          " (it restarted without a state directory, or forgot the job)"));
+      return absl::NotFoundError(
+          absl::StrCat("the root does not know ", job_id,
+                       " (a wrong id, or it restarted without a state directory)"));
     }
     if (!s.ok() && !absl::IsUnavailable(s) && !absl::IsCancelled(s)) return s;
     // The stream broke, or the root stopped before the job ended.
     if (std::chrono::steady_clock::now() - last_contact > options.reconnect) {
       return absl::UnavailableError(absl::StrCat(
-          "lost the root at ", root, " while watching ", submitted.job_id(), " and could not ",
+          "lost the root at ", root, " while watching ", job_id, " and could not ",
           "reach it again for ", options.reconnect.count(), " s",
           s.ok() ? "" : absl::StrCat(": ", s.message())));
     }
-    if (options.progress) {
-      std::fprintf(stderr, "\r\033[K%s: lost the root (%s); watching again\n",
-                   submitted.job_id().c_str(), s.ok() ? "it stopped" : std::string(s.message()).c_str());
+    if (progress) {
+      progress->Say(absl::StrCat(job_id, ": lost the root (",
+                                 s.ok() ? "it stopped" : std::string(s.message()),
+                                 "); watching again"));
     }
     std::this_thread::sleep_for(backoff);
     backoff = std::min(backoff * 2, std::chrono::milliseconds(2000));
@@ -145,10 +203,10 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::str
     // attempt's deadline, gRPC 1.51), while a new one connects at once.
     stub = v1::Root::NewStub(MakeChannel(root, Role::kRoot));
   }
-  if (state == v1::FAILED)
-    return absl::AbortedError(absl::StrCat(submitted.job_id(), " failed: ", error));
+  if (progress) progress->Finish();
+  if (state == v1::FAILED) return absl::AbortedError(absl::StrCat(job_id, " failed: ", error));
   if (state == v1::CANCELLED)
-    return absl::CancelledError(absl::StrCat(submitted.job_id(), " was cancelled"));
+    return absl::CancelledError(absl::StrCat(job_id, " was cancelled"));
   if (!save_error.ok()) return save_error;
   return stats;
 }

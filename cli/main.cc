@@ -3,8 +3,9 @@
 //   transtick render --volume FILE [--materials FILE | --transfer FILE] ...
 //   transtick info --volume FILE
 //
-// Run `transtick help` for every flag.
+// `transtick help` lists the commands; `transtick CMD --help` gives their flags.
 
+#include <grpcpp/grpcpp.h>
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
@@ -24,6 +25,7 @@
 #include "clock.h"
 #include "cluster.grpc.pb.h"
 #include "convert.h"
+#include "progress.h"
 #include "flags.h"
 #include "local_cluster.h"
 #include "rpc_channel.h"
@@ -33,56 +35,188 @@
 #include "transtick/render.h"
 #include "transtick/scene.h"
 #include "transtick/volume_io.h"
+#include "version.h"
 
 namespace transtick {
 namespace {
 
 constexpr char kUsage[] = R"(transtick: a volume ray tracer (sticks, ray dataflow)
 
-usage:
-  transtick render --volume FILE [options]     render one image (embedded cluster by default)
-  transtick submit JOB.json --root HOST:PORT [--out-dir DIR] [--stats FILE.json]
-  transtick status --root HOST:PORT            jobs and workers of a running cluster
-  transtick cancel JOB_ID --root HOST:PORT
-  transtick health --addr HOST:PORT[,...]      exit 0 when every daemon reports SERVING
-  transtick info --volume FILE [raw options]   describe a volume
+usage: transtick COMMAND [flags]     (transtick COMMAND --help for its flags)
 
-render options:
-  --materials FILE       surfaces mode classification (JSON, see docs/formats.md)
-  --transfer FILE        dvr mode transfer function (JSON)
-  --mode surfaces|dvr    default: surfaces with --materials, dvr with --transfer
-  --surface smooth|voxel surfaces on the trilinear field, hit exactly (default), or the
-                         paper's voxel faces (overrides the materials file's "surface")
-  --azimuth DEG          rotation about the volume's Y axis (0 looks along -Z)
-  --elevation DEG        tilt toward +Y
-  --zoom F               1 frames the whole volume (default 1)
-  --projection perspective|orthographic   (default perspective)
-  --fov DEG              perspective field of view (default 30)
-  --eye X,Y,Z --target X,Y,Z [--up X,Y,Z]  explicit view (world units, volume centred at 0)
-  --size WxH             image size, at most 8192x8192 (default 400x400)
-  --shadows on|off       shadow rays in surfaces mode (default on)
-  --samples N            primary rays per pixel, 1-64, at a fixed stratified pattern
-                         (anti-aliasing; default 1)
-  --background R,G,B     background colour in [0, 1] (default 0,0,0)
-  --step S               dvr sample step in world units (default half the smallest spacing)
-  --local N              render on an embedded cluster of N workers (default: one per
-                         core); 0 renders in this process without gRPC (the reference)
-  --rings R              rings of the embedded cluster (default 1)
-  --balance off|test-rays|previous-frame   static load balancing of the slabs on a
-                         cluster (default off; docs/balancing.md)
-  --balance-grid N       test rays per side of the image for test-rays (default 32)
-  --balance-rule cost|paper   how cuts follow from costs (default cost)
-  --root HOST:PORT       render on a running cluster; --volume is then relative to
-                         the root's data directory
-  --threads N            tracing threads of --local 0, and of each worker of --local N
-                         (default: one per core)
-  --out FILE             .png/.jpg (8-bit), .tif/.exr/.hdr (float) (default transtick.png)
-  --stats FILE.json      write frame statistics as JSON
-  --max-volume-mb N      refuse volumes larger than N MiB in memory (default 8192)
-raw volumes (any other extension, or --raw-dims given):
-  --raw-dims XxYxZ --raw-type uint8|int8|uint16|int16|uint32|int32|float
-  --raw-endian little|big --raw-spacing X,Y,Z --raw-skip BYTES
+commands:
+  render    render one image (on an embedded cluster by default, or --root)
+  info      describe a volume: size, spacing, values, histogram
+  submit    submit a job file to a running cluster and save its images
+  watch     follow a running job to its end and save its images
+  status    jobs and workers of a running cluster
+  cancel    cancel a job
+  health    exit 0 when every daemon named reports SERVING
+  version   print the version
+
+docs: README.md, docs/formats.md (materials, transfer functions, job files, stats)
 )";
+
+std::vector<FlagDoc> With(std::vector<FlagDoc> a, const std::vector<FlagDoc>& b) {
+  a.insert(a.end(), b.begin(), b.end());
+  return a;
+}
+
+const std::vector<FlagDoc> kVolumeFlags = {
+    {"volume", "FILE",
+     "NRRD (.nrrd, .nhdr), Levoy's .den, NIfTI-1 (.nii, .nii.gz); any other\n"
+     "extension, or --raw-dims given, is headerless raw"},
+    {"raw-dims", "XxYxZ", "a raw volume's size"},
+    {"raw-type", "T", "uint8|int8|uint16|int16|uint32|int32|float (default uint8)"},
+    {"raw-endian", "little|big", "byte order of a raw volume (default little)"},
+    {"raw-spacing", "X,Y,Z", "voxel size of a raw volume (default 1,1,1)"},
+    {"raw-skip", "BYTES", "header bytes to skip in a raw volume (default 0)"},
+    {"max-volume-mb", "N", "refuse volumes larger than N MiB in memory (default 8192)"},
+};
+
+const CommandDoc kInfoDoc = {
+    "transtick info", "", "Describes a volume: its size, sample type, spacing, range of values and a "
+    "histogram\nof 16 bins, which helps choose material intervals.", 0, 0, kVolumeFlags, ""};
+
+const std::vector<FlagDoc> kQuietFlag = {
+    {"quiet", "", "no progress (on a terminal, a line with the time left; elsewhere a line\n"
+                  "every 5 s); warnings and errors are still printed"}};
+
+const CommandDoc kRenderDoc = {
+    "transtick render", "",
+    "Renders one image of a volume: on an embedded cluster of workers on loopback by\n"
+    "default, in this process with --local 0 (the reference every cluster image equals\n"
+    "bit for bit), or on a running cluster with --root.",
+    0, 0,
+    With(With(kVolumeFlags,
+              {
+                  {"materials", "FILE", "surfaces mode classification (JSON, docs/formats.md)"},
+                  {"transfer", "FILE", "dvr mode transfer function (JSON)"},
+                  {"mode", "surfaces|dvr", "default: surfaces with --materials, dvr with --transfer"},
+                  {"surface", "smooth|voxel",
+                   "surfaces on the trilinear field, hit exactly (default), or the\n"
+                   "paper's voxel faces (overrides the materials file's \"surface\")"},
+                  {"azimuth", "DEG", "orbit: rotation about the volume's Y axis (0 looks along -Z)"},
+                  {"elevation", "DEG", "orbit: tilt toward +Y"},
+                  {"zoom", "F", "orbit: 1 frames the whole volume (default 1)"},
+                  {"eye", "X,Y,Z", "explicit view, with --target: world units, volume centred at 0"},
+                  {"target", "X,Y,Z", "the point looked at"},
+                  {"up", "X,Y,Z", "the explicit view's up (default 0,1,0)"},
+                  {"projection", "perspective|orthographic", "camera model (default perspective)"},
+                  {"fov", "DEG", "perspective field of view (default 30)"},
+                  {"size", "WxH", "image size, at most 8192x8192 (default 400x400)"},
+                  {"shadows", "on|off", "shadow rays in surfaces mode (default on)"},
+                  {"samples", "N",
+                   "primary rays per pixel, 1-64, at a fixed stratified pattern\n"
+                   "(anti-aliasing; default 1)"},
+                  {"background", "R,G,B", "background colour in [0, 1] (default 0,0,0)"},
+                  {"step", "S", "dvr sample step in world units (default half the smallest spacing)"},
+                  {"local", "N",
+                   "workers of the embedded cluster (default: one per core); 0 renders\n"
+                   "in this process without gRPC"},
+                  {"rings", "R", "rings of the embedded cluster (default 1)"},
+                  {"balance", "off|test-rays|previous-frame",
+                   "static load balancing of the slabs on a cluster (default off)"},
+                  {"balance-grid", "N", "test rays per side of the image for test-rays (default 32)"},
+                  {"balance-rule", "cost|paper", "how cuts follow from costs (default cost)"},
+                  {"root", "HOST:PORT",
+                   "render on a running cluster; --volume is then relative to the\n"
+                   "root's data directory"},
+                  {"threads", "N",
+                   "tracing threads of --local 0, and of each embedded worker\n"
+                   "(default: one per core)"},
+                  {"out", "FILE", "a .png/.jpg (8-bit) or .tif/.exr/.hdr (float) image (default\n"
+                                  "transtick.png); its directory must exist"},
+                  {"stats", "FILE.json", "frame statistics as JSON (docs/formats.md)"},
+              }),
+         With(kQuietFlag, ClientSecurityFlagDocs())),
+    "example:\n  transtick render --volume head.nrrd --materials examples/cthead_materials.json \\\n"
+    "      --azimuth 45 --size 400x400 --out head.png"};
+
+const CommandDoc kSubmitDoc = {
+    "transtick submit", "JOB.json",
+    "Submits a job file (docs/formats.md, \"Job file\") to a running cluster, follows it\n"
+    "to its end and saves each frame's image: a relative output path beneath --out-dir.\n"
+    "If the connection breaks, it watches again and gets the frames it lacks.",
+    1, 1,
+    With(With({{"root", "HOST:PORT", "the cluster's root (required)"},
+               {"out-dir", "DIR", "where images with relative paths go (default .); made if\n"
+                                  "missing, but not its parents"},
+               {"stats", "FILE.json", "every frame's statistics, as a JSON array"}},
+              kQuietFlag),
+         ClientSecurityFlagDocs()),
+    "example:\n  transtick submit examples/cthead_job.json --root 127.0.0.1:7000"};
+
+const CommandDoc kWatchDoc = {
+    "transtick watch", "JOB_ID",
+    "Follows a job already submitted (by this client, or by another with an admin token)\n"
+    "to its end, showing its progress and saving every frame's image, also those\n"
+    "rendered before the watch began: `transtick submit` again after a lost terminal.",
+    1, 1,
+    With(With({{"root", "HOST:PORT", "the cluster's root (required)"},
+               {"out-dir", "DIR", "where images with relative paths go (default .); made if\n"
+                                  "missing, but not its parents"},
+               {"stats", "FILE.json", "every frame's statistics, as a JSON array"}},
+              kQuietFlag),
+         ClientSecurityFlagDocs()),
+    ""};
+
+const CommandDoc kStatusDoc = {"transtick status", "",
+                               "Lists the workers of a running cluster, with their rings and "
+                               "slabs, and its jobs.",
+                               0, 0,
+                               With({{"root", "HOST:PORT", "the cluster's root (required)"}},
+                                    ClientSecurityFlagDocs()),
+                               ""};
+
+const CommandDoc kCancelDoc = {"transtick cancel", "JOB_ID", "Cancels a queued or running job.",
+                               1, 1,
+                               With({{"root", "HOST:PORT", "the cluster's root (required)"}},
+                                    ClientSecurityFlagDocs()),
+                               ""};
+
+const CommandDoc kHealthDoc = {
+    "transtick health", "",
+    "Asks each daemon's standard gRPC health service; exits 0 when every one reports\n"
+    "SERVING, 1 otherwise, with one line per daemon (container probes use it).",
+    0, 0,
+    With({{"addr", "HOST:PORT[,...]", "the daemons to ask (default 127.0.0.1:7000)"},
+          {"role", "root|worker|display", "what they are: their certificate's role (default root)"},
+          {"timeout", "S", "seconds to wait for each (default 3)"}},
+         ClientSecurityFlagDocs()),
+    ""};
+
+const CommandDoc kVersionDoc = {"transtick version", "", "Prints the version.", 0, 0, {}, ""};
+
+// Parses a command's flags; prints its usage for --help (returning 0 in
+// *exit) and the error otherwise (returning 2).
+std::optional<Flags> ParseCommand(int argc, char** argv, const CommandDoc& doc, int* exit) {
+  auto flags = Flags::Parse(argc, argv, 2, doc);
+  if (!flags.ok()) {
+    std::cerr << doc.name << ": " << flags.status().message() << "\n";
+    *exit = 2;
+    return std::nullopt;
+  }
+  if (flags->Has("help")) {
+    std::cout << Usage(doc);
+    *exit = 0;
+    return std::nullopt;
+  }
+  return *std::move(flags);
+}
+
+// Refuses flags that contradict each other: `a` given with any of `b`.
+absl::Status Exclusive(const Flags& flags, const std::string& a, std::initializer_list<const char*> b,
+                       const std::string& why) {
+  if (!flags.Has(a)) return absl::OkStatus();
+  for (const char* other : b) {
+    if (flags.Has(other)) {
+      return absl::InvalidArgumentError(absl::StrCat("--", a, " and --", other,
+                                                     " contradict each other: ", why));
+    }
+  }
+  return absl::OkStatus();
+}
 
 absl::StatusOr<Volume> LoadVolume(const Flags& flags) {
   if (!flags.Has("volume")) return absl::InvalidArgumentError("--volume FILE is required");
@@ -117,13 +251,25 @@ absl::StatusOr<Volume> LoadVolume(const Flags& flags) {
   return ReadRaw(path, spec, options);
 }
 
-const std::set<std::string> kRawFlags = {"volume",      "raw-dims", "raw-type",     "raw-endian",
-                                         "raw-spacing", "raw-skip", "max-volume-mb"};
+// The raw volume's flags describe a raw volume: without --raw-dims they
+// would be ignored.
+absl::Status CheckRawFlags(const Flags& flags) {
+  if (flags.Has("raw-dims")) return absl::OkStatus();
+  for (const char* f : {"raw-type", "raw-endian", "raw-spacing", "raw-skip"}) {
+    if (flags.Has(f)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("--", f, " describes a raw volume and needs --raw-dims"));
+    }
+  }
+  return absl::OkStatus();
+}
 
 int Info(int argc, char** argv) {
-  auto flags = Flags::Parse(argc, argv, 2, kRawFlags);
-  if (!flags.ok()) {
-    std::cerr << "transtick info: " << flags.status().message() << "\n";
+  int exit = 0;
+  auto flags = ParseCommand(argc, argv, kInfoDoc, &exit);
+  if (!flags) return exit;
+  if (absl::Status s = CheckRawFlags(*flags); !s.ok()) {
+    std::cerr << "transtick info: " << s.message() << "\n";
     return 2;
   }
   auto volume = LoadVolume(*flags);
@@ -237,6 +383,11 @@ absl::Status UseSecurity(const Flags& flags) {
   return absl::OkStatus();
 }
 
+std::string VersionText() {
+  return absl::StrCat("transtick ", TRANSTICK_VERSION, " (", TRANSTICK_GIT_COMMIT, "), gRPC ",
+                      grpc::Version(), ", API transtick.v1");
+}
+
 int Fail(const char* command, const absl::Status& s) {
   std::cerr << "transtick " << command << ": " << s.message() << "\n";
   return s.code() == absl::StatusCode::kInvalidArgument ? 2 : 1;
@@ -269,17 +420,16 @@ int RenderInProcess(const Flags& flags, const v1::View& view, bool dvr,
               volume->dims[2] * volume->spacing[2]};
   auto camera = Camera::Create(*ToCameraSpec(view), extent);
   if (!camera.ok()) return fail(camera.status());
-  const bool tty = isatty(STDERR_FILENO);
-  ProgressFn progress;
-  if (tty) {
-    progress = [](uint64_t done, uint64_t total) {
-      std::fprintf(stderr, "\rrendering %5.1f%%", 100.0 * done / total);
-      std::fflush(stderr);
-    };
-  }
+  Progress progress(Progress::ForStderr(flags.Has("quiet")));
+  const std::vector<std::string> warnings =
+      dvr ? UnseenTransfer(transfer, *volume) : UnseenMaterials(classification, *volume);
+  for (const std::string& w : warnings) progress.Warn("warning: " + w);
   RenderStats stats;
-  auto image = RenderLocal(*scene, *camera, ToRenderSettings(view), *threads, &stats, progress);
-  if (tty) std::fprintf(stderr, "\r\033[K");
+  auto image = RenderLocal(*scene, *camera, ToRenderSettings(view), *threads, &stats,
+                           [&progress](uint64_t done, uint64_t total) {
+                             progress.Update(static_cast<double>(done) / total, "rendering");
+                           });
+  progress.Finish();
   if (!image.ok()) return fail(image.status());
   const std::string out = view.output();
   if (auto s = WriteImage(out, *image); !s.ok()) return fail(s);
@@ -300,6 +450,7 @@ int RenderInProcess(const Flags& flags, const v1::View& view, bool dvr,
   fs.set_surface_hits(c.surface_hits);
   fs.set_samples(c.samples);
   fs.set_rays_truncated(c.truncated);
+  for (const std::string& w : warnings) fs.add_warnings(w);
   const Sticks& sticks = scene->sticks();
   uint64_t encoded = 0;
   for (int by = 0; by < sticks.BlocksY(); ++by)
@@ -314,7 +465,7 @@ int RenderInProcess(const Flags& flags, const v1::View& view, bool dvr,
   ss->set_scalar_bytes(scene->scalars().size() * sizeof(float));
   for (int a = 0; a < 3; ++a) fs.add_volume_dims(volume->dims[a]);
   fs.set_rays_per_second(stats.frame_ms > 0 ? (c.primary + c.shadow) / (stats.frame_ms / 1e3) : 0);
-  std::fprintf(stderr,
+  if (!flags.Has("quiet")) std::fprintf(stderr,
                "%s: %dx%d %s in %.1f ms on %d threads (%llu primary + %llu shadow rays); "
                "sticks %.2f MB = %.1f%% of the raw volume\n",
                out.c_str(), view.width(), view.height(), dvr ? "dvr" : "surfaces", stats.frame_ms,
@@ -354,18 +505,79 @@ void PrintClusterFrame(const v1::ClusterFrameStats& fs) {
   }
 }
 
-int Render(int argc, char** argv) {
-  std::set<std::string> known = kRawFlags;
-  for (const char* f :
-       {"materials",  "transfer",   "mode",  "azimuth", "elevation",    "zoom",
-        "projection", "fov",        "eye",   "target",  "up",           "size",
-        "shadows",    "background", "step",  "threads", "out",          "stats", "surface", "samples",
-        "local",      "root",       "rings", "balance", "balance-grid", "balance-rule"}) {
-    known.insert(f);
+// Flags of `render` that contradict each other, or that the chosen mode or
+// renderer would ignore: each is refused, naming both.
+absl::Status CheckRenderFlags(const Flags& f) {
+  if (absl::Status s = CheckRawFlags(f); !s.ok()) return s;
+  const std::string mode = f.Get("mode");
+  std::vector<absl::Status> checks = {
+      Exclusive(f, "materials", {"transfer"},
+                "surfaces mode takes --materials, dvr mode --transfer"),
+      Exclusive(f, "eye", {"azimuth", "elevation", "zoom"},
+                "a view is explicit (--eye, --target) or an orbit (--azimuth, --elevation, --zoom)"),
+      Exclusive(f, "target", {"azimuth", "elevation", "zoom"},
+                "a view is explicit (--eye, --target) or an orbit (--azimuth, --elevation, --zoom)"),
+      Exclusive(f, "root", {"local", "rings", "threads"},
+                "--root renders on a running cluster, whose workers and rings are its own"),
+  };
+  for (const absl::Status& s : checks) {
+    if (!s.ok()) return s;
   }
+  if (f.Has("up") && !f.Has("eye")) {
+    return absl::InvalidArgumentError("--up belongs to an explicit view: give --eye and --target");
+  }
+  if (f.Get("projection") == "orthographic" && f.Has("fov")) {
+    return absl::InvalidArgumentError(
+        "--fov and --projection orthographic contradict each other: an orthographic camera has "
+        "no field of view (--zoom sets its extent)");
+  }
+  const bool dvr = mode.empty() ? f.Has("transfer") : mode == "dvr";
+  if (mode == "surfaces" && f.Has("transfer")) {
+    return absl::InvalidArgumentError("--mode surfaces and --transfer contradict each other: "
+                                      "surfaces mode takes --materials");
+  }
+  if (mode == "dvr" && f.Has("materials")) {
+    return absl::InvalidArgumentError("--mode dvr and --materials contradict each other: dvr "
+                                      "mode takes --transfer");
+  }
+  for (const char* surfaces_only : {"shadows", "surface"}) {
+    if (dvr && f.Has(surfaces_only)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("--", surfaces_only, " is for surfaces mode; dvr mode would ignore it"));
+    }
+  }
+  if (!dvr && f.Has("step")) {
+    return absl::InvalidArgumentError("--step is dvr's sample step; surfaces mode would ignore it");
+  }
+  if (f.Has("local") && f.Get("local") == "0") {
+    for (const char* cluster_only : {"rings", "balance", "balance-grid", "balance-rule"}) {
+      if (f.Has(cluster_only)) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "--", cluster_only, " is for a cluster; --local 0 renders in this process"));
+      }
+    }
+  }
+  return absl::OkStatus();
+}
+
+// The directory an image will be written to must exist: transtick creates
+// none (a typo would otherwise leave a tree of directories behind).
+absl::Status CheckOutputDirectory(const std::string& out) {
+  const std::filesystem::path dir = std::filesystem::path(out).parent_path();
+  std::error_code ec;
+  if (!dir.empty() && !std::filesystem::is_directory(dir, ec)) {
+    return absl::NotFoundError(
+        absl::StrCat("--out: directory '", dir.string(), "' does not exist (transtick creates none)"));
+  }
+  return absl::OkStatus();
+}
+
+int Render(int argc, char** argv) {
   auto fail = [](const absl::Status& s) { return Fail("render", s); };
-  auto flags = Flags::Parse(argc, argv, 2, WithSecurityFlags(known));
-  if (!flags.ok()) return fail(flags.status());
+  int exit = 0;
+  auto flags = ParseCommand(argc, argv, kRenderDoc, &exit);
+  if (!flags) return exit;
+  if (absl::Status s = CheckRenderFlags(*flags); !s.ok()) return fail(s);
   if (absl::Status s = UseSecurity(*flags); !s.ok()) return fail(s);
 
   // Everything about the request is checked before the volume is read.
@@ -382,6 +594,7 @@ int Render(int argc, char** argv) {
   }
   auto view = ViewFromFlags(*flags);
   if (!view.ok()) return fail(view.status());
+  if (absl::Status s = CheckOutputDirectory(view->output()); !s.ok()) return fail(s);
   if (!flags->Has("volume")) return fail(absl::InvalidArgumentError("--volume FILE is required"));
   const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   auto local = flags->GetInt("local", cores);
@@ -491,51 +704,78 @@ int Render(int argc, char** argv) {
   auto rule = ParseEnum<v1::BalanceRule>(flags->Get("balance-rule", "cost"), "--balance-rule");
   if (!rule.ok()) return fail(rule.status());
   job.set_balance_rule(*rule);
+  Progress progress(Progress::ForStderr(flags->Has("quiet")));
   WatchOptions wo;
-  wo.progress = isatty(STDERR_FILENO);
+  wo.progress = &progress;
   auto stats = SubmitAndWatch(root, job, wo);
+  progress.Finish();
   if (!stats.ok()) return fail(stats.status());
-  if (!stats->empty()) {
+  if (!stats->empty() && !flags->Has("quiet")) {
     PrintClusterFrame(stats->front());
     std::fprintf(stderr, "%s: %dx%d %s on %d workers\n", out.c_str(), view->width(), view->height(),
                  mode_name.c_str(), stats->front().workers_size());
-    if (flags->Has("stats")) WriteStats(flags->Get("stats"), stats->front());
   }
+  if (!stats->empty() && flags->Has("stats")) WriteStats(flags->Get("stats"), stats->front());
   return 0;
 }
 
-int Submit(int argc, char** argv) {
-  auto flags = Flags::Parse(argc, argv, 2, WithSecurityFlags({"root", "out-dir", "stats"}));
-  if (!flags.ok()) return Fail("submit", flags.status());
-  if (absl::Status s = UseSecurity(*flags); !s.ok()) return Fail("submit", s);
-  if (flags->positional().size() != 1) {
-    return Fail("submit",
-                absl::InvalidArgumentError("usage: transtick submit JOB.json --root HOST:PORT "
-                                           "[--out-dir DIR] [--stats FILE.json]"));
+// The stats of a job's frames as a JSON array, for --stats.
+void WriteStatsArray(const std::string& path, const std::vector<v1::ClusterFrameStats>& stats) {
+  std::ofstream f(path);
+  f << "[\n";
+  for (size_t i = 0; i < stats.size(); ++i) {
+    f << ToJson(stats[i]) << (i + 1 < stats.size() ? ",\n" : "\n");
   }
-  if (!flags->Has("root"))
-    return Fail("submit", absl::InvalidArgumentError("--root HOST:PORT is required"));
-  auto job = LoadJobFile(flags->positional()[0]);
-  if (!job.ok()) return Fail("submit", job.status());
+  f << "]\n";
+  if (!f) std::cerr << "transtick: cannot write " << path << "\n";
+}
+
+// submit and watch: follow a job to its end, saving its images.
+int FollowJob(int argc, char** argv, const CommandDoc& doc, const char* command, bool submit) {
+  int exit = 0;
+  auto flags = ParseCommand(argc, argv, doc, &exit);
+  if (!flags) return exit;
+  auto fail = [command](const absl::Status& s) { return Fail(command, s); };
+  if (absl::Status s = UseSecurity(*flags); !s.ok()) return fail(s);
+  if (!flags->Has("root")) return fail(absl::InvalidArgumentError("--root HOST:PORT is required"));
+  const std::string out_dir = flags->Get("out-dir", ".");
+  Progress progress(Progress::ForStderr(flags->Has("quiet")));
+  // --out-dir names a directory to write into: made if missing (one level,
+  // said aloud); the directories of the job's own paths must exist.
+  std::error_code ec;
+  if (!std::filesystem::exists(out_dir, ec)) {
+    if (!std::filesystem::create_directory(out_dir, ec)) {
+      return fail(absl::NotFoundError(absl::StrCat("--out-dir: cannot create '", out_dir,
+                                                   "': ", ec ? ec.message() : "it exists")));
+    }
+    progress.Say(absl::StrCat("created directory ", out_dir));
+  }
   WatchOptions wo;
-  wo.out_dir = flags->Get("out-dir", ".");
-  wo.progress = isatty(STDERR_FILENO);
-  auto stats = SubmitAndWatch(flags->Get("root"), *job, wo);
-  if (!stats.ok()) return Fail("submit", stats.status());
-  for (const auto& s : *stats) PrintClusterFrame(s);
-  if (flags->Has("stats")) {
-    std::ofstream f(flags->Get("stats"));
-    f << "[\n";
-    for (size_t i = 0; i < stats->size(); ++i)
-      f << ToJson((*stats)[i]) << (i + 1 < stats->size() ? ",\n" : "\n");
-    f << "]\n";
+  wo.out_dir = out_dir;
+  wo.progress = &progress;
+  absl::StatusOr<std::vector<v1::ClusterFrameStats>> stats;
+  if (submit) {
+    auto job = LoadJobFile(flags->positional()[0]);
+    if (!job.ok()) return fail(job.status());
+    if (absl::Status s = CheckOutputDirectories(*job, out_dir); !s.ok()) return fail(s);
+    stats = SubmitAndWatch(flags->Get("root"), *job, wo);
+  } else {
+    if (absl::Status s = CheckOutputDirectories(v1::Job(), out_dir); !s.ok()) return fail(s);
+    stats = WatchJob(flags->Get("root"), flags->positional()[0], wo);
   }
+  progress.Finish();
+  if (!stats.ok()) return fail(stats.status());
+  if (!flags->Has("quiet")) {
+    for (const auto& s : *stats) PrintClusterFrame(s);
+  }
+  if (flags->Has("stats")) WriteStatsArray(flags->Get("stats"), *stats);
   return 0;
 }
 
 int StatusCommand(int argc, char** argv) {
-  auto flags = Flags::Parse(argc, argv, 2, WithSecurityFlags({"root"}));
-  if (!flags.ok()) return Fail("status", flags.status());
+  int exit = 0;
+  auto flags = ParseCommand(argc, argv, kStatusDoc, &exit);
+  if (!flags) return exit;
   if (absl::Status s = UseSecurity(*flags); !s.ok()) return Fail("status", s);
   if (!flags->Has("root"))
     return Fail("status", absl::InvalidArgumentError("--root HOST:PORT is required"));
@@ -565,12 +805,12 @@ int StatusCommand(int argc, char** argv) {
 }
 
 int CancelCommand(int argc, char** argv) {
-  auto flags = Flags::Parse(argc, argv, 2, WithSecurityFlags({"root"}));
-  if (!flags.ok()) return Fail("cancel", flags.status());
+  int exit = 0;
+  auto flags = ParseCommand(argc, argv, kCancelDoc, &exit);
+  if (!flags) return exit;
   if (absl::Status s = UseSecurity(*flags); !s.ok()) return Fail("cancel", s);
-  if (!flags->Has("root") || flags->positional().size() != 1) {
-    return Fail("cancel",
-                absl::InvalidArgumentError("usage: transtick cancel JOB_ID --root HOST:PORT"));
+  if (!flags->Has("root")) {
+    return Fail("cancel", absl::InvalidArgumentError("--root HOST:PORT is required"));
   }
   auto stub = v1::Root::NewStub(MakeChannel(flags->Get("root"), Role::kRoot));
   grpc::ClientContext ctx;
@@ -590,8 +830,9 @@ int CancelCommand(int argc, char** argv) {
 // stderr.
 int Health(int argc, char** argv) {
   using grpc::health::v1::HealthCheckResponse;
-  auto flags = Flags::Parse(argc, argv, 2, WithSecurityFlags({"addr", "timeout", "role"}));
-  if (!flags.ok()) return Fail("health", flags.status());
+  int exit = 0;
+  auto flags = ParseCommand(argc, argv, kHealthDoc, &exit);
+  if (!flags) return exit;
   if (absl::Status s = UseSecurity(*flags); !s.ok()) return Fail("health", s);
   const std::string role_name = flags->Get("role", "root");
   std::optional<Role> role;
@@ -646,17 +887,46 @@ int main(int argc, char** argv) {
   if (const char* level = std::getenv("TRANSTICK_LOG_LEVEL")) {
     spdlog::set_level(spdlog::level::from_str(level));
   }
-  std::string cmd = argc > 1 ? argv[1] : "help";
-  if (cmd == "render") return transtick::Render(argc, argv);
-  if (cmd == "info") return transtick::Info(argc, argv);
-  if (cmd == "submit") return transtick::Submit(argc, argv);
-  if (cmd == "status") return transtick::StatusCommand(argc, argv);
-  if (cmd == "cancel") return transtick::CancelCommand(argc, argv);
-  if (cmd == "health") return transtick::Health(argc, argv);
-  if (cmd == "help" || cmd == "--help" || cmd == "-h") {
-    std::cout << transtick::kUsage;
+  const std::string cmd = argc > 1 ? argv[1] : "help";
+  using namespace transtick;
+  if (cmd == "render") return Render(argc, argv);
+  if (cmd == "info") return Info(argc, argv);
+  if (cmd == "submit") return FollowJob(argc, argv, kSubmitDoc, "submit", /*submit=*/true);
+  if (cmd == "watch") return FollowJob(argc, argv, kWatchDoc, "watch", /*submit=*/false);
+  if (cmd == "status") return StatusCommand(argc, argv);
+  if (cmd == "cancel") return CancelCommand(argc, argv);
+  if (cmd == "health") return Health(argc, argv);
+  if (cmd == "version" || cmd == "--version") {
+    int exit = 0;
+    if (cmd == "version" && !ParseCommand(argc, argv, kVersionDoc, &exit)) return exit;
+    if (cmd == "--version" && argc > 2) {
+      std::cerr << "transtick: --version takes no arguments\n";
+      return 2;
+    }
+    std::cout << VersionText() << "\n";
     return 0;
   }
-  std::cerr << "transtick: unknown command '" << cmd << "'\n" << transtick::kUsage;
+  if (cmd == "help" || cmd == "--help" || cmd == "-h") {
+    if (argc == 3) {  // transtick help COMMAND
+      for (const CommandDoc* doc : {&kRenderDoc, &kInfoDoc, &kSubmitDoc, &kWatchDoc, &kStatusDoc,
+                                    &kCancelDoc, &kHealthDoc, &kVersionDoc}) {
+        if (doc->name == absl::StrCat("transtick ", argv[2])) {
+          std::cout << Usage(*doc);
+          return 0;
+        }
+      }
+    }
+    if (argc > 2 && argc != 3) {
+      std::cerr << "transtick: help takes at most one command\n";
+      return 2;
+    }
+    if (argc == 3) {
+      std::cerr << "transtick: no command '" << argv[2] << "'\n" << kUsage;
+      return 2;
+    }
+    std::cout << kUsage;
+    return 0;
+  }
+  std::cerr << "transtick: unknown command '" << cmd << "'\n" << kUsage;
   return 2;
 }

@@ -15,10 +15,38 @@
 
 namespace transtick {
 
+// What a command takes, for parsing and for its --help: the one place a
+// flag is declared.
+struct FlagDoc {
+  std::string name;   // without the leading "--"
+  std::string value;  // what follows it ("FILE", "N"); empty for a switch
+  std::string help;   // may hold '\n' for more lines
+};
+struct CommandDoc {
+  std::string name;      // "transtick render"
+  std::string args;      // the positional arguments' synopsis: "JOB.json", or ""
+  std::string summary;   // one paragraph
+  int min_args = 0;      // positional arguments required ...
+  int max_args = 0;      // ... and allowed
+  std::vector<FlagDoc> flags;
+  std::string epilog;    // after the flags: notes, examples
+};
+
+// The --help text of a command: synopsis, summary, each flag with its help.
+std::string Usage(const CommandDoc& doc);
+
 class Flags {
  public:
-  // Parses argv[first..]; every flag must be in `known`. Flags in `switches`
-  // take no value.
+  // Parses argv[first..] as `doc` declares: every flag must be one of its
+  // flags, a switch takes no value, and the positional arguments must number
+  // within [min_args, max_args]. "--help" or "-h" anywhere gives flags that
+  // only have "help" (the command prints Usage and exits 0); any other word
+  // starting with a single '-' is refused, as is a flag given twice.
+  static absl::StatusOr<Flags> Parse(int argc, char** argv, int first, const CommandDoc& doc);
+
+  // Parses argv[first..] as the CommandDoc of the program argv[0] with the
+  // flags `known` (each taking a value) and `switches` (none) and any number
+  // of positional arguments.
   static absl::StatusOr<Flags> Parse(int argc, char** argv, int first,
                                      const std::set<std::string>& known,
                                      const std::set<std::string>& switches = {});

@@ -188,6 +188,16 @@ std::set<std::string> WithSecurityFlags(std::set<std::string> known) {
   return known;
 }
 
+std::vector<FlagDoc> ClientSecurityFlagDocs() {
+  return {
+      {"tls-ca", "FILE", "the cluster's CA certificate: TLS on ($TRANSTICK_TLS_CA)"},
+      {"token-file", "FILE", "this client's bearer token ($TRANSTICK_TOKEN_FILE)"},
+      {"tls-cert", "FILE", "a client certificate, with --tls-key ($TRANSTICK_TLS_CERT)"},
+      {"tls-key", "FILE", "its key ($TRANSTICK_TLS_KEY)"},
+      {"insecure", "", "allow plaintext to a non-loopback address ($TRANSTICK_INSECURE)"},
+  };
+}
+
 std::set<std::string> WithSecuritySwitches(std::set<std::string> switches) {
   switches.insert("insecure");
   return switches;

@@ -26,6 +26,8 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <vector>
+
 #include "absl/strings/string_view.h"
 
 #include "absl/status/statusor.h"
@@ -82,6 +84,8 @@ absl::StatusOr<Security> SecurityFromFlags(const Flags& flags, bool daemon);
 // switch --insecure with WithSecuritySwitches.
 std::set<std::string> WithSecurityFlags(std::set<std::string> known);
 std::set<std::string> WithSecuritySwitches(std::set<std::string> switches);
+// The flags a client command reads, documented for its --help.
+std::vector<FlagDoc> ClientSecurityFlagDocs();
 // Usage text for them.
 inline constexpr char kSecurityUsage[] =
     "[--tls-ca FILE --tls-cert FILE --tls-key FILE] [--insecure]";

@@ -76,7 +76,7 @@ export TRANSTICK_IMAGE=$image TRANSTICK_DATA=${data:-/nonexistent} TRANSTICK_RIN
 # the address its client watches.
 root_port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])' 2>/dev/null ||
   echo $((20000 + RANDOM % 20000)))
-export TRANSTICK_BIND=127.0.0.1 TRANSTICK_ROOT_PORT=$root_port
+export TRANSTICK_ROOT_PORT=$root_port  # published on 127.0.0.1, the default
 compose() { "${TT_COMPOSE[@]}" -p "$project" -f deploy/docker-compose.yml "$@"; }
 if compose config -q; then pass "compose file accepted by ${TT_COMPOSE[*]}"; else fail "compose config"; fi
 if ((build_only)); then finish; exit; fi

@@ -92,5 +92,76 @@ expect 2 "unknown command" -- frobnicate
 expect 1 "127.0.0.1:1: no daemon answers" -- health --addr 127.0.0.1:1 --timeout 2
 expect 2 "empty address" -- health --addr 127.0.0.1:1,
 
+# Every command explains itself, exits 0, and names its own flags.
+for cmd in render info submit watch status cancel health version; do
+  expect 0 "usage: transtick $cmd" -- "$cmd" --help
+  expect 0 "usage: transtick $cmd" -- help "$cmd"
+done
+expect 0 "--balance-grid N" -- render --help
+expect 0 "usage: transtick render" -- render --volume x -h
+expect 0 "^transtick [0-9]*\.[0-9]*\.[0-9]* (" -- --version
+expect 0 "^transtick [0-9]" -- version
+expect 2 "no command 'frob'" -- help frob
+# Stray arguments, single-dash words, repeated and contradictory flags.
+expect 2 "unexpected argument 'extra'" -- render --volume "$dir/cube.nrrd" \
+  --materials "$dir/m.json" extra
+expect 2 "unexpected argument 'b.json'" -- submit a.json b.json --root 127.0.0.1:1
+expect 2 "needs JOB.json" -- submit --root 127.0.0.1:1
+expect 2 "needs JOB_ID" -- watch --root 127.0.0.1:1
+expect 2 "'-v' is not a flag" -- render -v
+expect 2 "--size is given twice" -- render --size 8x8 --size 9x9
+expect 2 "--materials and --transfer contradict" -- render --volume "$dir/cube.nrrd" \
+  --materials "$dir/m.json" --transfer "$dir/t.json"
+expect 2 "--mode dvr and --materials contradict" -- render --volume "$dir/cube.nrrd" \
+  --materials "$dir/m.json" --mode dvr
+expect 2 "--eye and --azimuth contradict" -- render --volume "$dir/cube.nrrd" \
+  --materials "$dir/m.json" --eye 0,0,100 --target 0,0,0 --azimuth 30
+expect 2 "--fov and --projection orthographic" -- render --volume "$dir/cube.nrrd" \
+  --materials "$dir/m.json" --projection orthographic --fov 20
+expect 2 "--shadows is for surfaces mode" -- render --volume "$dir/cube.nrrd" \
+  --transfer "$dir/t.json" --shadows on
+expect 2 "--step is dvr's" -- render --volume "$dir/cube.nrrd" --materials "$dir/m.json" --step 0.5
+expect 2 "--rings is for a cluster" -- render --local 0 --volume "$dir/cube.nrrd" \
+  --materials "$dir/m.json" --rings 2
+expect 2 "--root and --local contradict" -- render --root 127.0.0.1:1 --local 2 \
+  --volume "$dir/cube.nrrd" --materials "$dir/m.json"
+expect 2 "--raw-type describes a raw volume" -- info --volume "$dir/cube.nrrd" --raw-type int16
+# No directory is created for an output: the error names the missing one.
+expect 1 "directory '$dir/no/such' does not exist" -- render --local 0 --volume "$dir/cube.nrrd" \
+  --materials "$dir/m.json" --out "$dir/no/such/x.png"
+expect 1 "directory '$dir/no/such' does not exist" -- render --volume "$dir/cube.nrrd" \
+  --materials "$dir/m.json" --out "$dir/no/such/x.png"
+[[ -e $dir/no ]] && { echo "FAIL: a directory was created"; fails=$((fails + 1)); }
+# A material no voxel can show is named, in-process and on a cluster, and
+# in the stats; a transparent transfer function likewise.
+cat >"$dir/far.json" <<'JSON'
+{"materials":[{"name":"block","min":100,"max":256,"color":[0.8,0.8,0.8]},
+              {"name":"ghost","min":300,"max":400,"color":[1,1,1]}]}
+JSON
+expect 0 "warning: material 'ghost' \[300, 400) shows nothing: the volume's values are 0 .. 200" \
+  -- render --local 0 --volume "$dir/cube.nrrd" --materials "$dir/far.json" --size 16x16 \
+  --out "$dir/w.png" --stats "$dir/w.json"
+grep -q "material 'ghost'" "$dir/w.json" || { echo "FAIL: no warning in stats"; fails=$((fails + 1)); }
+expect 0 "warning: material 'ghost'" -- render --local 1 --volume "$dir/cube.nrrd" \
+  --materials "$dir/far.json" --size 16x16 --out "$dir/w.png" --stats "$dir/w.json"
+grep -q "material 'ghost'" "$dir/w.json" || { echo "FAIL: no warning in cluster stats"; fails=$((fails + 1)); }
+if "$bin" render --local 0 --volume "$dir/cube.nrrd" --materials "$dir/m.json" --size 16x16 \
+  --out "$dir/w.png" 2>&1 | grep -q warning; then
+  echo "FAIL: a warning for a material that shows"; fails=$((fails + 1))
+fi
+printf '{"points":[{"value":0,"rgba":[1,1,1,0]},{"value":250,"rgba":[1,1,1,0]},{"value":260,"rgba":[1,1,1,1]}]}' >"$dir/clear.json"
+expect 0 "transfer function is transparent over the whole volume" -- render --local 0 \
+  --volume "$dir/cube.nrrd" --transfer "$dir/clear.json" --size 16x16 --out "$dir/w.png"
+# Progress outside a terminal: plain lines with the time left.
+TRANSTICK_PROGRESS_EVERY=0.2 "$bin" render --local 0 --threads 1 --volume "$dir/cube.nrrd" \
+  --materials "$dir/m.json" --size 3000x3000 --samples 2 --out "$dir/big.png" 2>"$dir/progress" >/dev/null
+if ! grep -qE '^rendering: +[0-9.]+%, [0-9.]+ s elapsed, time left [0-9]' "$dir/progress" ||
+  grep -q $'\r' "$dir/progress"; then
+  echo "FAIL: progress lines:"; cat "$dir/progress"; fails=$((fails + 1))
+fi
+"$bin" render --local 0 --quiet --volume "$dir/cube.nrrd" --materials "$dir/m.json" --size 16x16 \
+  --out "$dir/q.png" >"$dir/quiet" 2>&1
+[[ -s $dir/quiet ]] && { echo "FAIL: --quiet printed:"; cat "$dir/quiet"; fails=$((fails + 1)); }
+
 echo "cli_test: $fails failed"
 [[ $fails == 0 ]]

@@ -66,6 +66,22 @@ done
   --elevation 20 --size 48x40 --out "$dir/ref.png" 2>/dev/null
 cmp -s "$dir/out/a.png" "$dir/ref.png" || fail "cluster image differs from --local 0"
 
+# The submitting client dies; `transtick watch` takes the job up and saves
+# its image, the same bits.
+
+"$T" submit "$dir/job.json" --root 127.0.0.1:$rport --out-dir "$dir/out2" >"$dir/lost.log" 2>&1 &
+lost=$!
+for _ in $(seq 100); do grep -q '^job-[0-9]*: 1 frame' "$dir/lost.log" && break; sleep 0.05; done
+kill -9 "$lost" 2>/dev/null; wait "$lost" 2>/dev/null
+job_id=$(grep -o '^job-[0-9]*' "$dir/lost.log" | head -1)
+rm -f "$dir/out2/a.png"
+"$T" watch "$job_id" --root 127.0.0.1:$rport --out-dir "$dir/out2" >"$dir/watch.log" 2>&1 ||
+  fail "watch $job_id: $(cat "$dir/watch.log")"
+cmp -s "$dir/out2/a.png" "$dir/ref.png" || fail "image saved by watch differs: $(cat "$dir/watch.log")"
+"$T" watch job-999 --root 127.0.0.1:$rport >"$dir/watch2.log" 2>&1
+[[ $? == 1 ]] && grep -q "does not know job-999" "$dir/watch2.log" ||
+  fail "watch of an unknown job: $(cat "$dir/watch2.log")"
+
 printf '{"datasets":[{"volume":' >"$dir/bad.json"
 "$T" submit "$dir/bad.json" --root 127.0.0.1:$rport >"$dir/bad.log" 2>&1
 [[ $? == 2 ]] && grep -q "bad.json" "$dir/bad.log" || fail "malformed job file: $(cat "$dir/bad.log")"

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
+#include "transtick/volume.h"
 
 namespace transtick {
 namespace {
@@ -127,6 +128,51 @@ std::array<float, 4> TransferFunction::Evaluate(float value) const {
   std::array<float, 4> out;
   for (int c = 0; c < 4; ++c) out[c] = a.rgba[c] + f * (b.rgba[c] - a.rgba[c]);
   return out;
+}
+
+namespace {
+
+std::string RangeText(const std::array<float, 2>& range) {
+  return absl::StrCat("the volume's values are ", range[0], " .. ", range[1]);
+}
+
+}  // namespace
+
+std::vector<std::string> UnseenMaterials(const Classification& classification,
+                                         const Volume& volume) {
+  std::vector<std::string> out;
+  const std::array<float, 2> range = volume.Range();
+  std::vector<uint64_t> voxels;
+  if (classification.surface == SurfaceModel::kVoxel) {
+    voxels.assign(classification.materials.size() + 1, 0);
+    for (float v : volume.values) ++voxels[classification.Classify(v)];
+  }
+  for (size_t i = 0; i < classification.materials.size(); ++i) {
+    const Material& m = classification.materials[i];
+    const bool misses = m.max <= range[0] || m.min > range[1];
+    if (classification.surface == SurfaceModel::kSmooth && misses) {
+      out.push_back(absl::StrCat("material '", m.name, "' [", m.min, ", ", m.max,
+                                 ") shows nothing: ", RangeText(range)));
+    } else if (classification.surface == SurfaceModel::kVoxel && voxels[i + 1] == 0) {
+      out.push_back(absl::StrCat("material '", m.name, "' [", m.min, ", ", m.max,
+                                 ") covers no voxel: ", RangeText(range),
+                                 misses ? "" : ", and an earlier material takes those in it"));
+    }
+  }
+  return out;
+}
+
+std::vector<std::string> UnseenTransfer(const TransferFunction& transfer, const Volume& volume) {
+  const std::array<float, 2> range = volume.Range();
+  // Piecewise linear: the largest opacity over the range is at its ends or
+  // at a point inside it.
+  float alpha = std::max(transfer.Evaluate(range[0])[3], transfer.Evaluate(range[1])[3]);
+  for (const TransferPoint& p : transfer.points) {
+    if (p.value > range[0] && p.value < range[1]) alpha = std::max(alpha, p.rgba[3]);
+  }
+  if (alpha > 0) return {};
+  return {absl::StrCat("the transfer function is transparent over the whole volume (",
+                       RangeText(range), "): the image will be the background")};
 }
 
 }  // namespace transtick

@@ -164,10 +164,14 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
   if (const auto* c = std::get_if<Classification>(&plan.classification)) {
     data->mode = RenderMode::kSurfaces;
     scene = Scene::ForSurfaces(*volume, *c);
+    data->warnings = UnseenMaterials(*c, *volume);
   } else {
     data->mode = RenderMode::kDvr;
-    scene = Scene::ForDvr(*volume, std::get<TransferFunction>(plan.classification));
+    const auto& transfer = std::get<TransferFunction>(plan.classification);
+    scene = Scene::ForDvr(*volume, transfer);
+    data->warnings = UnseenTransfer(transfer, *volume);
   }
+  for (const std::string& w : data->warnings) spdlog::info("{}: {}", Shown(ds.volume()), w);
   if (!scene.ok())
     return absl::Status(scene.status().code(),
                         absl::StrCat(Shown(ds.volume()), ": ", scene.status().message()));

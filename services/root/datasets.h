@@ -54,6 +54,8 @@ struct LoadedDataset {
   Scene scene;
   double load_ms = 0;
   BalanceMemory balance;
+  // Materials or a transfer function that show nothing of the volume.
+  std::vector<std::string> warnings;
 };
 
 class Datasets {

@@ -79,6 +79,12 @@ absl::Status JobRunner::RunJob(Job& job) {
       if (!d.ok()) return d.status();
       data = *std::move(d);
       loaded = key.dataset;
+      if (!data->warnings.empty()) {
+        v1::JobEvent e;
+        e.set_dataset(key.dataset);
+        for (const std::string& w : data->warnings) e.add_warnings(w);
+        job.Publish(std::move(e));
+      }
     }
     if (auto s = RunView(job, *frame, *data); !s.ok()) return s;
     job.FrameRendered(*frame);
@@ -184,14 +190,14 @@ absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data) {
     }
     balancer->Learn(*result, layout, data.balance, &report);
     if (!held) return absl::InternalError("frame ended without its image");
-    return PublishStats(job, d, v, layout, *result, report, *std::move(held));
+    return PublishStats(job, d, v, data, layout, *result, report, *std::move(held));
   }
   return status;
 }
 
-absl::Status JobRunner::PublishStats(Job& job, int d, int v, const Layout& layout,
-                                     const FrameResult& frame, const BalanceReport& balance,
-                                     v1::JobEvent last_chunk) {
+absl::Status JobRunner::PublishStats(Job& job, int d, int v, const LoadedDataset& data,
+                                     const Layout& layout, const FrameResult& frame,
+                                     const BalanceReport& balance, v1::JobEvent last_chunk) {
   const v1::View& view = job.spec().datasets(d).views(v);
   v1::ClusterFrameStats& fs = *last_chunk.mutable_stats();
   fs.set_job_id(job.id());
@@ -199,6 +205,7 @@ absl::Status JobRunner::PublishStats(Job& job, int d, int v, const Layout& layou
   fs.set_view(v);
   fs.set_frame_ms(frame.frame_ms);
   fs.set_since_submit_ms((frame.started_unix - job.submitted_unix()) * 1e3);
+  for (const std::string& w : data.warnings) fs.add_warnings(w);
   fs.set_width(view.width());
   fs.set_height(view.height());
   fs.set_rings(static_cast<int>(layout.rings.size()));

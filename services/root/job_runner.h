@@ -51,9 +51,9 @@ class JobRunner {
   // display fail) and publishes its image.
   absl::Status RunView(Job& job, int frame, LoadedDataset& data);
   // The frame's statistics, logged and sent with its last image chunk.
-  absl::Status PublishStats(Job& job, int dataset, int view, const Layout& layout,
-                            const FrameResult& frame, const BalanceReport& balance,
-                            v1::JobEvent last_chunk);
+  absl::Status PublishStats(Job& job, int dataset, int view, const LoadedDataset& data,
+                            const Layout& layout, const FrameResult& frame,
+                            const BalanceReport& balance, v1::JobEvent last_chunk);
 
   const RunnerOptions options_;
   JobQueue& queue_;

@@ -117,6 +117,23 @@ struct TransferFunction {
   std::array<float, 4> Evaluate(float value) const;
 };
 
+struct Volume;
+
+// What a user should be told before a render: one sentence for each
+// material no ray can meet in `volume`, naming it and the volume's range of
+// values. A smooth surface lies where the trilinear field crosses the
+// interval's edges, and the field takes every value between the volume's
+// smallest and largest sample, so a smooth material is unseen when its
+// interval misses that range; a voxel material is unseen when no voxel
+// classifies as it (an earlier, overlapping interval may take them all).
+// Empty when every material can be seen.
+std::vector<std::string> UnseenMaterials(const Classification& classification,
+                                         const Volume& volume);
+
+// The same for a transfer function: a sentence when its opacity is zero over
+// the whole range of `volume`'s values, so the image is the background.
+std::vector<std::string> UnseenTransfer(const TransferFunction& transfer, const Volume& volume);
+
 }  // namespace transtick
 
 #endif  // TRANSTICK_CLASSIFICATION_H_
