@@ -77,6 +77,7 @@ export TRANSTICK_IMAGE=$image TRANSTICK_DATA=${data:-/nonexistent} TRANSTICK_RIN
 root_port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])' 2>/dev/null ||
   echo $((20000 + RANDOM % 20000)))
 export TRANSTICK_ROOT_PORT=$root_port  # published on 127.0.0.1, the default
+export TRANSTICK_METRICS_PORT=0         # the root's /metrics: any free port
 compose() { "${TT_COMPOSE[@]}" -p "$project" -f deploy/docker-compose.yml "$@"; }
 if compose config -q; then pass "compose file accepted by ${TT_COMPOSE[*]}"; else fail "compose config"; fi
 if ((build_only)); then finish; exit; fi
@@ -210,6 +211,16 @@ else
 fi
 rings=$(status_counts | cut -d' ' -f2)
 if [[ $rings == 2 ]]; then pass "root forms 2 rings"; else fail "root forms $rings rings, not 2"; fi
+# The root's /metrics: HTTPS with its certificate, as a Prometheus scrape
+# with the cluster's CA would see it.
+metrics_port=$(compose port root 7100 | tail -1 | sed 's/.*://')
+if curl -s -f -m 10 --cacert "$work/secrets/ca.crt" \
+  --resolve "transtick-root:$metrics_port:127.0.0.1" "https://transtick-root:$metrics_port/metrics" |
+  grep -q '^transtick_root_workers 4$'; then
+  pass "the root's /metrics over HTTPS counts 4 workers"
+else
+  fail "the root's /metrics over HTTPS"
+fi
 deadline=$((SECONDS + 60))
 while (($(healthy_workers) < 4 && SECONDS < deadline)); do sleep 1; done
 if (($(healthy_workers) == 4)); then pass "4 workers healthy"; else fail "$(healthy_workers) of 4 workers healthy"; fi

@@ -8,7 +8,7 @@ cd "$(dirname "$0")/.."
 packages=(build-essential cmake ninja-build ccache pkg-config git
   libabsl-dev libprotobuf-dev protobuf-compiler libgrpc++-dev protobuf-compiler-grpc
   libspdlog-dev libopenimageio-dev libgtest-dev libgmock-dev zlib1g-dev libsqlite3-dev
-  openssl)
+  libcpp-httplib-dev openssl curl)
 
 missing=()
 for p in "${packages[@]}"; do

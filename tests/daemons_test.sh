@@ -38,7 +38,8 @@ cat >"$dir/job.json" <<JSON
 JSON
 
 dport=$(port); rport=$(port)
-"$build/services/display/transtick-display" --listen 127.0.0.1:$dport >"$dir/display.log" 2>&1 &
+"$build/services/display/transtick-display" --listen 127.0.0.1:$dport \
+  --metrics 127.0.0.1:$(port) >"$dir/display.log" 2>&1 &
 pids+=($!); dpid=$!
 "$build/services/root/transtick-root" --listen 127.0.0.1:$rport --data-dir "$dir/data" \
   --state-dir "$dir/state" --display 127.0.0.1:$dport >"$dir/root.log" 2>&1 &
@@ -266,5 +267,25 @@ done
 [[ $? == 1 ]] && grep -q "127.0.0.1:$rport: no daemon answers" "$dir/health2.log" &&
   grep -q "127.0.0.1:$dport: no daemon answers" "$dir/health2.log" ||
   fail "health of stopped daemons: $(cat "$dir/health2.log")"
+# JSON lines: every line of a root's log is one JSON object, even for a job
+# whose name holds quotes, backslashes and a newline.
+jport=$(port)
+TRANSTICK_LOG_FORMAT=json "$build/services/root/transtick-root" --listen 127.0.0.1:$jport \
+  --data-dir "$dir/data" --display 127.0.0.1:1 --metrics off >"$dir/json.log" 2>&1 &
+jpid=$!
+for _ in $(seq 100); do "$T" health --addr 127.0.0.1:$jport --timeout 1 >/dev/null 2>&1 && break; sleep 0.1; done
+printf '{"name":"a\\"b\\\\c\\nd","datasets":[{"volume":"box.nrrd","materials_file":"m.json","views":[{"width":8,"height":8}]}]}' \
+  >"$dir/odd-name.json"
+timeout 3 "$T" submit "$dir/odd-name.json" --root 127.0.0.1:$jport --out-dir "$dir/out" \
+  >/dev/null 2>&1
+kill -TERM $jpid; wait $jpid
+python3 -c '
+import json, sys
+lines = open(sys.argv[1]).read().splitlines()
+msgs = [json.loads(l)["msg"] for l in lines]
+assert all(set(json.loads(l)) == {"time", "level", "daemon", "msg"} for l in lines)
+assert any("queued" in m and "a\"b" in m for m in msgs), msgs
+' "$dir/json.log" || fail "JSON log lines: $(cat "$dir/json.log")"
+
 echo "daemons_test: $((fails == 0 ? 1 : 0)) passed, $fails failed checks"
 [[ $fails == 0 ]]

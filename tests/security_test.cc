@@ -24,6 +24,7 @@
 #include "absl/strings/str_cat.h"
 #include "cluster.grpc.pb.h"
 #include "gtest/gtest.h"
+#include "reflection_client.h"
 
 extern char** environ;
 
@@ -169,12 +170,14 @@ class SecurityTest : public ::testing::Test {
                                        "boss boss-token-0123456789ab admin\n";
     root_port_ = FreePort();
     display_port_ = FreePort();
+    root_metrics_port_ = FreePort();
     display_ = new Process(Daemon("display", {"--listen", Address(display_port_)}),
                            *dir_ / "display.log");
     root_ = new Process(
         Daemon("root", {"--listen", Address(root_port_), "--display", Address(display_port_),
                         "--data-dir", (*dir_ / "data").string(), "--tokens",
-                        (*dir_ / "tokens").string()}),
+                        (*dir_ / "tokens").string(), "--metrics",
+                        Address(root_metrics_port_)}),
         *dir_ / "root.log");
   }
   static void TearDownTestSuite() {
@@ -248,7 +251,7 @@ class SecurityTest : public ::testing::Test {
   static constexpr char kBoss[] = "boss-token-0123456789ab";
   static inline fs::path* dir_ = nullptr;
   static inline Process *display_ = nullptr, *root_ = nullptr, *worker_ = nullptr;
-  static inline int root_port_ = 0, display_port_ = 0, worker_port_ = 0;
+  static inline int root_port_ = 0, display_port_ = 0, worker_port_ = 0, root_metrics_port_ = 0;
 };
 
 // Every RPC a client can make, with no token, a wrong one, or over
@@ -287,6 +290,36 @@ TEST_F(SecurityTest, AClientWithoutATokenCannotSubmitWatchCancelOrList) {
   auto plain = RootAs(Creds{});
   EXPECT_EQ(Submit(*plain, SmallJob("x", {"a.nrrd"}), kAlice, nullptr, false).error_code(),
             grpc::StatusCode::UNAVAILABLE);
+}
+
+// Server reflection passes the root's token check like the API; /metrics
+// is HTTPS with the root's certificate, which a scraper checks against the
+// cluster's CA (and then under the name transtick-root).
+TEST_F(SecurityTest, ReflectionNeedsATokenAndMetricsAreHttpsOnly) {
+  grpc::Status status;
+  const auto channel = Dial(Address(root_port_), "transtick-root", Cluster());
+  testing::ReflectedServices(channel, "", &status);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAUTHENTICATED) << status.error_message();
+  const std::string listed = testing::ReflectedServices(channel, kAlice, &status);
+  EXPECT_TRUE(status.ok()) << status.error_message();
+  EXPECT_NE(listed.find("transtick.v1.Root"), std::string::npos);
+
+  const std::string url = absl::StrCat("transtick-root:", root_metrics_port_, "/metrics");
+  const std::string resolve =
+      absl::StrCat("--resolve transtick-root:", root_metrics_port_, ":127.0.0.1 ");
+  const fs::path out = *dir_ / "metrics.txt";
+  auto curl = [&](const std::string& args) {
+    fs::remove(out);
+    return std::system(absl::StrCat("curl -s -f -m 10 -o ", out.string(), " ", resolve, args,
+                                    " 2>/dev/null")
+                           .c_str());
+  };
+  EXPECT_EQ(curl(absl::StrCat("--cacert ", (*dir_ / "certs" / "ca.crt").string(), " https://", url)),
+            0);
+  EXPECT_NE(Slurp(out).find("transtick_root_workers"), std::string::npos);
+  EXPECT_NE(curl(absl::StrCat("--cacert ", (*dir_ / "rogue" / "ca.crt").string(), " https://", url)),
+            0) << "another CA's scraper trusts the root";
+  EXPECT_NE(curl(absl::StrCat("http://", url)), 0) << "plaintext HTTP answered on a TLS port";
 }
 
 // Alice's job is hers: Bob can neither watch nor cancel it, nor see it in

@@ -1,8 +1,11 @@
 #include "daemon.h"
 
+#include <grpcpp/ext/channelz_service_plugin.h>
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
 #include <malloc.h>
 #include <signal.h>
+#include <spdlog/pattern_formatter.h>
 #include <spdlog/spdlog.h>
 
 #include <cmath>
@@ -18,6 +21,11 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const std::string& address
   auto creds = ServerCredentialsFor(self, address);
   if (!creds.ok()) return creds.status();
   grpc::EnableDefaultHealthCheckService(true);
+  // Server reflection (grpcurl can list and call the services) and channelz
+  // (the channels' and sockets' counters) on every daemon. Both pass the same
+  // credentials and, at the root, the same token check as the API.
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  grpc::channelz::experimental::InitChannelzService();
   grpc::ServerBuilder builder;
   auto server = std::unique_ptr<Server>(new Server());
   builder.AddListeningPort(address, *creds, &server->port_);
@@ -69,6 +77,26 @@ int WaitForSignal() {
   int sig = 0;
   sigwait(&set, &sig);
   return sig;
+}
+
+absl::StatusOr<MetricsEndpoint> MetricsAddress(const Flags& flags, const std::string& listen) {
+  const std::string set = Setting(flags, "metrics", "TRANSTICK_METRICS", "");
+  if (set == "off") return MetricsEndpoint{"", false};
+  const std::string address = set.empty() ? listen : set;
+  const size_t colon = address.rfind(':');
+  int port = -1;
+  if (colon == std::string::npos || !absl::SimpleAtoi(address.substr(colon + 1), &port) ||
+      port < 0 || port > 65535) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        set.empty() ? "--listen '" : "--metrics '", address, "' is not HOST:PORT"));
+  }
+  if (!set.empty()) return MetricsEndpoint{set, true};
+  if (port == 0) return MetricsEndpoint{address, false};
+  if (port + 100 > 65535) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--listen port ", port, " leaves no port + 100 for metrics: give --metrics ADDR or off"));
+  }
+  return MetricsEndpoint{absl::StrCat(address.substr(0, colon), ":", port + 100), false};
 }
 
 absl::Status UseDaemonSecurity(const Flags& flags) {
@@ -123,8 +151,45 @@ absl::StatusOr<std::chrono::milliseconds> SecondsSetting(const Flags& flags,
 
 void ReturnLargeBlocksToTheSystem() { mallopt(M_MMAP_THRESHOLD, 1 << 20); }
 
+namespace {
+
+// %j in a pattern: the message as the inside of a JSON string (quotes,
+// backslashes and control characters escaped), for JSON lines.
+class JsonMessage : public spdlog::custom_flag_formatter {
+ public:
+  void format(const spdlog::details::log_msg& msg, const std::tm&,
+              spdlog::memory_buf_t& dest) override {
+    static constexpr char kHex[] = "0123456789abcdef";
+    for (char c : std::string_view(msg.payload.data(), msg.payload.size())) {
+      const auto u = static_cast<unsigned char>(c);
+      if (c == '"' || c == '\\') {
+        dest.push_back('\\');
+        dest.push_back(c);
+      } else if (u < 0x20) {
+        for (char e : {'\\', 'u', '0', '0', kHex[u >> 4], kHex[u & 15]}) dest.push_back(e);
+      } else {
+        dest.push_back(c);
+      }
+    }
+  }
+  std::unique_ptr<custom_flag_formatter> clone() const override {
+    return std::make_unique<JsonMessage>();
+  }
+};
+
+}  // namespace
+
 void InitLogging(const std::string& name) {
-  spdlog::set_pattern(absl::StrCat("[%Y-%m-%d %H:%M:%S.%e] [%l] [", name, "] %v"));
+  const char* format = std::getenv("TRANSTICK_LOG_FORMAT");
+  if (format != nullptr && std::string_view(format) == "json") {
+    // One JSON object per line: time (UTC), level, daemon, message.
+    auto formatter = std::make_unique<spdlog::pattern_formatter>(spdlog::pattern_time_type::utc);
+    formatter->add_flag<JsonMessage>('j').set_pattern(absl::StrCat(
+        R"({"time":"%Y-%m-%dT%H:%M:%S.%eZ","level":"%l","daemon":")", name, R"(","msg":"%j"})"));
+    spdlog::set_formatter(std::move(formatter));
+  } else {
+    spdlog::set_pattern(absl::StrCat("[%Y-%m-%d %H:%M:%S.%e] [%l] [", name, "] %v"));
+  }
   if (const char* level = std::getenv("TRANSTICK_LOG_LEVEL")) {
     spdlog::set_level(spdlog::level::from_str(level));
   }

@@ -19,6 +19,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "flags.h"
+#include "metrics.h"
 #include "rpc_channel.h"
 #include "rpc_status.h"
 
@@ -63,6 +64,12 @@ absl::StatusOr<int64_t> IntSetting(const Flags& flags, const std::string& flag, 
 absl::StatusOr<std::chrono::milliseconds> SecondsSetting(const Flags& flags,
                                                          const std::string& flag, const char* env,
                                                          std::chrono::milliseconds fallback);
+
+// Where the daemon serves /metrics (metrics.h): --metrics or
+// $TRANSTICK_METRICS, "off" for nowhere (""), by default the gRPC address
+// `listen` with its port + 100 (7000 -> 7100; port 0 stays 0). An error
+// names a malformed address.
+absl::StatusOr<MetricsEndpoint> MetricsAddress(const Flags& flags, const std::string& listen);
 
 // Reads the daemon's TLS flags (security.h) and makes them the process's.
 absl::Status UseDaemonSecurity(const Flags& flags);

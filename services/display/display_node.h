@@ -10,14 +10,17 @@
 #include "absl/status/statusor.h"
 #include "daemon.h"
 #include "display_service.h"
+#include "metrics.h"
 
 namespace transtick {
 
 class DisplayNode {
  public:
   // Serves a DisplayService on `listen` ("host:port"; port 0 picks one).
+  // And /metrics at `metrics` (StartMetrics).
   static absl::StatusOr<std::unique_ptr<DisplayNode>> Start(const std::string& listen,
-                                                            const DisplayOptions& options = {});
+                                                            const DisplayOptions& options = {},
+                                                            const MetricsEndpoint& metrics = {});
   // Stops serving at once if Stop was not called.
   ~DisplayNode();
 
@@ -25,6 +28,7 @@ class DisplayNode {
   DisplayNode& operator=(const DisplayNode&) = delete;
 
   int port() const { return server_->port(); }
+  int metrics_port() const { return metrics_ ? metrics_->port() : 0; }
   DisplayService& service() { return *service_; }
   // Stops accepting calls and waits up to `grace` for calls in flight (a
   // root waiting for its frame), then cancels what remains. Idempotent.
@@ -37,6 +41,7 @@ class DisplayNode {
   // serves.
   std::unique_ptr<DisplayService> service_;
   std::unique_ptr<Server> server_;
+  std::unique_ptr<MetricsServer> metrics_;
 };
 
 }  // namespace transtick

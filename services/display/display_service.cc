@@ -27,8 +27,25 @@ double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).coun
 
 DisplayService::DisplayService(DisplayOptions options)
     : options_(options),
+      metrics_(std::make_shared<Metrics>()),
       sweeper_(SweepPeriod(options.idle), [this] { ExpireIdle(); }),
-      heartbeat_(std::chrono::milliseconds(250), [this] { Heartbeat(); }) {}
+      heartbeat_(std::chrono::milliseconds(250), [this] { Heartbeat(); }) {
+  using T = Metrics::Type;
+  Metrics& m = *metrics_;
+  m.Declare("transtick_display_frames_total", T::kCounter,
+            "Frames that ended here, by result: complete (every pixel in) or aborted.");
+  m.Declare("transtick_display_deposits_total", T::kCounter, "Pixel deposits received.");
+  m.Declare("transtick_display_deposit_bytes_total", T::kCounter,
+            "Bytes of deposit batches received.");
+  m.Declare("transtick_display_deposits_refused_total", T::kCounter,
+            "Deposit batches refused (malformed, or for an aborted or complete frame).");
+  m.Declare("transtick_display_frames_open", T::kGauge, "Frames being assembled now.");
+  m.Declare("transtick_display_framebuffer_bytes", T::kGauge, "Memory of the open framebuffers.");
+  m.OnScrape([this](Metrics& g) {
+    g.Set("transtick_display_frames_open", static_cast<double>(open_frames()));
+    g.Set("transtick_display_framebuffer_bytes", static_cast<double>(framebuffer_bytes()));
+  });
+}
 
 size_t DisplayService::open_frames() const {
   absl::MutexLock lock(&mu_);
@@ -209,10 +226,12 @@ grpc::Status DisplayService::AddDeposits(const v1::DepositBatch& batch, FrameSta
                                          bool* completed) {
   absl::MutexLock lock(&f.mu);
   if (f.aborted) {
+    metrics_->Add("transtick_display_deposits_refused_total", 1);
     return ToGrpc(absl::FailedPreconditionError(absl::StrCat(
         "display: frame ", f.id, " was aborted (", f.abort_reason, "); its deposits are refused")));
   }
   if (!f.fb) {
+    metrics_->Add("transtick_display_deposits_refused_total", 1);
     return ToGrpc(absl::FailedPreconditionError(
         absl::StrCat("display: frame ", f.id, " is complete; deposits after it are refused")));
   }
@@ -221,12 +240,16 @@ grpc::Status DisplayService::AddDeposits(const v1::DepositBatch& batch, FrameSta
       static_cast<uint32_t>(f.fb->width()) * static_cast<uint32_t>(f.fb->height());
   auto deposits = DecodeDeposits(batch.deposits(), limit);
   if (!deposits.ok()) {
+    metrics_->Add("transtick_display_deposits_refused_total", 1);
     return ToGrpc(
         absl::InvalidArgumentError(absl::StrCat("display: ", deposits.status().message())));
   }
   for (const Deposit& d : *deposits) f.fb->Add(d);
   f.deposits += deposits->size();
+  metrics_->Add("transtick_display_deposits_total", static_cast<double>(deposits->size()));
+  metrics_->Add("transtick_display_deposit_bytes_total", static_cast<double>(batch.deposits().size()));
   *completed = f.fb->Complete();
+  if (*completed) metrics_->Add("transtick_display_frames_total", 1, {{"result", "complete"}});
   return grpc::Status::OK;
 }
 
@@ -465,6 +488,7 @@ bool DisplayService::MarkAborted(FrameState& frame, const std::string& why, bool
     if (frame.aborted || (unless_complete && (!frame.fb || frame.fb->Complete()))) return false;
     frame.aborted = true;
     frame.abort_reason = why;
+    metrics_->Add("transtick_display_frames_total", 1, {{"result", "aborted"}});
     // Deposit streams may hold the frame for a while; its memory goes now.
     frame.fb.reset();
   }

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "metrics.h"
 #include "absl/base/thread_annotations.h"
 #include "absl/synchronization/mutex.h"
 #include "clock.h"
@@ -54,6 +55,8 @@ class DisplayService final
   size_t open_frames() const;
   // Bytes of framebuffers held: the open frames' and the spare one's.
   uint64_t framebuffer_bytes() const;
+  // The display's metrics (docs/formats.md, "Metrics"), for /metrics.
+  const std::shared_ptr<Metrics>& metrics() const { return metrics_; }
 
   grpc::ServerUnaryReactor* BeginFrame(grpc::CallbackServerContext* ctx,
                                        const v1::DisplayFrame* req, v1::FrameAck* reply) override;
@@ -97,7 +100,7 @@ class DisplayService final
   void AbortIncomplete(FrameState& frame, const std::string& why) ABSL_LOCKS_EXCLUDED(mu_);
   // Marks `frame` aborted and frees its framebuffer; with `unless_complete`,
   // not a frame whose deposits are all in. False when it did nothing.
-  static bool MarkAborted(FrameState& frame, const std::string& why, bool unless_complete = false)
+  bool MarkAborted(FrameState& frame, const std::string& why, bool unless_complete = false)
       ABSL_LOCKS_EXCLUDED(frame.mu);
   // When `frame` was last active: now while a root awaits it.
   static Clock::time_point LastActive(FrameState& frame, Clock::time_point now)
@@ -119,10 +122,11 @@ class DisplayService final
   grpc::Status Accumulate(const v1::DepositBatch& batch, std::shared_ptr<FrameState>* frame);
   // Adds a batch's deposits to `frame`; `completed` says whether the frame
   // is complete after them.
-  static grpc::Status AddDeposits(const v1::DepositBatch& batch, FrameState& frame,
-                                  bool* completed) ABSL_LOCKS_EXCLUDED(frame.mu);
+  grpc::Status AddDeposits(const v1::DepositBatch& batch, FrameState& frame,
+                           bool* completed) ABSL_LOCKS_EXCLUDED(frame.mu);
 
   const DisplayOptions options_;
+  const std::shared_ptr<Metrics> metrics_;
   mutable absl::Mutex mu_;
   std::map<uint64_t, std::shared_ptr<FrameState>> frames_ ABSL_GUARDED_BY(mu_);
   // A finished frame's framebuffer, for reuse, and since when.

@@ -13,7 +13,7 @@ int main(int argc, char** argv) {
   InitLogging("display");
   auto flags = Flags::Parse(
       argc, argv, 1,
-      WithSecurityFlags({"listen", "max-frames", "max-framebuffer-mb", "frame-idle-s"}),
+      WithSecurityFlags({"listen", "max-frames", "max-framebuffer-mb", "frame-idle-s", "metrics"}),
       WithSecuritySwitches({"help"}));
   if (!flags.ok() || flags->Has("help")) {
     if (!flags.ok()) std::cerr << "transtick-display: " << flags.status().message() << "\n";
@@ -22,7 +22,9 @@ int main(int argc, char** argv) {
                  "TRANSTICK_MAX_FRAMES, TRANSTICK_MAX_FRAMEBUFFER_MB, TRANSTICK_FRAME_IDLE_S)\n"
                  "TLS: " << kSecurityUsage << " (or TRANSTICK_TLS_CA, TRANSTICK_TLS_CERT, "
                  "TRANSTICK_TLS_KEY); without them it serves plaintext on loopback only "
-                 "(docs/security.md)\n";
+                 "(docs/security.md)\n"
+                 "/metrics (Prometheus): --metrics ADDR|off (TRANSTICK_METRICS), default the --listen "
+                 "address with port + 100; HTTPS with TLS\n";
     return flags.ok() ? 0 : 2;
   }
   if (absl::Status s = UseDaemonSecurity(*flags); !s.ok()) {
@@ -45,12 +47,18 @@ int main(int argc, char** argv) {
   o.max_frames = static_cast<size_t>(*max_frames);
   o.max_bytes = static_cast<uint64_t>(*max_mb) << 20;
   o.idle = *idle;
-  auto node = DisplayNode::Start(listen, o);
+  auto metrics = MetricsAddress(*flags, listen);
+  if (!metrics.ok()) {
+    std::cerr << "transtick-display: " << metrics.status().message() << "\n";
+    return 2;
+  }
+  auto node = DisplayNode::Start(listen, o, *metrics);
   if (!node.ok()) {
     spdlog::error("{}", std::string(node.status().message()));
     return 1;
   }
-  spdlog::info("display serving on port {}", (*node)->port());
+  spdlog::info("display serving on port {}, metrics on {}", (*node)->port(),
+               (*node)->metrics_port() == 0 ? "no port" : std::to_string((*node)->metrics_port()));
   int sig = WaitForSignal();
   spdlog::info("signal {}: stopping", sig);
   (*node)->Stop(std::chrono::milliseconds(5000));

@@ -12,7 +12,8 @@ namespace transtick {
 
 absl::StatusOr<std::unique_ptr<LocalCluster>> LocalCluster::Start(const Options& options) {
   auto c = std::unique_ptr<LocalCluster>(new LocalCluster());
-  auto display = DisplayNode::Start("127.0.0.1:0");
+  const MetricsEndpoint metrics{options.metrics ? "127.0.0.1:0" : "", true};
+  auto display = DisplayNode::Start("127.0.0.1:0", {}, metrics);
   if (!display.ok()) return display.status();
   c->display_ = *std::move(display);
   RootOptions ro;
@@ -20,7 +21,7 @@ absl::StatusOr<std::unique_ptr<LocalCluster>> LocalCluster::Start(const Options&
   ro.display = absl::StrCat("127.0.0.1:", c->display_->port());
   ro.rings = options.rings;
   ro.worker_wait_s = 30;
-  auto root = RootNode::Start("127.0.0.1:0", ro);
+  auto root = RootNode::Start("127.0.0.1:0", ro, metrics);
   if (!root.ok()) return root.status();
   c->root_ = *std::move(root);
   for (int i = 0; i < options.workers; ++i) {
@@ -28,6 +29,7 @@ absl::StatusOr<std::unique_ptr<LocalCluster>> LocalCluster::Start(const Options&
     wo.listen = "127.0.0.1:0";
     wo.root = c->root_address();
     wo.threads = options.threads_per_worker;
+    wo.metrics = metrics;
     // The advertised address is fixed once the port is known.
     auto w = WorkerNode::Start(wo);
     if (!w.ok()) return w.status();
@@ -48,5 +50,21 @@ LocalCluster::~LocalCluster() {
 }
 
 std::string LocalCluster::root_address() const { return absl::StrCat("127.0.0.1:", root_->port()); }
+
+int LocalCluster::root_metrics_port() const { return root_->metrics_port(); }
+
+int LocalCluster::display_metrics_port() const { return display_->metrics_port(); }
+
+std::vector<int> LocalCluster::worker_metrics_ports() const {
+  std::vector<int> ports;
+  for (const auto& w : workers_) ports.push_back(w->metrics_port());
+  return ports;
+}
+
+std::vector<std::string> LocalCluster::worker_addresses() const {
+  std::vector<std::string> addresses;
+  for (const auto& w : workers_) addresses.push_back(w->address());
+  return addresses;
+}
 
 }  // namespace transtick

@@ -25,6 +25,7 @@ class LocalCluster {
     int rings = 1;
     int threads_per_worker = 1;
     std::string data_dir;  // the root's data directory
+    bool metrics = false;  // each node serves /metrics on a port of 127.0.0.1
   };
   // Returns once every worker has registered with the root.
   static absl::StatusOr<std::unique_ptr<LocalCluster>> Start(const Options& options);
@@ -35,6 +36,12 @@ class LocalCluster {
 
   // "127.0.0.1:PORT" of the root, for clients.
   std::string root_address() const;
+  // The ports of the nodes' /metrics (Options::metrics), and each worker's
+  // gRPC address.
+  int root_metrics_port() const;
+  int display_metrics_port() const;
+  std::vector<int> worker_metrics_ports() const;
+  std::vector<std::string> worker_addresses() const;
 
  private:
   LocalCluster() = default;

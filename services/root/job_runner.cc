@@ -33,13 +33,35 @@ void SleepUnless(std::chrono::milliseconds d, const std::function<bool()>& cance
 
 }  // namespace
 
-JobRunner::JobRunner(const RunnerOptions& options, JobQueue& queue, Registry& registry)
+JobRunner::JobRunner(const RunnerOptions& options, JobQueue& queue, Registry& registry,
+                     Metrics& metrics)
     : options_(options),
       queue_(queue),
       registry_(registry),
+      metrics_(metrics),
       datasets_(options.data_dir, options.max_volume_bytes),
       slabs_(registry),
-      driver_(registry, options.display, options.frame_timeout_s) {}
+      driver_(registry, options.display, options.frame_timeout_s) {
+  using T = Metrics::Type;
+  const std::vector<double> seconds = {0.005, 0.01, 0.02, 0.033, 0.05, 0.1, 0.2, 0.5,
+                                       1,     2,    5,    10,    30,   60,  300};
+  metrics.Declare("transtick_root_frames_total", T::kCounter, "Frames rendered and published.");
+  metrics.Declare("transtick_root_frame_seconds", T::kHistogram,
+                  "A frame's time at the root, from its start to its image assembled.", seconds);
+  metrics.Declare("transtick_root_job_start_seconds", T::kHistogram,
+                  "From a job's submission to the start of its first frame.", seconds);
+  metrics.Declare("transtick_root_frame_retries_total", T::kCounter,
+                  "Frame attempts that failed (a worker or the display lost) and were rendered again.");
+  metrics.Declare("transtick_root_rays_traced_total", T::kCounter,
+                  "Rays traced by the workers, summed over the cluster, by kind (a ray crossing "
+                  "slabs counts on each).");
+  metrics.Declare("transtick_root_rays_forwarded_total", T::kCounter,
+                  "Rays the workers passed to a ring neighbour, summed over the cluster.");
+  metrics.Declare("transtick_root_ray_bytes_total", T::kCounter,
+                  "Bytes of ray batches the workers sent to their neighbours.");
+  metrics.Declare("transtick_root_frame_imbalance", T::kGauge,
+                  "The last frame's max/mean active time over the workers.");
+}
 
 void JobRunner::Start() { thread_ = std::thread([this] { Loop(); }); }
 
@@ -186,6 +208,7 @@ absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data) {
       status = result.status();
       if (status.code() != absl::StatusCode::kUnavailable || job.cancelled()) return status;
       spdlog::warn("{}: frame failed ({}); retrying", job.id(), Printable(status.message()));
+      metrics_.Add("transtick_root_frame_retries_total", 1);
       continue;
     }
     balancer->Learn(*result, layout, data.balance, &report);
@@ -240,6 +263,23 @@ absl::Status JobRunner::PublishStats(Job& job, int d, int v, const LoadedDataset
   }
   const double mean_active = frame.workers.empty() ? 0 : active_sum / frame.workers.size();
   fs.set_active_imbalance(mean_active > 0 ? active_max / mean_active : 0.0);
+  uint64_t primary = 0, shadow = 0, forwarded = 0, bytes = 0;
+  for (const v1::WorkerFrameStats& w : fs.workers()) {
+    primary += w.primary_traced();
+    shadow += w.shadow_traced();
+    forwarded += w.rays_sent();
+    bytes += w.bytes_sent();
+  }
+  metrics_.Add("transtick_root_frames_total", 1);
+  metrics_.Observe("transtick_root_frame_seconds", frame.frame_ms / 1e3);
+  if (job.key(0).dataset == d && job.key(0).view == v) {
+    metrics_.Observe("transtick_root_job_start_seconds", fs.since_submit_ms() / 1e3);
+  }
+  metrics_.Add("transtick_root_rays_traced_total", primary, {{"kind", "primary"}});
+  metrics_.Add("transtick_root_rays_traced_total", shadow, {{"kind", "shadow"}});
+  metrics_.Add("transtick_root_rays_forwarded_total", forwarded);
+  metrics_.Add("transtick_root_ray_bytes_total", bytes);
+  metrics_.Set("transtick_root_frame_imbalance", fs.active_imbalance());
   spdlog::info(
       "frame {} ({} {}/{}): {}x{} in {:.1f} ms on {} workers in {} ring(s); {} rays traced; "
       "max/mean active {:.2f}; balance {}",

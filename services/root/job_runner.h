@@ -15,6 +15,7 @@
 #include "datasets.h"
 #include "frame_driver.h"
 #include "job_queue.h"
+#include "metrics.h"
 #include "registry.h"
 #include "slabs.h"
 
@@ -32,7 +33,8 @@ struct RunnerOptions {
 class JobRunner {
  public:
   // REQUIRES: `queue` and `registry` outlive this.
-  JobRunner(const RunnerOptions& options, JobQueue& queue, Registry& registry);
+  // Frames, rays and retries are counted in `metrics`, which also outlives this.
+  JobRunner(const RunnerOptions& options, JobQueue& queue, Registry& registry, Metrics& metrics);
   ~JobRunner();
   JobRunner(const JobRunner&) = delete;
   JobRunner& operator=(const JobRunner&) = delete;
@@ -58,6 +60,7 @@ class JobRunner {
   const RunnerOptions options_;
   JobQueue& queue_;
   Registry& registry_;
+  Metrics& metrics_;
   Datasets datasets_;
   Slabs slabs_;
   FrameDriver driver_;

@@ -15,7 +15,7 @@ int main(int argc, char** argv) {
       argc, argv, 1,
       WithSecurityFlags({"listen", "data-dir", "state-dir", "display", "rings", "max-volume-mb",
                          "frame-timeout", "max-queued-jobs", "max-jobs-per-client",
-                         "max-job-megapixels"}),
+                         "max-job-megapixels", "metrics"}),
       WithSecuritySwitches({"help"}));
   if (!flags.ok() || flags->Has("help")) {
     if (!flags.ok()) std::cerr << "transtick-root: " << flags.status().message() << "\n";
@@ -29,7 +29,9 @@ int main(int argc, char** argv) {
                  "TLS: " << kSecurityUsage << " [--tokens FILE] (or TRANSTICK_TLS_CA, TRANSTICK_TLS_CERT, "
                  "TRANSTICK_TLS_KEY, TRANSTICK_TOKENS); without them it serves plaintext on loopback only "
                  "(docs/security.md)\n"
-                 "Without a state directory the jobs live in memory and a restart loses them.\n";
+                 "Without a state directory the jobs live in memory and a restart loses them.\n"
+                 "/metrics (Prometheus): --metrics ADDR|off (TRANSTICK_METRICS), default the --listen "
+                 "address with port + 100; HTTPS with TLS\n";
     return flags.ok() ? 0 : 2;
   }
   if (absl::Status s = UseDaemonSecurity(*flags); !s.ok()) {
@@ -66,13 +68,19 @@ int main(int argc, char** argv) {
     std::cerr << "transtick-root: --rings must be in [1, 64]\n";
     return 2;
   }
-  auto node = RootNode::Start(listen, o);
+  auto metrics = MetricsAddress(*flags, listen);
+  if (!metrics.ok()) {
+    std::cerr << "transtick-root: " << metrics.status().message() << "\n";
+    return 2;
+  }
+  auto node = RootNode::Start(listen, o, *metrics);
   if (!node.ok()) {
     spdlog::error("{}", std::string(node.status().message()));
     return 1;
   }
-  spdlog::info("root serving on port {}; data {}, state {}, display {}, {} ring(s)",
-               (*node)->port(), o.data_dir, o.state_dir.empty() ? "(memory)" : o.state_dir,
+  spdlog::info("root serving on port {} (metrics on {}); data {}, state {}, display {}, {} ring(s)",
+               (*node)->port(),
+               (*node)->metrics_port() == 0 ? "no port" : std::to_string((*node)->metrics_port()), o.data_dir, o.state_dir.empty() ? "(memory)" : o.state_dir,
                o.display, o.rings);
   int sig = WaitForSignal();
   spdlog::info("signal {}: stopping", sig);

@@ -51,9 +51,27 @@ absl::StatusOr<std::unique_ptr<RootService>> RootService::Create(const RootOptio
 
 RootService::RootService(const RootOptions& options, std::unique_ptr<JobStore> store)
     : options_(options),
+      metrics_(std::make_shared<Metrics>()),
       store_(std::move(store)),
       queue_(options, *store_),
-      runner_(options, queue_, registry_) {}
+      runner_(options, queue_, registry_, *metrics_) {
+  Metrics& m = *metrics_;
+  m.Declare("transtick_root_jobs", Metrics::Type::kGauge, "Jobs the root holds, by state.");
+  m.Declare("transtick_root_jobs_submitted_total", Metrics::Type::kCounter,
+            "Jobs accepted by Submit.");
+  m.Declare("transtick_root_jobs_refused_total", Metrics::Type::kCounter,
+            "Jobs Submit refused (invalid, over a limit, unauthenticated).");
+  m.Declare("transtick_root_workers", Metrics::Type::kGauge, "Workers registered now.");
+  m.Declare("transtick_root_rings", Metrics::Type::kGauge, "Rings the root forms (--rings).");
+  m.OnScrape([this](Metrics& g) {
+    std::map<std::string, int> by_state;
+    for (const char* s : {"QUEUED", "RUNNING", "DONE", "FAILED", "CANCELLED"}) by_state[s] = 0;
+    for (const v1::JobSummary& j : queue_.Summaries()) ++by_state[v1::JobState_Name(j.state())];
+    for (const auto& [state, n] : by_state) g.Set("transtick_root_jobs", n, {{"state", state}});
+    g.Set("transtick_root_workers", registry_.size());
+    g.Set("transtick_root_rings", options_.rings);
+  });
+}
 
 RootService::~RootService() { Stop(); }
 
@@ -61,13 +79,18 @@ void RootService::Stop() { runner_.Stop(); }
 
 grpc::Status RootService::Submit(grpc::ServerContext* ctx, const v1::Job* job,
                                  v1::SubmitReply* reply) {
+  auto refused = [this](const absl::Status& s) {
+    metrics_->Add("transtick_root_jobs_refused_total", 1);
+    return ToGrpc(s);
+  };
   auto client = Caller(*ctx);
-  if (!client.ok()) return ToGrpc(client.status());
+  if (!client.ok()) return refused(client.status());
   auto plan = runner_.Plan(*job);
-  if (!plan.ok()) return ToGrpc(plan.status());
+  if (!plan.ok()) return refused(plan.status());
   int position = 0;
   auto record = queue_.Submit(*job, *std::move(plan), client->name, &position);
-  if (!record.ok()) return ToGrpc(record.status());
+  if (!record.ok()) return refused(record.status());
+  metrics_->Add("transtick_root_jobs_submitted_total", 1);
   reply->set_job_id((*record)->id());
   reply->set_frames((*record)->frames_total());
   reply->set_queue_position(position);

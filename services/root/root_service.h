@@ -14,6 +14,7 @@
 #include "job_queue.h"
 #include "job_store.h"
 #include "job_runner.h"
+#include "metrics.h"
 #include "registry.h"
 
 namespace transtick {
@@ -34,6 +35,8 @@ class RootService final : public v1::Root::Service {
   void Stop();
   // Workers registered now.
   int WorkerCount() const { return registry_.size(); }
+  // The root's metrics (docs/formats.md, "Metrics"), for /metrics.
+  const std::shared_ptr<Metrics>& metrics() const { return metrics_; }
 
   grpc::Status Submit(grpc::ServerContext* ctx, const v1::Job* job,
                       v1::SubmitReply* reply) override;
@@ -52,6 +55,7 @@ class RootService final : public v1::Root::Service {
   RootService(const RootOptions& options, std::unique_ptr<JobStore> store);
 
   const RootOptions options_;
+  const std::shared_ptr<Metrics> metrics_;
   std::unique_ptr<JobStore> store_;
   JobQueue queue_;
   Registry registry_;

@@ -15,7 +15,7 @@ int main(int argc, char** argv) {
   auto flags = Flags::Parse(argc, argv, 1,
                             WithSecurityFlags({"listen", "root", "advertise", "threads",
                                                "max-frames", "frame-idle-s",
-                                               "running-frame-idle-s"}),
+                                               "running-frame-idle-s", "metrics"}),
                             WithSecuritySwitches({"help"}));
   if (!flags.ok() || flags->Has("help")) {
     if (!flags.ok()) std::cerr << "transtick-worker: " << flags.status().message() << "\n";
@@ -26,7 +26,9 @@ int main(int argc, char** argv) {
                  "TRANSTICK_RUNNING_FRAME_IDLE_S)\n"
                  "TLS: " << kSecurityUsage << " (or TRANSTICK_TLS_CA, TRANSTICK_TLS_CERT, "
                  "TRANSTICK_TLS_KEY); without them it serves plaintext on loopback only "
-                 "(docs/security.md)\n";
+                 "(docs/security.md)\n"
+                 "/metrics (Prometheus): --metrics ADDR|off (TRANSTICK_METRICS), default the --listen "
+                 "address with port + 100; HTTPS with TLS\n";
     return flags.ok() ? 0 : 2;
   }
   if (absl::Status s = UseDaemonSecurity(*flags); !s.ok()) {
@@ -56,6 +58,12 @@ int main(int argc, char** argv) {
   o.frames.max_frames = static_cast<size_t>(*max_frames);
   o.frames.prepared_idle = *prepared_idle;
   o.frames.running_idle = *running_idle;
+  auto metrics = MetricsAddress(*flags, o.listen);
+  if (!metrics.ok()) {
+    std::cerr << "transtick-worker: " << metrics.status().message() << "\n";
+    return 2;
+  }
+  o.metrics = *metrics;
   auto node = WorkerNode::Start(o);
   if (!node.ok()) {
     spdlog::error("{}", std::string(node.status().message()));

@@ -39,6 +39,9 @@ absl::StatusOr<std::unique_ptr<WorkerNode>> WorkerNode::Start(const WorkerNodeOp
   auto server = Server::Start(options.listen, Role::kWorker, {node->service_.get()});
   if (!server.ok()) return server.status();
   node->server_ = *std::move(server);
+  auto served = StartMetrics(options.metrics, node->service_->metrics());
+  if (!served.ok()) return served.status();
+  node->metrics_ = *std::move(served);
   const std::string listen_host = options.listen.substr(0, options.listen.rfind(':'));
   if (!options.advertise.empty()) {
     node->address_ = options.advertise;
@@ -51,8 +54,9 @@ absl::StatusOr<std::unique_ptr<WorkerNode>> WorkerNode::Start(const WorkerNodeOp
   }
   node->service_->set_address(node->address_);
   node->registrar_ = std::thread([n = node.get()] { n->RegisterLoop(); });
-  spdlog::info("worker {} serving on {} ({} tracer threads), registering with {}", node->id_,
-               node->address_, node->threads_, options.root);
+  spdlog::info("worker {} serving on {} ({} tracer threads, metrics on {}), registering with {}",
+               node->id_, node->address_, node->threads_,
+               node->metrics_ ? std::to_string(node->metrics_->port()) : "no port", options.root);
   return node;
 }
 
@@ -114,6 +118,7 @@ void WorkerNode::Stop(std::chrono::milliseconds grace) {
     stopping_ = true;
   }
   if (registrar_.joinable()) registrar_.join();
+  metrics_.reset();
   if (registered_) {
     auto stub = v1::Root::NewStub(MakeChannel(options_.root, Role::kRoot));
     grpc::ClientContext ctx;

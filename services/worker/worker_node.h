@@ -15,6 +15,7 @@
 #include "absl/status/statusor.h"
 #include "absl/synchronization/mutex.h"
 #include "daemon.h"
+#include "metrics.h"
 #include "worker_service.h"
 
 namespace transtick {
@@ -25,6 +26,7 @@ struct WorkerNodeOptions {
   std::string advertise;  // empty: this host's name and the bound port
   int threads = 0;        // 0: one per core
   std::chrono::milliseconds heartbeat{1000};
+  MetricsEndpoint metrics;  // where /metrics is served (StartMetrics)
   FrameLimits frames;
 };
 
@@ -35,6 +37,7 @@ class WorkerNode {
 
   const std::string& address() const { return address_; }
   const std::string& id() const { return id_; }
+  int metrics_port() const { return metrics_ ? metrics_->port() : 0; }
   // True once the root accepted the registration.
   bool registered() const { return registered_; }
   // Unregisters, cancels frames, stops serving within `grace`.
@@ -50,6 +53,7 @@ class WorkerNode {
   int threads_ = 1;
   std::unique_ptr<WorkerService> service_;
   std::unique_ptr<Server> server_;
+  std::unique_ptr<MetricsServer> metrics_;
   std::thread registrar_;
   std::atomic<bool> registered_{false};
   absl::Mutex mu_;

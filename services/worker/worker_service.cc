@@ -70,16 +70,84 @@ absl::StatusOr<std::shared_ptr<const Scene>> AssembleSlab(const v1::SlabHeader& 
 
 WorkerService::WorkerService(WorkerOptions options)
     : options_(std::move(options)),
+      metrics_(std::make_shared<Metrics>()),
       address_(options_.address),
       frames_(options_.frames),
       sweeper_(SweepPeriod(std::min(options_.frames.prepared_idle, options_.frames.running_idle)),
                [this] {
                  for (FrameTable::Dropped& d : frames_.TakeExpired(Clock::now())) {
+                   metrics_->Add("transtick_worker_frames_dropped_total", 1);
                    Drop(std::move(d));
                  }
-               }) {}
+               }) {
+  using T = Metrics::Type;
+  Metrics& m = *metrics_;
+  m.Declare("transtick_worker_frames_total", T::kCounter, "Frames this worker ended, by result.");
+  m.Declare("transtick_worker_frames_dropped_total", T::kCounter,
+            "Frames let go of because nobody ended them in time.");
+  m.Declare("transtick_worker_frame_seconds", T::kHistogram,
+            "A frame's elapsed time on this worker, from its tracers starting to its end.",
+            {0.005, 0.01, 0.02, 0.033, 0.05, 0.1, 0.2, 0.5, 1, 2, 5, 10, 30, 60, 300});
+  m.Declare("transtick_worker_rays_traced_total", T::kCounter, "Rays traced here, by kind.");
+  m.Declare("transtick_worker_rays_forwarded_total", T::kCounter,
+            "Rays sent to a ring neighbour, by direction.");
+  m.Declare("transtick_worker_rays_received_total", T::kCounter,
+            "Rays received from a ring neighbour, by direction.");
+  m.Declare("transtick_worker_rays_rejected_total", T::kCounter,
+            "Invalid ray records from a neighbour, dropped (each aborts its frame).");
+  m.Declare("transtick_worker_rays_truncated_total", T::kCounter,
+            "Rays ended at the tracer's hard bound (0 unless there is a defect).");
+  m.Declare("transtick_worker_stream_bytes_total", T::kCounter,
+            "Bytes of ray batches on the neighbour streams, by direction (sent, received).");
+  m.Declare("transtick_worker_busy_seconds_total", T::kCounter,
+            "Time the tracer threads traced (active time, averaged over threads).");
+  m.Declare("transtick_worker_idle_seconds_total", T::kCounter,
+            "Time within frames the tracer threads waited for rays.");
+  m.Declare("transtick_worker_cpu_seconds_total", T::kCounter, "CPU time of the tracer threads.");
+  m.Declare("transtick_worker_inbox_high_water_rays", T::kGauge,
+            "The most rays that waited in the inbox at once during the last frame.");
+  m.Declare("transtick_worker_frames_held", T::kGauge, "Frames prepared or running now.");
+  m.Declare("transtick_worker_datasets_held", T::kGauge, "Slabs of datasets held in memory.");
+  m.Declare("transtick_worker_threads", T::kGauge, "Tracer threads.");
+  m.OnScrape([this](Metrics& g) {
+    g.Set("transtick_worker_frames_held", static_cast<double>(frames_.size()));
+    size_t datasets = 0;
+    {
+      absl::MutexLock lock(&mu_);
+      datasets = datasets_.size();
+    }
+    g.Set("transtick_worker_datasets_held", static_cast<double>(datasets));
+    g.Set("transtick_worker_threads", options_.threads);
+  });
+}
 
 WorkerService::~WorkerService() { CancelAll(); }
+
+namespace {
+
+// One frame's statistics into the worker's counters.
+void CountFrame(Metrics& m, const v1::WorkerFrameStats& s, bool cancelled) {
+  m.Add("transtick_worker_frames_total", 1, {{"result", cancelled ? "cancelled" : "done"}});
+  m.Observe("transtick_worker_frame_seconds", s.elapsed_ms() / 1e3);
+  const double other = static_cast<double>(s.rays_traced()) - s.primary_traced() - s.shadow_traced();
+  m.Add("transtick_worker_rays_traced_total", s.primary_traced(), {{"kind", "primary"}});
+  m.Add("transtick_worker_rays_traced_total", s.shadow_traced(), {{"kind", "shadow"}});
+  if (other > 0) m.Add("transtick_worker_rays_traced_total", other, {{"kind", "other"}});
+  m.Add("transtick_worker_rays_forwarded_total", s.sent_left(), {{"direction", "left"}});
+  m.Add("transtick_worker_rays_forwarded_total", s.sent_right(), {{"direction", "right"}});
+  m.Add("transtick_worker_rays_received_total", s.received_left(), {{"direction", "left"}});
+  m.Add("transtick_worker_rays_received_total", s.received_right(), {{"direction", "right"}});
+  m.Add("transtick_worker_rays_rejected_total", s.rays_rejected());
+  m.Add("transtick_worker_rays_truncated_total", s.rays_truncated());
+  m.Add("transtick_worker_stream_bytes_total", s.bytes_sent(), {{"direction", "sent"}});
+  m.Add("transtick_worker_stream_bytes_total", s.bytes_received(), {{"direction", "received"}});
+  m.Add("transtick_worker_busy_seconds_total", s.active_ms() / 1e3);
+  m.Add("transtick_worker_idle_seconds_total", std::max(0.0, s.elapsed_ms() - s.active_ms()) / 1e3);
+  m.Add("transtick_worker_cpu_seconds_total", s.cpu_ms() / 1e3);
+  m.Set("transtick_worker_inbox_high_water_rays", s.buffer_high_water());
+}
+
+}  // namespace
 
 void WorkerService::set_address(const std::string& address) {
   absl::MutexLock lock(&mu_);
@@ -450,7 +518,9 @@ grpc::ServerUnaryReactor* WorkerService::EndFrame(grpc::CallbackServerContext* c
   }
   // The reply goes when the tracers have stopped (within one ray), from
   // the last of them; the streams wind down after it.
-  frame->EndAsync(req->cancel(), [reactor, reply, id, address](v1::WorkerFrameStats stats) {
+  frame->EndAsync(req->cancel(), [reactor, reply, id, address, metrics = metrics_,
+                                   cancel = req->cancel()](v1::WorkerFrameStats stats) {
+    CountFrame(*metrics, stats, cancel);
     *reply = std::move(stats);
     reply->set_id(id);
     reply->set_address(address);

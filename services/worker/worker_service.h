@@ -7,6 +7,7 @@
 #include <memory>
 #include <string>
 
+#include "metrics.h"
 #include "absl/base/thread_annotations.h"
 #include "absl/synchronization/mutex.h"
 #include "cluster.grpc.pb.h"
@@ -39,6 +40,8 @@ class WorkerService final
   void set_address(const std::string& address);
   // Cancels every frame in progress (on shutdown).
   void CancelAll();
+  // The worker's metrics (docs/formats.md, "Metrics"), for /metrics.
+  const std::shared_ptr<Metrics>& metrics() const { return metrics_; }
   // Frames prepared and not yet ended, expired or evicted.
   size_t frames_held() const { return frames_.size(); }
   // Whether frame `id` is held and its left neighbour's stream attached.
@@ -79,6 +82,7 @@ class WorkerService final
   std::shared_ptr<const Scene> FindDataset(const std::string& key);
 
   const WorkerOptions options_;  // options_.address is only the first address_
+  const std::shared_ptr<Metrics> metrics_;
   absl::Mutex mu_;
   std::string address_ ABSL_GUARDED_BY(mu_);
   std::map<std::string, std::shared_ptr<const Scene>> datasets_ ABSL_GUARDED_BY(mu_);
