@@ -1,0 +1,218 @@
+"""The client of the root's API (proto/cluster.proto, service transtick.v1.Root)."""
+
+import dataclasses
+import json
+import os
+import time
+from typing import Callable, Dict, Iterator, List, Optional, Union
+
+import grpc
+import numpy as np
+from google.protobuf import json_format
+
+import cluster_pb2
+import cluster_pb2_grpc
+
+# As the daemons: images and slabs travel in messages of up to 64 MiB.
+_MAX_MESSAGE = 64 << 20
+_ENDED = (cluster_pb2.DONE, cluster_pb2.FAILED, cluster_pb2.CANCELLED)
+
+
+class JobFailed(Exception):
+    """A job ended FAILED or CANCELLED; `state` and `job_id` say which."""
+
+    def __init__(self, job_id: str, state: str, error: str):
+        super().__init__(f"{job_id} {state.lower()}: {error}" if error else f"{job_id} {state.lower()}")
+        self.job_id = job_id
+        self.state = state
+        self.error = error
+
+
+@dataclasses.dataclass
+class Frame:
+    """One rendered frame of a job."""
+
+    index: int  # over the job's views in order (dataset 0's, then dataset 1's, ...)
+    dataset: int
+    view: int
+    image: np.ndarray  # float32, shape (height, width, 3), linear RGB as the renderer made it
+    stats: dict  # ClusterFrameStats as JSON (docs/formats.md, "Cluster frame statistics")
+    output: str  # the view's output path, as the job gave it ("" if none)
+
+    def to_uint8(self) -> np.ndarray:
+        """The image in 8 bits, as transtick writes a .png: clamped to [0, 1], x 255, rounded."""
+        v = np.clip(self.image, np.float32(0), np.float32(1))
+        return (v * np.float32(255) + np.float32(0.5)).astype(np.uint8)
+
+
+def parse_job(job: Union[dict, str, "cluster_pb2.Job"], base_dir: str = ".") -> "cluster_pb2.Job":
+    """A Job from a message, a dict or JSON text in the job file's schema.
+
+    `materials_file` and `transfer_file` are read relative to `base_dir` and
+    sent inline, as `transtick submit` does. Unknown fields are errors.
+    """
+    if isinstance(job, cluster_pb2.Job):
+        message = cluster_pb2.Job()
+        message.CopyFrom(job)
+    else:
+        message = cluster_pb2.Job()
+        text = job if isinstance(job, str) else json.dumps(job)
+        json_format.Parse(text, message)
+    for dataset in message.datasets:
+        for field, target in (("materials_file", dataset.materials), ("transfer_file", dataset.transfer)):
+            name = getattr(dataset, field)
+            if not name:
+                continue
+            path = name if os.path.isabs(name) else os.path.join(base_dir, name)
+            with open(path, encoding="utf-8") as f:
+                json_format.Parse(f.read(), target)
+            dataset.ClearField(field)
+    return message
+
+
+def load_job(path: str) -> "cluster_pb2.Job":
+    """A job file (docs/formats.md, "Job file"), with its files read inline."""
+    with open(path, encoding="utf-8") as f:
+        return parse_job(f.read(), os.path.dirname(os.path.abspath(path)))
+
+
+class Client:
+    """A connection to a transtick root.
+
+    Without `ca` the channel is plaintext (the root allows that only on
+    loopback). With `ca` (the cluster's CA certificate, a path), TLS, and the
+    root's certificate must name `server_name`. `token` or `token_file` is the
+    client's bearer token (docs/security.md).
+    """
+
+    def __init__(
+        self,
+        root: str,
+        ca: Optional[str] = None,
+        token: Optional[str] = None,
+        token_file: Optional[str] = None,
+        server_name: str = "transtick-root",
+        timeout: float = 30.0,
+    ):
+        options = [
+            ("grpc.max_receive_message_length", _MAX_MESSAGE),
+            ("grpc.max_send_message_length", _MAX_MESSAGE),
+        ]
+        if token_file:
+            with open(token_file, encoding="utf-8") as f:
+                token = f.read().strip()
+        if token and not ca:
+            raise ValueError("a token is only sent over TLS: give ca= as well")
+        if ca:
+            with open(ca, "rb") as f:
+                credentials = grpc.ssl_channel_credentials(root_certificates=f.read())
+            options.append(("grpc.ssl_target_name_override", server_name))
+            self._channel = grpc.secure_channel(root, credentials, options=options)
+        else:
+            self._channel = grpc.insecure_channel(root, options=options)
+        self._stub = cluster_pb2_grpc.RootStub(self._channel)
+        self._metadata = [("authorization", f"Bearer {token}")] if token else []
+        self._timeout = timeout
+        self.root = root
+
+    def close(self) -> None:
+        self._channel.close()
+
+    def __enter__(self) -> "Client":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def submit(self, job: Union[dict, str, "cluster_pb2.Job"]) -> str:
+        """Queues a job; returns its id. Errors are grpc.RpcError naming the field."""
+        reply = self._stub.Submit(parse_job(job), timeout=self._timeout, metadata=self._metadata)
+        return reply.job_id
+
+    def status(self) -> dict:
+        """Workers, rings and the jobs this client may see (StatusReply as JSON)."""
+        reply = self._stub.Status(cluster_pb2.StatusRequest(), timeout=self._timeout, metadata=self._metadata)
+        return json_format.MessageToDict(reply, preserving_proto_field_name=True)
+
+    def cancel(self, job_id: str) -> bool:
+        """Cancels a job; False if it had already ended."""
+        reply = self._stub.Cancel(cluster_pb2.JobRef(job_id=job_id), timeout=self._timeout, metadata=self._metadata)
+        return reply.cancelled
+
+    def frames(
+        self,
+        job_id: str,
+        progress: Optional[Callable[[float, "cluster_pb2.JobEvent"], None]] = None,
+        reconnect: float = 300.0,
+    ) -> Iterator[Frame]:
+        """Yields every frame of a job as it completes, to the job's end.
+
+        Frames rendered before the call are delivered too. A stream that
+        breaks is watched again with the frames already yielded, as the
+        command-line client does, for up to `reconnect` seconds without news.
+        `progress(fraction_of_job, event)` is called for progress events.
+        Raises JobFailed when the job fails or is cancelled.
+        """
+        have: set = set()
+        last_contact = time.monotonic()
+        backoff = 0.25
+        while True:
+            request = cluster_pb2.WatchRequest(job_id=job_id, resume=True, have_frames=sorted(have))
+            images: Dict[int, np.ndarray] = {}
+            rows_in: Dict[int, int] = {}
+            state, error = cluster_pb2.QUEUED, ""
+            try:
+                for e in self._stub.Watch(request, metadata=self._metadata):
+                    last_contact = time.monotonic()
+                    backoff = 0.25
+                    state, error = e.state, e.error
+                    if e.HasField("image"):
+                        frame = self._take_chunk(e, images, rows_in)
+                        if frame is not None and frame.index not in have:
+                            have.add(frame.index)
+                            yield frame
+                    elif progress and e.pixels_total and e.frames_total:
+                        done = (len(have) + e.pixels_done / e.pixels_total) / e.frames_total
+                        progress(min(1.0, done), e)
+            except grpc.RpcError as rpc:
+                if rpc.code() not in (grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.CANCELLED):
+                    raise
+                if time.monotonic() - last_contact > reconnect:
+                    raise
+                time.sleep(backoff)
+                backoff = min(backoff * 2, 2.0)
+                continue
+            if state in _ENDED:
+                break
+            time.sleep(backoff)  # the root stopped before the job ended
+        if state != cluster_pb2.DONE:
+            raise JobFailed(job_id, cluster_pb2.JobState.Name(state), error)
+
+    def render(
+        self,
+        job: Union[dict, str, "cluster_pb2.Job"],
+        progress: Optional[Callable[[float, "cluster_pb2.JobEvent"], None]] = None,
+    ) -> List[Frame]:
+        """Submits a job and returns its frames, in frame order."""
+        job_id = self.submit(job)
+        return sorted(self.frames(job_id, progress=progress), key=lambda f: f.index)
+
+    @staticmethod
+    def _take_chunk(e, images: Dict[int, np.ndarray], rows_in: Dict[int, int]) -> Optional[Frame]:
+        c = e.image
+        if c.width <= 0 or c.height <= 0 or c.width > 8192 or c.height > 8192:
+            raise ValueError(f"the root sent an image chunk of an impossible size {c.width}x{c.height}")
+        image = images.get(e.frame)
+        if image is None:
+            image = images[e.frame] = np.zeros((c.height, c.width, 3), dtype=np.float32)
+        rows = c.row_end - c.row_begin
+        if (image.shape != (c.height, c.width, 3) or c.row_begin < 0 or c.row_end > c.height
+                or rows < 0 or len(c.rgb) != rows * c.width * 3 * 4):
+            raise ValueError("the root sent a malformed image chunk")
+        image[c.row_begin:c.row_end] = np.frombuffer(c.rgb, dtype="<f4").reshape(rows, c.width, 3)
+        rows_in[e.frame] = rows_in.get(e.frame, 0) + rows
+        if rows_in[e.frame] < c.height:
+            return None
+        del images[e.frame], rows_in[e.frame]
+        stats = json_format.MessageToDict(e.stats, preserving_proto_field_name=True) if e.HasField("stats") else {}
+        return Frame(index=e.frame, dataset=e.dataset, view=e.view, image=image, stats=stats, output=c.output)

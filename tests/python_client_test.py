@@ -1,0 +1,121 @@
+"""The Python client (clients/python) against a real cluster of daemons.
+
+Run by python_client_test.sh, which starts the daemons and passes the root's
+address in TRANSTICK_ROOT, the data directory in TRANSTICK_TEST_DATA and the
+transtick command in TRANSTICK_BIN.
+"""
+
+import os
+import subprocess
+import tempfile
+import unittest
+
+import grpc
+import numpy as np
+from PIL import Image
+
+import transtick
+
+ROOT = os.environ["TRANSTICK_ROOT"]
+DATA = os.environ["TRANSTICK_TEST_DATA"]
+BIN = os.environ["TRANSTICK_BIN"]
+MATERIALS = {"materials": [{"name": "box", "min": 100, "max": 256, "color": [0.8, 0.7, 0.6]}]}
+
+
+def job(views, **extra):
+    return {"name": "python", "datasets": [{"volume": "box.nrrd", "materials": MATERIALS, "views": views}], **extra}
+
+
+def view(azimuth, elevation=20, width=48, height=40, **extra):
+    return {"azimuth": azimuth, "elevation": elevation, "width": width, "height": height, **extra}
+
+
+class ClientTest(unittest.TestCase):
+    def setUp(self):
+        self.client = transtick.Client(ROOT)
+
+    def tearDown(self):
+        self.client.close()
+
+    def test_frames_are_the_in_process_render(self):
+        views = [view(35), view(120, -10, 32, 24, samples=4), view(200, 60, shadows=False)]
+        progress = []
+        frames = self.client.render(job(views), progress=lambda f, e: progress.append(f))
+        self.assertEqual([f.index for f in frames], [0, 1, 2])
+        with tempfile.TemporaryDirectory() as tmp:
+            materials = os.path.join(tmp, "m.json")
+            with open(materials, "w", encoding="utf-8") as f:
+                import json
+                json.dump(MATERIALS, f)
+            for frame, v in zip(frames, views):
+                self.assertEqual(frame.image.dtype, np.float32)
+                self.assertEqual(frame.image.shape, (v["height"], v["width"], 3))
+                self.assertGreater(frame.image.max(), 0.1, "the box is in view")
+                self.assertEqual(frame.stats["width"], v["width"])
+                out = os.path.join(tmp, f"ref{frame.index}.png")
+                args = [BIN, "render", "--local", "0", "--quiet", "--volume", os.path.join(DATA, "box.nrrd"),
+                        "--materials", materials, "--azimuth", str(v["azimuth"]), "--elevation",
+                        str(v["elevation"]), "--size", f"{v['width']}x{v['height']}", "--out", out]
+                if "samples" in v:
+                    args += ["--samples", str(v["samples"])]
+                if v.get("shadows") is False:
+                    args += ["--shadows", "off"]
+                subprocess.run(args, check=True)
+                want = np.asarray(Image.open(out).convert("RGB"))
+                np.testing.assert_array_equal(frame.to_uint8(), want, f"frame {frame.index}")
+        self.assertTrue(all(0 <= p <= 1 for p in progress))
+
+    def test_the_same_job_gives_the_same_floats(self):
+        a = self.client.render(job([view(70)]))[0].image
+        b = self.client.render(job([view(70)]))[0].image
+        self.assertTrue(np.array_equal(a, b))
+
+    def test_a_bad_job_is_refused_naming_the_field(self):
+        with self.assertRaises(grpc.RpcError) as e:
+            self.client.submit(job([view(0, width=0)]))
+        self.assertEqual(e.exception.code(), grpc.StatusCode.INVALID_ARGUMENT)
+        self.assertIn("datasets[0].views[0]", e.exception.details())
+        with self.assertRaises(grpc.RpcError) as e:
+            self.client.submit({"datasets": [{"volume": "../outside.nrrd", "materials": MATERIALS,
+                                              "views": [view(0)]}]})
+        self.assertIn(e.exception.code(), (grpc.StatusCode.INVALID_ARGUMENT, grpc.StatusCode.NOT_FOUND,
+                                           grpc.StatusCode.PERMISSION_DENIED))
+        from google.protobuf import json_format
+        with self.assertRaises(json_format.ParseError):
+            self.client.submit({"datasets": [], "no_such_field": 1})
+
+    def test_unknown_jobs_and_cancel(self):
+        with self.assertRaises(grpc.RpcError) as e:
+            list(self.client.frames("job-999999"))
+        self.assertEqual(e.exception.code(), grpc.StatusCode.NOT_FOUND)
+        job_id = self.client.submit(job([view(a, width=400, height=400, samples=16) for a in range(0, 360, 10)]))
+        self.assertTrue(self.client.cancel(job_id))
+        with self.assertRaises(transtick.JobFailed) as failed:
+            list(self.client.frames(job_id))
+        self.assertEqual(failed.exception.state, "CANCELLED")
+        status = self.client.status()
+        self.assertEqual(len(status["workers"]), 2)
+        states = {j["job_id"]: j["state"] for j in status["jobs"]}
+        self.assertEqual(states[job_id], "CANCELLED")
+
+    def test_job_files_read_their_materials_inline(self):
+        with tempfile.TemporaryDirectory() as tmp:
+            with open(os.path.join(tmp, "m.json"), "w", encoding="utf-8") as f:
+                import json
+                json.dump(MATERIALS, f)
+            with open(os.path.join(tmp, "job.json"), "w", encoding="utf-8") as f:
+                json.dump({"datasets": [{"volume": "box.nrrd", "materials_file": "m.json",
+                                         "views": [view(35)]}]}, f)
+            loaded = transtick.load_job(os.path.join(tmp, "job.json"))
+        self.assertEqual(loaded.datasets[0].materials.materials[0].name, "box")
+        self.assertFalse(loaded.datasets[0].materials_file)
+        frame = self.client.render(loaded)[0]
+        np.testing.assert_array_equal(frame.image, self.client.render(job([view(35)]))[0].image)
+
+    def test_tokens_need_tls(self):
+        with self.assertRaises(ValueError):
+            transtick.Client(ROOT, token="a-token-of-sixteen-chars")
+
+
+if __name__ == "__main__":
+    unittest.main(verbosity=2)
