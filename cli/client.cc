@@ -211,6 +211,115 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> WatchJob(const std::string& r
   return stats;
 }
 
+absl::StatusOr<std::unique_ptr<SessionClient>> SessionClient::Open(const std::string& root,
+                                                                   const v1::Dataset& dataset,
+                                                                   int preview) {
+  auto c = std::unique_ptr<SessionClient>(new SessionClient());
+  c->stub_ = v1::Root::NewStub(MakeChannel(root, Role::kRoot));
+  c->stream_ = c->stub_->Session(&c->ctx_);
+  v1::SessionRequest open;
+  *open.mutable_open() = dataset;
+  open.set_preview(preview);
+  auto seq = c->Send(std::move(open));
+  if (!seq.ok()) return seq.status();
+  return c;
+}
+
+SessionClient::~SessionClient() {
+  if (!stream_) return;
+  ctx_.TryCancel();
+  v1::SessionEvent e;
+  while (stream_->Read(&e)) {
+  }
+  (void)stream_->Finish();
+}
+
+absl::StatusOr<uint64_t> SessionClient::Send(v1::SessionRequest request) {
+  absl::MutexLock lock(&mu_);
+  if (closed_) return absl::FailedPreconditionError("the session is closed");
+  request.set_seq(next_seq_++);
+  if (!stream_->Write(request)) {
+    return absl::UnavailableError("the session's stream is broken (see Next for why)");
+  }
+  return request.seq();
+}
+
+absl::StatusOr<uint64_t> SessionClient::SetView(const v1::View& view) {
+  v1::SessionRequest r;
+  *r.mutable_view() = view;
+  return Send(std::move(r));
+}
+
+absl::StatusOr<uint64_t> SessionClient::SetMaterials(const v1::MaterialSet& materials) {
+  v1::SessionRequest r;
+  *r.mutable_materials() = materials;
+  return Send(std::move(r));
+}
+
+absl::StatusOr<uint64_t> SessionClient::SetTransfer(const v1::TransferFunction& transfer) {
+  v1::SessionRequest r;
+  *r.mutable_transfer() = transfer;
+  return Send(std::move(r));
+}
+
+absl::StatusOr<SessionClient::Event> SessionClient::Next() {
+  v1::SessionEvent e;
+  while (stream_->Read(&e)) {
+    Event out;
+    out.seq = e.seq();
+    if (e.has_ready()) {
+      out.ready = e.ready();
+      return out;
+    }
+    if (!e.error().empty()) {
+      out.error = e.error();
+      return out;
+    }
+    if (!e.has_image()) continue;
+    const v1::ImageChunk& c = e.image();
+    if (c.width() <= 0 || c.height() <= 0 || c.width() > CameraSpec::kMaxImageSize ||
+        c.height() > CameraSpec::kMaxImageSize) {
+      return absl::DataLossError("the root sent an image chunk of an impossible size");
+    }
+    auto& [img, rows] = partial_[{e.seq(), e.preview()}];
+    if (img.rgb.empty()) {
+      img.width = c.width();
+      img.height = c.height();
+      img.rgb.resize(static_cast<size_t>(c.width()) * c.height() * 3);
+    }
+    const size_t floats = static_cast<size_t>(c.row_end() - c.row_begin()) * c.width() * 3;
+    if (c.width() != img.width || c.height() != img.height || c.row_begin() < 0 ||
+        c.row_end() > img.height || c.row_end() < c.row_begin() || c.rgb().size() != floats * 4) {
+      return absl::DataLossError("the root sent a malformed image chunk");
+    }
+    DecodeFloats(c.rgb(), img.rgb.data() + static_cast<size_t>(c.row_begin()) * img.width * 3);
+    rows += c.row_end() - c.row_begin();
+    if (rows < img.height) continue;
+    out.has_frame = true;
+    out.preview = e.preview();
+    out.image = std::move(img);
+    out.stats = e.stats();
+    partial_.erase({e.seq(), e.preview()});
+    return out;
+  }
+  absl::Status s = FromGrpc(stream_->Finish());
+  stream_.reset();
+  return s.ok() ? absl::OutOfRangeError("the session ended") : s;
+}
+
+absl::Status SessionClient::Close() {
+  {
+    absl::MutexLock lock(&mu_);
+    if (closed_) return absl::OkStatus();
+    closed_ = true;
+    stream_->WritesDone();
+  }
+  while (true) {
+    auto e = Next();
+    if (!e.ok()) return absl::IsOutOfRange(e.status()) ? absl::OkStatus() : e.status();
+  }
+}
+
 absl::StatusOr<v1::Job> LoadJobFile(const std::string& path) {
   auto text = ReadTextFile(path);
   if (!text.ok()) return text.status();

@@ -5,11 +5,17 @@
 #define TRANSTICK_CLI_CLIENT_H_
 
 #include <chrono>
+#include <map>
+#include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "absl/synchronization/mutex.h"
+#include "cluster.grpc.pb.h"
 #include "cluster.pb.h"
+#include "transtick/framebuffer.h"
 #include "grpc/health/v1/health.pb.h"
 #include "security.h"
 
@@ -51,6 +57,54 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::str
 // output (beneath out_dir when relative). The error names the view and the
 // missing directory.
 absl::Status CheckOutputDirectories(const v1::Job& job, const std::string& out_dir);
+
+// The client side of an interactive session (docs/formats.md, "Session
+// stream"): requests go out from any thread, events come in through Next
+// from one thread at a time.
+class SessionClient {
+ public:
+  // What Next returns: a whole frame (its chunks assembled), a ready
+  // notice, or the error of one request.
+  struct Event {
+    uint64_t seq = 0;
+    std::optional<v1::SessionReady> ready;
+    bool has_frame = false;
+    bool preview = false;
+    Image image;
+    v1::ClusterFrameStats stats;
+    std::string error;
+  };
+
+  // Opens a session on `dataset` (its views[0] is the first camera), with a
+  // preview at 1/preview of the size before each frame (0: none). The first
+  // event Next returns is the dataset's ready notice, or the open fails.
+  static absl::StatusOr<std::unique_ptr<SessionClient>> Open(const std::string& root,
+                                                             const v1::Dataset& dataset,
+                                                             int preview = 0);
+  ~SessionClient();
+
+  // A new camera; returns its seq. Thread-safe.
+  absl::StatusOr<uint64_t> SetView(const v1::View& view);
+  // A new classification (materials for surfaces, transfer for dvr).
+  absl::StatusOr<uint64_t> SetMaterials(const v1::MaterialSet& materials);
+  absl::StatusOr<uint64_t> SetTransfer(const v1::TransferFunction& transfer);
+  // The next event; the stream's end (the root's status) when there is none.
+  absl::StatusOr<Event> Next();
+  // Closes this side and waits for the root to end the session.
+  absl::Status Close();
+
+ private:
+  SessionClient() = default;
+  absl::StatusOr<uint64_t> Send(v1::SessionRequest request);
+
+  std::unique_ptr<v1::Root::Stub> stub_;
+  grpc::ClientContext ctx_;
+  std::unique_ptr<grpc::ClientReaderWriter<v1::SessionRequest, v1::SessionEvent>> stream_;
+  absl::Mutex mu_;
+  uint64_t next_seq_ ABSL_GUARDED_BY(mu_) = 1;
+  bool closed_ ABSL_GUARDED_BY(mu_) = false;
+  std::map<std::pair<uint64_t, bool>, std::pair<Image, int>> partial_;  // by (seq, preview): rows in
+};
 
 // Reads a job file (protobuf JSON of transtick.v1.Job). A dataset may name
 // "materials_file" or "transfer_file" relative to the job file; they are

@@ -15,6 +15,12 @@ inline double MsBetween(Clock::time_point a, Clock::time_point b) {
 
 inline double MsSince(Clock::time_point t) { return MsBetween(t, Clock::now()); }
 
+// Now, in seconds since the Unix epoch (for times compared across hosts).
+inline double UnixNow() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
 }  // namespace transtick
 
 #endif  // TRANSTICK_COMMON_CLOCK_H_

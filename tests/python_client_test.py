@@ -112,6 +112,30 @@ class ClientTest(unittest.TestCase):
         frame = self.client.render(loaded)[0]
         np.testing.assert_array_equal(frame.image, self.client.render(job([view(35)]))[0].image)
 
+    def test_a_session_renders_the_newest_camera(self):
+        first = view(30)
+        with self.client.session({"volume": "box.nrrd", "materials": MATERIALS, "views": [first]},
+                                 preview=2) as s:
+            ready = s.next()
+            self.assertEqual(ready.ready["dims"], [24, 20, 16])
+            preview = s.next()
+            self.assertTrue(preview.preview)
+            self.assertEqual(preview.image.shape, (20, 24, 3))
+            full = s.frame(1)
+            np.testing.assert_array_equal(full.image, self.client.render(job([first]))[0].image)
+            seqs = [s.set_view(view(a)) for a in range(40, 400, 10)]
+            got = []
+            while not got or got[-1].seq != seqs[-1]:
+                got.append(s.frame(seqs[0]))
+            self.assertLess(len(got), len(seqs), "every stale camera was rendered")
+            np.testing.assert_array_equal(got[-1].image, self.client.render(job([view(390)]))[0].image)
+            bad = s.set_view(view(0, width=0))
+            with self.assertRaises(ValueError) as e:
+                s.frame(bad)
+            self.assertIn("0x40", str(e.exception))
+            again = s.set_view(view(55))
+            self.assertEqual(s.frame(again).seq, again)
+
     def test_tokens_need_tls(self):
         with self.assertRaises(ValueError):
             transtick.Client(ROOT, token="a-token-of-sixteen-chars")

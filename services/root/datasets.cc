@@ -145,6 +145,7 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
                                       st.st_mtim.tv_nsec, "|", identity.SerializeAsString());
   const std::string key = absl::StrFormat("%016x", std::hash<std::string>{}(key_text)) + "-" +
                           absl::StrFormat("%08x", static_cast<uint32_t>(key_text.size()));
+  absl::MutexLock lock(&mu_);
   if (cache_ && cache_->key == key) return cache_;
   const auto t0 = Clock::now();
   ReadOptions ro;

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "absl/synchronization/mutex.h"
 #include "cluster.pb.h"
 #include "transtick/classification.h"
 #include "transtick/partition.h"
@@ -71,13 +72,15 @@ class Datasets {
 
   // Dataset `dataset` of `plan`'s job, loaded and classified, or the
   // cached one when the file and its classification are unchanged.
+  // Thread-safe: loads run one at a time.
   absl::StatusOr<std::shared_ptr<LoadedDataset>> Load(const v1::Dataset& dataset,
                                                       const DatasetPlan& plan);
 
  private:
   const std::string data_dir_;
   const uint64_t max_volume_bytes_;
-  std::shared_ptr<LoadedDataset> cache_;
+  absl::Mutex mu_;
+  std::shared_ptr<LoadedDataset> cache_ ABSL_GUARDED_BY(mu_);
 };
 
 }  // namespace transtick

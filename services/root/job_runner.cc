@@ -114,6 +114,89 @@ absl::Status JobRunner::RunJob(Job& job) {
   return absl::OkStatus();
 }
 
+bool FrameTurns::Acquire(bool interactive, const std::function<bool()>& cancelled) {
+  absl::MutexLock lock(&mu_);
+  if (interactive) ++interactive_waiting_;
+  auto mine = [&]() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+    return !busy_ && (interactive || interactive_waiting_ == 0);
+  };
+  // Woken by Release; the timeout only looks at `cancelled` now and then.
+  while (!mine() && !cancelled()) {
+    mu_.AwaitWithTimeout(absl::Condition(&mine), absl::Milliseconds(50));
+  }
+  if (interactive) --interactive_waiting_;
+  if (!mine()) return false;
+  busy_ = true;
+  return true;
+}
+
+void FrameTurns::Release() {
+  absl::MutexLock lock(&mu_);
+  busy_ = false;
+}
+
+absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
+  LoadedDataset& data = *task.data;
+  const int planes = data.scene.dims()[1];
+  absl::Status status = absl::CancelledError("cancelled");
+  for (int attempt = 0; attempt < kAttempts; ++attempt) {
+    if (attempt > 0) SleepUnless(kFirstBackoff * (1 << (attempt - 1)), task.cancelled);
+    if (task.cancelled()) return absl::CancelledError("cancelled");
+    if (!turns_.Acquire(task.interactive, task.cancelled)) return absl::CancelledError("cancelled");
+    struct Turn {
+      FrameTurns& turns;
+      ~Turn() { turns.Release(); }
+    } turn{turns_};
+    auto workers = registry_.Workers(
+        std::chrono::milliseconds(static_cast<int64_t>(options_.worker_wait_s * 1000)),
+        task.cancelled);
+    if (!workers.ok()) {
+      status = workers.status();
+      if (status.code() != absl::StatusCode::kUnavailable) return status;
+      continue;
+    }
+    RenderedFrame out;
+    out.layout = Slabs::FormRings(*workers, options_.rings, planes);
+    Layout& layout = out.layout;
+    // Cuts computed for other ring members mean nothing to these.
+    if (const std::string members = layout.Members(); members != data.balance.members) {
+      data.balance = BalanceMemory{members, {}, {}};
+    }
+    out.report.job_id = task.who;
+    const auto balance_start = Clock::now();
+    bool prerendered = false;
+    status = task.balancer->Plan(
+        *task.view, data.balance, layout,
+        [&](const v1::View& test, Layout& probe) -> absl::StatusOr<FrameResult> {
+          prerendered = true;
+          if (absl::Status s = slabs_.Distribute(data, probe); !s.ok()) return s;
+          return driver_.Run(test, data, probe, task.cancelled, nullptr, nullptr);
+        },
+        &out.report);
+    if (status.ok()) status = slabs_.Distribute(data, layout);
+    if (!status.ok()) {
+      if (status.code() == absl::StatusCode::kUnavailable && !task.cancelled()) continue;
+      return status;
+    }
+    // The prerender and the plane moves it caused.
+    if (prerendered) out.report.balance_ms = MsSince(balance_start);
+    if (task.on_attempt) task.on_attempt();
+    auto result =
+        driver_.Run(*task.view, data, layout, task.cancelled, task.on_progress, task.on_chunk);
+    if (!result.ok()) {
+      status = result.status();
+      if (status.code() != absl::StatusCode::kUnavailable || task.cancelled()) return status;
+      spdlog::warn("{}: frame failed ({}); retrying", task.who, Printable(status.message()));
+      metrics_.Add("transtick_root_frame_retries_total", 1);
+      continue;
+    }
+    task.balancer->Learn(*result, layout, data.balance, &out.report);
+    out.result = *std::move(result);
+    return out;
+  }
+  return status;
+}
+
 absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data) {
   const int d = job.key(frame).dataset, v = job.key(frame).view;
   // The view goes to the workers as the client wrote it; the root's own
@@ -123,111 +206,77 @@ absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data) {
   const FrameRequest& request = plan.views[v];
   std::unique_ptr<Balancer> balancer =
       MakeBalancer(plan.balance[v], job.plan().rule, job.spec().balance_grid());
-  const int planes = data.scene.dims()[1];
   if (absl::Status s = CheckRenderSettings(
           request.settings, data.scene.mode(), data.scene.dims(), data.scene.spacing(),
           int64_t{request.camera.width} * request.camera.height);
       !s.ok()) {
     return absl::InvalidArgumentError(absl::StrCat("dataset ", d, " view ", v, ": ", s.message()));
   }
-  auto cancelled = [&] { return job.cancelled() || queue_.stopping(); };
-  absl::Status status;
-  for (int attempt = 0; attempt < kAttempts; ++attempt) {
-    if (attempt > 0) SleepUnless(kFirstBackoff * (1 << (attempt - 1)), cancelled);
-    if (cancelled()) return absl::CancelledError("cancelled");
-    auto workers = registry_.Workers(
-        std::chrono::milliseconds(static_cast<int64_t>(options_.worker_wait_s * 1000)), cancelled);
-    if (!workers.ok()) {
-      status = workers.status();
-      if (status.code() != absl::StatusCode::kUnavailable) return status;
-      continue;
+  // The image passes through as the display sends it, chunk by chunk; the
+  // last chunk waits for the frame's statistics, which go with it.
+  std::optional<v1::JobEvent> held;
+  const uint64_t pixels = static_cast<uint64_t>(view.width()) * view.height();
+  const auto& queue_options = queue_.options();
+  FrameTask task;
+  task.who = job.id();
+  task.view = &view;
+  task.request = &request;
+  task.balancer = balancer.get();
+  task.data = &data;
+  task.cancelled = [&] { return job.cancelled() || queue_.stopping(); };
+  task.on_attempt = [&] { held.reset(); };
+  task.on_chunk = [&](v1::ImageChunk chunk) -> absl::Status {
+    if (held) {
+      absl::Status s = job.PublishImage(*std::move(held), queue_options.max_pending_image_bytes,
+                                        queue_options.image_wait);
+      held.reset();
+      if (!s.ok()) return s;
     }
-    Layout layout = Slabs::FormRings(*workers, options_.rings, planes);
-    // Cuts computed for other ring members mean nothing to these.
-    if (const std::string members = layout.Members(); members != data.balance.members) {
-      data.balance = BalanceMemory{members, {}, {}};
-    }
-    BalanceReport report;
-    report.job_id = job.id();
-    const auto balance_start = Clock::now();
-    bool prerendered = false;
-    status = balancer->Plan(
-        view, data.balance, layout,
-        [&](const v1::View& test, Layout& probe) -> absl::StatusOr<FrameResult> {
-          prerendered = true;
-          if (absl::Status s = slabs_.Distribute(data, probe); !s.ok()) return s;
-          return driver_.Run(test, data, probe, cancelled, nullptr, nullptr);
-        },
-        &report);
-    if (!status.ok()) {
-      if (status.code() == absl::StatusCode::kUnavailable && !job.cancelled()) continue;
-      return status;
-    }
-    status = slabs_.Distribute(data, layout);
-    if (!status.ok()) {
-      if (status.code() == absl::StatusCode::kUnavailable && !job.cancelled()) continue;
-      return status;
-    }
-    // The prerender and the plane moves it caused.
-    if (prerendered) report.balance_ms = MsSince(balance_start);
-
-    // The image passes through as the display sends it, chunk by chunk; the
-    // last chunk waits for the frame's statistics, which go with it.
-    std::optional<v1::JobEvent> held;
-    const uint64_t pixels = static_cast<uint64_t>(view.width()) * view.height();
-    const auto& queue_options = queue_.options();
-    auto on_chunk = [&](v1::ImageChunk chunk) -> absl::Status {
-      if (held) {
-        absl::Status s = job.PublishImage(*std::move(held), queue_options.max_pending_image_bytes,
-                                          queue_options.image_wait);
-        held.reset();
-        if (!s.ok()) return s;
-      }
-      v1::JobEvent e;
-      e.set_frame(frame);
-      e.set_dataset(d);
-      e.set_view(v);
-      e.set_pixels_done(pixels);
-      e.set_pixels_total(pixels);
-      chunk.set_output(view.output());
-      *e.mutable_image() = std::move(chunk);
-      held = std::move(e);
-      return absl::OkStatus();
-    };
-    auto on_progress = [&](uint64_t done, uint64_t total) {
-      v1::JobEvent e;
-      e.set_frame(frame);
-      e.set_dataset(d);
-      e.set_view(v);
-      e.set_pixels_done(done);
-      e.set_pixels_total(total);
-      job.Publish(std::move(e));
-    };
-    auto result = driver_.Run(view, data, layout, cancelled, on_progress, on_chunk);
-    if (!result.ok()) {
-      status = result.status();
-      if (status.code() != absl::StatusCode::kUnavailable || job.cancelled()) return status;
-      spdlog::warn("{}: frame failed ({}); retrying", job.id(), Printable(status.message()));
-      metrics_.Add("transtick_root_frame_retries_total", 1);
-      continue;
-    }
-    balancer->Learn(*result, layout, data.balance, &report);
-    if (!held) return absl::InternalError("frame ended without its image");
-    return PublishStats(job, d, v, data, layout, *result, report, *std::move(held));
+    v1::JobEvent e;
+    e.set_frame(frame);
+    e.set_dataset(d);
+    e.set_view(v);
+    e.set_pixels_done(pixels);
+    e.set_pixels_total(pixels);
+    chunk.set_output(view.output());
+    *e.mutable_image() = std::move(chunk);
+    held = std::move(e);
+    return absl::OkStatus();
+  };
+  task.on_progress = [&](uint64_t done, uint64_t total) {
+    v1::JobEvent e;
+    e.set_frame(frame);
+    e.set_dataset(d);
+    e.set_view(v);
+    e.set_pixels_done(done);
+    e.set_pixels_total(total);
+    job.Publish(std::move(e));
+  };
+  auto rendered = Render(task);
+  if (!rendered.ok()) return rendered.status();
+  if (!held) return absl::InternalError("frame ended without its image");
+  Describe(job.id(), absl::StrCat(job.id(), " ", d, "/", v), view, data, *rendered,
+           job.submitted_unix(), held->mutable_stats());
+  held->mutable_stats()->set_dataset(d);
+  held->mutable_stats()->set_view(v);
+  if (job.key(0).dataset == d && job.key(0).view == v) {
+    metrics_.Observe("transtick_root_job_start_seconds", held->stats().since_submit_ms() / 1e3);
   }
-  return status;
+  return job.PublishImage(*std::move(held), queue_options.max_pending_image_bytes,
+                          queue_options.image_wait);
 }
 
-absl::Status JobRunner::PublishStats(Job& job, int d, int v, const LoadedDataset& data,
-                                     const Layout& layout, const FrameResult& frame,
-                                     const BalanceReport& balance, v1::JobEvent last_chunk) {
-  const v1::View& view = job.spec().datasets(d).views(v);
-  v1::ClusterFrameStats& fs = *last_chunk.mutable_stats();
-  fs.set_job_id(job.id());
-  fs.set_dataset(d);
-  fs.set_view(v);
+void JobRunner::Describe(const std::string& who, const std::string& label, const v1::View& view,
+                         const LoadedDataset& data,
+                         const RenderedFrame& rendered, double submitted_unix,
+                         v1::ClusterFrameStats* out) {
+  const FrameResult& frame = rendered.result;
+  const Layout& layout = rendered.layout;
+  const BalanceReport& balance = rendered.report;
+  v1::ClusterFrameStats& fs = *out;
+  fs.set_job_id(who);
   fs.set_frame_ms(frame.frame_ms);
-  fs.set_since_submit_ms((frame.started_unix - job.submitted_unix()) * 1e3);
+  fs.set_since_submit_ms((frame.started_unix - submitted_unix) * 1e3);
   for (const std::string& w : data.warnings) fs.add_warnings(w);
   fs.set_width(view.width());
   fs.set_height(view.height());
@@ -272,22 +321,16 @@ absl::Status JobRunner::PublishStats(Job& job, int d, int v, const LoadedDataset
   }
   metrics_.Add("transtick_root_frames_total", 1);
   metrics_.Observe("transtick_root_frame_seconds", frame.frame_ms / 1e3);
-  if (job.key(0).dataset == d && job.key(0).view == v) {
-    metrics_.Observe("transtick_root_job_start_seconds", fs.since_submit_ms() / 1e3);
-  }
   metrics_.Add("transtick_root_rays_traced_total", primary, {{"kind", "primary"}});
   metrics_.Add("transtick_root_rays_traced_total", shadow, {{"kind", "shadow"}});
   metrics_.Add("transtick_root_rays_forwarded_total", forwarded);
   metrics_.Add("transtick_root_ray_bytes_total", bytes);
   metrics_.Set("transtick_root_frame_imbalance", fs.active_imbalance());
   spdlog::info(
-      "frame {} ({} {}/{}): {}x{} in {:.1f} ms on {} workers in {} ring(s); {} rays traced; "
+      "frame {} ({}): {}x{} in {:.1f} ms on {} workers in {} ring(s); {} rays traced; "
       "max/mean active {:.2f}; balance {}",
-      frame.frame_id, job.id(), d, v, view.width(), view.height(), frame.frame_ms,
-      frame.workers.size(), layout.rings.size(), rays, fs.active_imbalance(),
-      EnumName(balance.mode));
-  const auto& o = queue_.options();
-  return job.PublishImage(std::move(last_chunk), o.max_pending_image_bytes, o.image_wait);
+      frame.frame_id, label, view.width(), view.height(), frame.frame_ms, frame.workers.size(),
+      layout.rings.size(), rays, fs.active_imbalance(), EnumName(balance.mode));
 }
 
 }  // namespace transtick

@@ -11,6 +11,7 @@
 #include <string>
 #include <thread>
 
+#include "absl/synchronization/mutex.h"
 #include "balancer.h"
 #include "datasets.h"
 #include "frame_driver.h"
@@ -30,6 +31,43 @@ struct RunnerOptions {
   double worker_wait_s = 120;  // how long a job waits for a first worker
 };
 
+// Who renders on the cluster next: one frame at a time (a frame uses every
+// worker), and an interactive session's frame before any batch job's that
+// waits. Batch frames go between session frames, so a session that renders
+// without pause holds the jobs off until it pauses. Thread-safe.
+class FrameTurns {
+ public:
+  // Blocks until it is the caller's turn; false (no turn) if `cancelled()`
+  // turns true first.
+  bool Acquire(bool interactive, const std::function<bool()>& cancelled);
+  void Release();
+
+ private:
+  absl::Mutex mu_;
+  bool busy_ ABSL_GUARDED_BY(mu_) = false;
+  int interactive_waiting_ ABSL_GUARDED_BY(mu_) = 0;
+};
+
+// One frame to render on the cluster, and where its progress and image go.
+struct FrameTask {
+  std::string who;  // "job-3", "session-2": for logs
+  const v1::View* view = nullptr;
+  const FrameRequest* request = nullptr;  // the view, converted and checked
+  Balancer* balancer = nullptr;
+  LoadedDataset* data = nullptr;
+  std::function<bool()> cancelled;
+  FrameDriver::ProgressFn on_progress;
+  FrameDriver::ChunkFn on_chunk;
+  std::function<void()> on_attempt;  // before each attempt (chunks of a failed one are void)
+  bool interactive = false;
+};
+
+struct RenderedFrame {
+  FrameResult result;
+  Layout layout;
+  BalanceReport report;
+};
+
 class JobRunner {
  public:
   // REQUIRES: `queue` and `registry` outlive this.
@@ -41,6 +79,23 @@ class JobRunner {
 
   // Checks and converts a job (Datasets::Plan). Thread-safe.
   absl::StatusOr<JobPlan> Plan(const v1::Job& job) const { return datasets_.Plan(job); }
+  // The dataset of `dataset`, loaded and classified (Datasets::Load).
+  // Thread-safe.
+  absl::StatusOr<std::shared_ptr<LoadedDataset>> Load(const v1::Dataset& dataset,
+                                                      const DatasetPlan& plan) {
+    return datasets_.Load(dataset, plan);
+  }
+  // Renders `task` on the cluster when it is its turn (FrameTurns): forms
+  // the rings from the workers registered then, balances, distributes the
+  // slabs and drives the frame, on attempt after attempt while workers or
+  // the display fail. Thread-safe.
+  absl::StatusOr<RenderedFrame> Render(FrameTask& task);
+  // Counts a rendered frame in the metrics, logs it (as `label`) and fills
+  // its statistics.
+  void Describe(const std::string& who, const std::string& label, const v1::View& view,
+                const LoadedDataset& data,
+                const RenderedFrame& frame, double submitted_unix, v1::ClusterFrameStats* fs);
+  bool stopping() const { return queue_.stopping(); }
   // Starts the runner's thread. Call once.
   void Start();
   // Stops the queue (cancelling its jobs) and joins the runner. Idempotent.
@@ -52,12 +107,9 @@ class JobRunner {
   // Renders the job's frame (on attempt after attempt while workers or the
   // display fail) and publishes its image.
   absl::Status RunView(Job& job, int frame, LoadedDataset& data);
-  // The frame's statistics, logged and sent with its last image chunk.
-  absl::Status PublishStats(Job& job, int dataset, int view, const LoadedDataset& data,
-                            const Layout& layout, const FrameResult& frame,
-                            const BalanceReport& balance, v1::JobEvent last_chunk);
 
   const RunnerOptions options_;
+  FrameTurns turns_;
   JobQueue& queue_;
   Registry& registry_;
   Metrics& metrics_;

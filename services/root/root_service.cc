@@ -54,7 +54,8 @@ RootService::RootService(const RootOptions& options, std::unique_ptr<JobStore> s
       metrics_(std::make_shared<Metrics>()),
       store_(std::move(store)),
       queue_(options, *store_),
-      runner_(options, queue_, registry_, *metrics_) {
+      runner_(options, queue_, registry_, *metrics_),
+      sessions_(runner_, *metrics_) {
   Metrics& m = *metrics_;
   m.Declare("transtick_root_jobs", Metrics::Type::kGauge, "Jobs the root holds, by state.");
   m.Declare("transtick_root_jobs_submitted_total", Metrics::Type::kCounter,
@@ -98,6 +99,14 @@ grpc::Status RootService::Submit(grpc::ServerContext* ctx, const v1::Job* job,
   spdlog::info("{} queued: '{}', {} frames, {} ahead, from {}", (*record)->id(),
                Printable(job->name()), (*record)->frames_total(), position, client->name);
   return grpc::Status::OK;
+}
+
+grpc::Status RootService::Session(
+    grpc::ServerContext* ctx,
+    grpc::ServerReaderWriter<v1::SessionEvent, v1::SessionRequest>* stream) {
+  auto client = Caller(*ctx);
+  if (!client.ok()) return ToGrpc(client.status());
+  return sessions_.Serve(ctx, stream, *client);
 }
 
 grpc::Status RootService::Watch(grpc::ServerContext* ctx, const v1::WatchRequest* req,

@@ -16,6 +16,7 @@
 #include "job_runner.h"
 #include "metrics.h"
 #include "registry.h"
+#include "session.h"
 
 namespace transtick {
 
@@ -40,6 +41,9 @@ class RootService final : public v1::Root::Service {
 
   grpc::Status Submit(grpc::ServerContext* ctx, const v1::Job* job,
                       v1::SubmitReply* reply) override;
+  grpc::Status Session(
+      grpc::ServerContext* ctx,
+      grpc::ServerReaderWriter<v1::SessionEvent, v1::SessionRequest>* stream) override;
   grpc::Status Watch(grpc::ServerContext* ctx, const v1::WatchRequest* req,
                      grpc::ServerWriter<v1::JobEvent>* writer) override;
   grpc::Status Status(grpc::ServerContext* ctx, const v1::StatusRequest* req,
@@ -60,6 +64,7 @@ class RootService final : public v1::Root::Service {
   JobQueue queue_;
   Registry registry_;
   JobRunner runner_;  // after queue_ and registry_: it uses both
+  Sessions sessions_;  // after runner_: it renders through it
 };
 
 }  // namespace transtick

@@ -31,8 +31,10 @@ from .client import (  # noqa: E402,F401
     Client,
     Frame,
     JobFailed,
+    Session,
+    SessionEvent,
     load_job,
     parse_job,
 )
 
-__all__ = ["Client", "Frame", "JobFailed", "load_job", "parse_job", "v1"]
+__all__ = ["Client", "Frame", "JobFailed", "Session", "SessionEvent", "load_job", "parse_job", "v1"]

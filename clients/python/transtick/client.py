@@ -1,8 +1,11 @@
 """The client of the root's API (proto/cluster.proto, service transtick.v1.Root)."""
 
 import dataclasses
+import itertools
 import json
 import os
+import queue
+import threading
 import time
 from typing import Callable, Dict, Iterator, List, Optional, Union
 
@@ -70,6 +73,133 @@ def parse_job(job: Union[dict, str, "cluster_pb2.Job"], base_dir: str = ".") -> 
     return message
 
 
+def _message(value, cls):
+    """A message of `cls` from a message, a dict or JSON text."""
+    if isinstance(value, cls):
+        return value
+    message = cls()
+    json_format.Parse(value if isinstance(value, str) else json.dumps(value), message)
+    return message
+
+
+def _image(chunk, image: Optional[np.ndarray]) -> np.ndarray:
+    """Adds an ImageChunk's rows to `image` (made on the first chunk)."""
+    c = chunk
+    if c.width <= 0 or c.height <= 0 or c.width > 8192 or c.height > 8192:
+        raise ValueError(f"the root sent an image chunk of an impossible size {c.width}x{c.height}")
+    if image is None:
+        image = np.zeros((c.height, c.width, 3), dtype=np.float32)
+    rows = c.row_end - c.row_begin
+    if (image.shape != (c.height, c.width, 3) or c.row_begin < 0 or c.row_end > c.height
+            or rows < 0 or len(c.rgb) != rows * c.width * 3 * 4):
+        raise ValueError("the root sent a malformed image chunk")
+    image[c.row_begin:c.row_end] = np.frombuffer(c.rgb, dtype="<f4").reshape(rows, c.width, 3)
+    return image
+
+
+@dataclasses.dataclass
+class SessionEvent:
+    """What a session sends back (docs/formats.md, "Session stream")."""
+
+    seq: int  # the request it answers
+    ready: Optional[dict] = None  # SessionReady as JSON: the dataset is loaded
+    image: Optional[np.ndarray] = None  # a whole frame, float32 (height, width, 3)
+    preview: bool = False  # the frame is the coarse preview
+    stats: Optional[dict] = None  # ClusterFrameStats as JSON, with a frame
+    error: str = ""  # the request could not be done; the session goes on
+
+
+class Session:
+    """An interactive session: cameras and classifications out, frames back.
+
+    Made by Client.session. set_view and the others may be called from any
+    thread; next() from one thread at a time.
+    """
+
+    def __init__(self, stub, metadata, dataset, preview: int):
+        self._requests: "queue.Queue" = queue.Queue()
+        self._seq = itertools.count(1)
+        self._lock = threading.Lock()
+        self._closed = False
+        self._partial: Dict[tuple, np.ndarray] = {}
+        self._rows: Dict[tuple, int] = {}
+        # As a job's dataset: materials_file and transfer_file are read here.
+        job = cluster_pb2.Job()
+        job.datasets.append(_message(dataset, cluster_pb2.Dataset))
+        self._send(cluster_pb2.SessionRequest(open=parse_job(job).datasets[0], preview=preview))
+        self._responses = stub.Session(iter(self._requests.get, None), metadata=metadata)
+
+    def _send(self, request) -> int:
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("the session is closed")
+            request.seq = next(self._seq)
+            self._requests.put(request)
+            return request.seq
+
+    def set_view(self, view) -> int:
+        """A new camera (a View, or a dict of its fields); returns its seq."""
+        return self._send(cluster_pb2.SessionRequest(view=_message(view, cluster_pb2.View)))
+
+    def set_materials(self, materials) -> int:
+        return self._send(cluster_pb2.SessionRequest(materials=_message(materials, cluster_pb2.MaterialSet)))
+
+    def set_transfer(self, transfer) -> int:
+        return self._send(cluster_pb2.SessionRequest(transfer=_message(transfer, cluster_pb2.TransferFunction)))
+
+    def next(self) -> SessionEvent:
+        """The next event: a ready notice, a whole frame, or an error.
+
+        StopIteration when the session has ended; grpc.RpcError when the
+        root ended it with an error (a bad open request, say).
+        """
+        for e in self._responses:
+            if e.HasField("ready"):
+                return SessionEvent(e.seq, ready=json_format.MessageToDict(e.ready, preserving_proto_field_name=True))
+            if e.error:
+                return SessionEvent(e.seq, error=e.error)
+            if not e.HasField("image"):
+                continue
+            key = (e.seq, e.preview)
+            self._partial[key] = _image(e.image, self._partial.get(key))
+            self._rows[key] = self._rows.get(key, 0) + e.image.row_end - e.image.row_begin
+            if self._rows[key] < e.image.height:
+                continue
+            image = self._partial.pop(key)
+            del self._rows[key]
+            stats = json_format.MessageToDict(e.stats, preserving_proto_field_name=True)
+            return SessionEvent(e.seq, image=image, preview=e.preview, stats=stats)
+        raise StopIteration
+
+    def frame(self, seq: int) -> SessionEvent:
+        """Events until the full frame of `seq` (or a later one); an error event raises ValueError."""
+        while True:
+            e = self.next()
+            if e.error and e.seq >= seq:
+                raise ValueError(f"request {e.seq}: {e.error}")
+            if e.image is not None and not e.preview and e.seq >= seq:
+                return e
+
+    def close(self) -> None:
+        """Closes this side; returns when the root has answered every camera and ended."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            self._requests.put(None)
+        try:
+            while True:
+                self.next()
+        except StopIteration:
+            pass
+
+    def __enter__(self) -> "Session":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
 def load_job(path: str) -> "cluster_pb2.Job":
     """A job file (docs/formats.md, "Job file"), with its files read inline."""
     with open(path, encoding="utf-8") as f:
@@ -123,6 +253,12 @@ class Client:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+    def session(self, dataset, preview: int = 0) -> Session:
+        """Opens an interactive session on `dataset` (a Dataset or a dict in the
+        job file's schema, with exactly one view: the first camera); with
+        `preview` (2 .. 16) each frame is preceded by one at 1/preview size."""
+        return Session(self._stub, self._metadata, dataset, preview)
 
     def submit(self, job: Union[dict, str, "cluster_pb2.Job"]) -> str:
         """Queues a job; returns its id. Errors are grpc.RpcError naming the field."""
@@ -200,17 +336,8 @@ class Client:
     @staticmethod
     def _take_chunk(e, images: Dict[int, np.ndarray], rows_in: Dict[int, int]) -> Optional[Frame]:
         c = e.image
-        if c.width <= 0 or c.height <= 0 or c.width > 8192 or c.height > 8192:
-            raise ValueError(f"the root sent an image chunk of an impossible size {c.width}x{c.height}")
-        image = images.get(e.frame)
-        if image is None:
-            image = images[e.frame] = np.zeros((c.height, c.width, 3), dtype=np.float32)
-        rows = c.row_end - c.row_begin
-        if (image.shape != (c.height, c.width, 3) or c.row_begin < 0 or c.row_end > c.height
-                or rows < 0 or len(c.rgb) != rows * c.width * 3 * 4):
-            raise ValueError("the root sent a malformed image chunk")
-        image[c.row_begin:c.row_end] = np.frombuffer(c.rgb, dtype="<f4").reshape(rows, c.width, 3)
-        rows_in[e.frame] = rows_in.get(e.frame, 0) + rows
+        images[e.frame] = image = _image(c, images.get(e.frame))
+        rows_in[e.frame] = rows_in.get(e.frame, 0) + c.row_end - c.row_begin
         if rows_in[e.frame] < c.height:
             return None
         del images[e.frame], rows_in[e.frame]

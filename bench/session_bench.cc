@@ -1,0 +1,176 @@
+// Interactive sessions through an embedded cluster: how long a camera
+// change takes to come back as a full frame, against the frame's own time
+// at the root (the goal: within 1.5x), with and without a preview,
+// and what a drag (a camera every few ms) does.
+//
+//   session_bench [--volume cthead.nrrd] [--materials FILE] [--workers 2]
+//                 [--size 400x400] [--steps 20] [--drag-ms 3000] [--every-ms 15]
+//
+// Needs TRANSTICK_DATA_DIR (the volume's directory; default ../shared/data).
+#include <spdlog/spdlog.h>
+
+#include <atomic>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "bench_util.h"
+#include "client.h"
+#include "convert.h"
+#include "local_cluster.h"
+
+namespace transtick {
+namespace {
+
+int Main(int argc, char** argv) {
+  std::string volume = "cthead.nrrd";
+  std::string materials = std::string(TRANSTICK_SOURCE_DIR) + "/examples/cthead_materials.json";
+  int workers = 2, width = 400, height = 400, steps = 20, drag_ms = 3000, every_ms = 15;
+  for (int i = 1; i + 1 < argc; i += 2) {
+    const std::string flag = argv[i], value = argv[i + 1];
+    bool ok = true;
+    if (flag == "--volume") {
+      volume = value;
+    } else if (flag == "--materials") {
+      materials = value;
+    } else if (flag == "--workers") {
+      ok = bench::ParseInt(value, 1, 16, &workers);
+    } else if (flag == "--size") {
+      ok = bench::ParseSize(value, 8192, &width, &height);
+    } else if (flag == "--steps") {
+      ok = bench::ParseInt(value, 2, 10000, &steps);
+    } else if (flag == "--drag-ms") {
+      ok = bench::ParseInt(value, 0, 600000, &drag_ms);
+    } else if (flag == "--every-ms") {
+      ok = bench::ParseInt(value, 1, 10000, &every_ms);
+    } else {
+      ok = false;
+    }
+    if (!ok) {
+      std::fprintf(stderr, "session_bench: bad flag %s %s\n", flag.c_str(), value.c_str());
+      return 2;
+    }
+  }
+  const char* data = std::getenv("TRANSTICK_DATA_DIR");
+  LocalCluster::Options o;
+  o.workers = workers;
+  o.threads_per_worker = 1;
+  o.data_dir = data ? data : "../shared/data";
+  auto cluster = LocalCluster::Start(o);
+  if (!cluster.ok()) {
+    std::fprintf(stderr, "session_bench: %s\n", std::string(cluster.status().message()).c_str());
+    return 1;
+  }
+  v1::Dataset dataset;
+  dataset.set_volume(volume);
+  {
+    std::ifstream f(materials);
+    std::stringstream text;
+    text << f.rdbuf();
+    if (absl::Status s = ParseJson(text.str(), materials, dataset.mutable_materials()); !s.ok()) {
+      std::fprintf(stderr, "session_bench: %s\n", std::string(s.message()).c_str());
+      return 1;
+    }
+  }
+  auto view = [&](double azimuth) {
+    v1::View v;
+    v.set_azimuth(azimuth);
+    v.set_width(width);
+    v.set_height(height);
+    v.set_shadows(true);
+    return v;
+  };
+  *dataset.add_views() = view(45);
+  std::printf("session_bench: %s %dx%d, %d workers x 1 thread, shadows on\n", volume.c_str(), width,
+              height, workers);
+
+  for (int preview : {0, 4}) {
+    auto session = SessionClient::Open((*cluster)->root_address(), dataset, preview);
+    if (!session.ok()) return 1;
+    auto next_full = [&](uint64_t seq, double* preview_ms,
+                         std::chrono::steady_clock::time_point t0) -> absl::StatusOr<SessionClient::Event> {
+      while (true) {
+        auto e = (*session)->Next();
+        if (!e.ok()) return e.status();
+        if (!e->error.empty()) return absl::InternalError(e->error);
+        if (e->has_frame && e->preview && e->seq == seq && preview_ms) *preview_ms = bench::MsSince(t0);
+        if (e->has_frame && !e->preview && e->seq == seq) return e;
+      }
+    };
+    auto first = next_full(1, nullptr, std::chrono::steady_clock::now());  // ready, and camera 1
+    if (!first.ok()) {
+      std::fprintf(stderr, "session_bench: %s\n", std::string(first.status().message()).c_str());
+      return 1;
+    }
+    std::vector<double> latency, frame, ratio, previews;
+    for (int i = 0; i < steps; ++i) {
+      const auto t0 = std::chrono::steady_clock::now();
+      auto seq = (*session)->SetView(view(45 + 7 * (i + 1)));
+      double preview_ms = 0;
+      auto e = next_full(*seq, &preview_ms, t0);
+      if (!e.ok()) return 1;
+      latency.push_back(bench::MsSince(t0));
+      frame.push_back(e->stats.frame_ms());
+      ratio.push_back(latency.back() / e->stats.frame_ms());
+      if (preview) previews.push_back(preview_ms);
+    }
+    std::printf("  steps, preview %s: camera -> full frame median %.1f ms (min %.1f), frame at the "
+                "root %.1f ms; latency/frame median %.2f%s\n",
+                preview ? "1/4" : "off", bench::Median(latency),
+                *std::min_element(latency.begin(), latency.end()), bench::Median(frame),
+                bench::Median(ratio),
+                preview ? absl::StrCat("; camera -> preview median ",
+                                       absl::StrFormat("%.1f", bench::Median(previews)), " ms")
+                              .c_str()
+                        : "");
+    if (drag_ms > 0) {
+      // A drag: cameras every `every_ms` while frames come back.
+      std::atomic<bool> dragging{true};
+      std::atomic<uint64_t> last_sent{0};
+      int sent = 0;
+      std::thread sender([&] {
+        const auto start = std::chrono::steady_clock::now();
+        for (int i = 0; bench::MsSince(start) < drag_ms; ++i) {
+          last_sent = *(*session)->SetView(view(100 + 0.5 * i));
+          ++sent;
+          std::this_thread::sleep_for(std::chrono::milliseconds(every_ms));
+        }
+        dragging = false;
+      });
+      int full = 0, previewed = 0;
+      uint64_t newest = 0;
+      std::chrono::steady_clock::time_point stop_at;
+      while (true) {
+        auto e = (*session)->Next();
+        if (!e.ok()) return 1;
+        if (!e->has_frame) continue;
+        (e->preview ? previewed : full) += 1;
+        newest = e->seq;
+        if (!dragging && stop_at == std::chrono::steady_clock::time_point()) {
+          stop_at = std::chrono::steady_clock::now();
+        }
+        if (!dragging && !e->preview && newest == last_sent) break;
+      }
+      const double settle = bench::MsSince(stop_at);
+      sender.join();
+      std::printf("  drag %d ms, a camera every %d ms: %d cameras sent, %d full frames and %d "
+                  "previews back (%.1f full frames/s); the last camera's frame %.0f ms after the "
+                  "drag ended\n",
+                  drag_ms, every_ms, sent, full, previewed, full * 1000.0 / drag_ms, settle);
+    }
+    if (!(*session)->Close().ok()) return 1;
+  }
+  return 0;
+}
+
+}  // namespace
+}  // namespace transtick
+
+int main(int argc, char** argv) {
+  spdlog::set_level(spdlog::level::warn);  // the embedded root logs every frame at info
+  return transtick::Main(argc, argv);
+}

@@ -1,0 +1,202 @@
+// Interactive sessions on an embedded cluster (docs/formats.md, "Session
+// stream"): the frames equal the in-process render of their camera and
+// classification bit for bit, a burst of cameras is not rendered one by
+// one but ends on the newest, a bad request is an error event and the
+// session goes on, and batch jobs still run beside a session.
+#include <fstream>
+#include <thread>
+
+#include "absl/strings/str_cat.h"
+#include "client.h"
+#include "convert.h"
+#include "gtest/gtest.h"
+#include "local_cluster.h"
+#include "testing.h"
+#include "transtick/camera.h"
+#include "transtick/image_io.h"
+#include "transtick/scene.h"
+#include "transtick/synthetic.h"
+#include "transtick/volume_io.h"
+
+namespace transtick {
+namespace {
+
+v1::MaterialSet Materials(float lo) {
+  v1::MaterialSet m;
+  v1::Material* x = m.add_materials();
+  x->set_name("hard");
+  x->set_min(lo);
+  x->set_max(1000);
+  for (float c : {0.9f, 0.7f, 0.6f}) x->add_color(c);
+  return m;
+}
+
+v1::View Camera(double azimuth, int width = 40, int height = 32) {
+  v1::View v;
+  v.set_azimuth(azimuth);
+  v.set_elevation(25);
+  v.set_width(width);
+  v.set_height(height);
+  v.set_shadows(true);
+  return v;
+}
+
+class SessionTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = testing::TempDir();
+    Volume v = MakeNoisyPhantom({36, 32, 40}, 7);
+    std::ofstream f(dir_ + "/p.nrrd", std::ios::binary);
+    f << "NRRD0004\ntype: float\ndimension: 3\nsizes: 36 32 40\nendian: little\nencoding: raw\n"
+         "spacings: 1 1 1.25\n\n";
+    f.write(reinterpret_cast<const char*>(v.values.data()), v.values.size() * 4);
+    f.close();
+    LocalCluster::Options o;
+    o.workers = 2;
+    o.data_dir = dir_;
+    auto c = LocalCluster::Start(o);
+    ASSERT_TRUE(c.ok()) << c.status();
+    cluster_ = *std::move(c);
+  }
+  v1::Dataset Dataset(const v1::View& first, float lo = 45) {
+    v1::Dataset d;
+    d.set_volume("p.nrrd");
+    *d.mutable_materials() = Materials(lo);
+    *d.add_views() = first;
+    return d;
+  }
+  Image Reference(const v1::View& view, float lo = 45) {
+    auto volume = ReadVolume(dir_ + "/p.nrrd");
+    EXPECT_TRUE(volume.ok());
+    auto scene = Scene::ForSurfaces(*volume, *ToClassification(Materials(lo)));
+    Vec3 extent{volume->dims[0] * volume->spacing[0], volume->dims[1] * volume->spacing[1],
+                volume->dims[2] * volume->spacing[2]};
+    auto camera = Camera::Create(*ToCameraSpec(view), extent);
+    return testing::RenderWhole(*scene, *camera, ToRenderSettings(view));
+  }
+  // Events until a full frame (not a preview) arrives.
+  SessionClient::Event NextFull(SessionClient& s, std::vector<SessionClient::Event>* seen = nullptr) {
+    while (true) {
+      auto e = s.Next();
+      EXPECT_TRUE(e.ok()) << e.status();
+      if (!e.ok()) return {};
+      if (seen) seen->push_back(*e);
+      if (e->has_frame && !e->preview) return *e;
+    }
+  }
+  std::string dir_;
+  std::unique_ptr<LocalCluster> cluster_;
+};
+
+TEST_F(SessionTest, FramesAreTheInProcessRenderOfTheirCamera) {
+  auto s = SessionClient::Open(cluster_->root_address(), Dataset(Camera(30)), /*preview=*/4);
+  ASSERT_TRUE(s.ok()) << s.status();
+  auto ready = (*s)->Next();
+  ASSERT_TRUE(ready.ok() && ready->ready) << ready.status();
+  EXPECT_EQ(ready->ready->dims_size(), 3);
+  EXPECT_EQ(ready->ready->dims(2), 40);
+  // The preview, a quarter of the size, then the frame.
+  auto preview = (*s)->Next();
+  ASSERT_TRUE(preview.ok() && preview->has_frame) << preview.status();
+  EXPECT_TRUE(preview->preview);
+  EXPECT_EQ(preview->image.width, 10);
+  EXPECT_EQ(preview->image.height, 8);
+  auto first = NextFull(**s);
+  EXPECT_EQ(first.seq, 1u);
+  EXPECT_EQ(first.image.rgb, Reference(Camera(30)).rgb);
+  EXPECT_EQ(first.stats.width(), 40);
+  for (double az : {75.0, 160.0, 250.0}) {
+    auto seq = (*s)->SetView(Camera(az, 48, 40));
+    ASSERT_TRUE(seq.ok());
+    auto frame = NextFull(**s);
+    EXPECT_EQ(frame.seq, *seq);
+    EXPECT_EQ(frame.image.rgb, Reference(Camera(az, 48, 40)).rgb) << "azimuth " << az;
+  }
+  // A new classification: ready again, and the camera renders again.
+  auto seq = (*s)->SetMaterials(Materials(30));
+  ASSERT_TRUE(seq.ok());
+  std::vector<SessionClient::Event> seen;
+  auto frame = NextFull(**s, &seen);
+  ASSERT_FALSE(seen.empty());
+  EXPECT_TRUE(seen.front().ready.has_value())
+      << "seq " << seen.front().seq << " error '" << seen.front().error << "' frame " << seen.front().has_frame << " preview " << seen.front().preview;
+  EXPECT_EQ(frame.seq, *seq);
+  EXPECT_EQ(frame.image.rgb, Reference(Camera(250, 48, 40), 30).rgb);
+  EXPECT_TRUE((*s)->Close().ok());
+}
+
+TEST_F(SessionTest, ABurstOfCamerasEndsOnTheNewestWithoutRenderingEach) {
+  auto s = SessionClient::Open(cluster_->root_address(), Dataset(Camera(0, 96, 80)));
+  ASSERT_TRUE(s.ok());
+  ASSERT_TRUE((*s)->Next()->ready);
+  uint64_t last = 0;
+  for (int i = 1; i <= 40; ++i) last = *(*s)->SetView(Camera(i * 9, 96, 80));
+  std::vector<uint64_t> rendered;
+  SessionClient::Event e;
+  do {
+    e = NextFull(**s);
+    rendered.push_back(e.seq);
+  } while (e.seq != last && rendered.size() < 50);
+  EXPECT_EQ(rendered.back(), last);
+  EXPECT_LT(rendered.size(), 20u) << "stale cameras were rendered one by one";
+  for (size_t i = 1; i < rendered.size(); ++i) EXPECT_GT(rendered[i], rendered[i - 1]);
+  EXPECT_EQ(e.image.rgb, Reference(Camera(40 * 9, 96, 80)).rgb);
+}
+
+TEST_F(SessionTest, ABadRequestIsAnErrorAndTheSessionGoesOn) {
+  auto s = SessionClient::Open(cluster_->root_address(), Dataset(Camera(10)));
+  ASSERT_TRUE(s.ok());
+  ASSERT_TRUE((*s)->Next()->ready);
+  NextFull(**s);
+  auto bad = (*s)->SetView(Camera(10, 0, 32));
+  auto e = (*s)->Next();
+  ASSERT_TRUE(e.ok());
+  EXPECT_EQ(e->seq, *bad);
+  EXPECT_NE(e->error.find("0x32"), std::string::npos) << e->error;
+  v1::TransferFunction tf;  // a surfaces session takes materials
+  auto wrong = (*s)->SetTransfer(tf);
+  e = (*s)->Next();
+  ASSERT_TRUE(e.ok());
+  EXPECT_EQ(e->seq, *wrong);
+  EXPECT_NE(e->error.find("materials"), std::string::npos) << e->error;
+  auto good = (*s)->SetView(Camera(100));
+  auto frame = NextFull(**s);
+  EXPECT_EQ(frame.seq, *good);
+  EXPECT_EQ(frame.image.rgb, Reference(Camera(100)).rgb);
+}
+
+TEST_F(SessionTest, OpeningIsChecked) {
+  v1::Dataset no_views = Dataset(Camera(0));
+  no_views.clear_views();
+  auto s = SessionClient::Open(cluster_->root_address(), no_views);
+  ASSERT_TRUE(s.ok());
+  EXPECT_TRUE(absl::IsInvalidArgument((*s)->Next().status()));
+  v1::Dataset outside = Dataset(Camera(0));
+  outside.set_volume("../p.nrrd");
+  s = SessionClient::Open(cluster_->root_address(), outside);
+  ASSERT_TRUE(s.ok());
+  auto e = (*s)->Next();
+  EXPECT_FALSE(e.ok());
+  EXPECT_NE(e.status().message().find("p.nrrd"), std::string::npos) << e.status();
+}
+
+TEST_F(SessionTest, BatchJobsRunBesideAnOpenSession) {
+  auto s = SessionClient::Open(cluster_->root_address(), Dataset(Camera(30)));
+  ASSERT_TRUE(s.ok());
+  ASSERT_TRUE((*s)->Next()->ready);
+  NextFull(**s);
+  v1::Job job;
+  v1::Dataset d = Dataset(Camera(45));
+  d.mutable_views(0)->set_output(dir_ + "/job.exr");
+  *job.add_datasets() = d;
+  auto stats = SubmitAndWatch(cluster_->root_address(), job, WatchOptions{});
+  ASSERT_TRUE(stats.ok()) << stats.status();
+  auto image = ReadImage(dir_ + "/job.exr");
+  ASSERT_TRUE(image.ok());
+  EXPECT_EQ(image->rgb, Reference(Camera(45)).rgb);
+  auto seq = (*s)->SetView(Camera(60));
+  EXPECT_EQ(NextFull(**s).seq, *seq);
+}
+
+}  // namespace
+}  // namespace transtick
