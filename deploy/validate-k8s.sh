@@ -46,7 +46,8 @@ typos=(
   "worker.yaml|s/^      containers:/      contaners:/"
   "root.yaml|s/^            exec:/            exce:/"
   "display.yaml|s/imagePullPolicy:/imagePullPolicyy:/"
-  "worker.yaml|s/^  serviceName:/  servicename:/"
+  "worker.yaml|s/^  maxUnavailable:/  maxUnavailble:/"
+  "worker.yaml|/kind: PodDisruptionBudget/,$ s/component: worker$/component: workers/"
   "config.yaml|s/^  TRANSTICK_ROOT:/  TRANSTICK_ROOTS:/"
 )
 bad=0

@@ -187,6 +187,14 @@ function checkReferences(docs) {
       if (!ports.has(target)) s.errors.push(`port ${p.name ?? p.port}: targetPort ${target} is no port of ${match.doc.metadata.name}`);
     }
   }
+  for (const b of byKind("PodDisruptionBudget")) {
+    const sel = b.doc.spec?.selector?.matchLabels ?? {};
+    const match = workloads.find((w) => {
+      const labels = w.doc.spec?.template?.metadata?.labels ?? {};
+      return Object.entries(sel).every(([k, v]) => labels[k] === v);
+    });
+    if (Object.keys(sel).length === 0 || !match) b.errors.push("spec.selector.matchLabels matches no workload");
+  }
 }
 
 async function main(files) {
