@@ -146,8 +146,12 @@ grpc::Status Sessions::Serve(grpc::ServerContext* ctx,
   // an older one while a frame renders.
   std::thread reader([&] {
     v1::SessionRequest r;
+    // Errors wait for the render loop; a client that floods bad requests
+    // while a frame renders gets the first few back, not unbounded memory.
+    constexpr size_t kMaxNotices = 64;
     while (stream->Read(&r)) {
       absl::MutexLock lock(&inbox.mu);
+      if (inbox.notices.size() >= kMaxNotices) inbox.notices.pop_front();
       if (r.has_open() || r.preview() != 0) {
         inbox.notices.push_back(
             ErrorEvent(r.seq(), "open and preview belong to the session's first request"));
