@@ -95,6 +95,22 @@ TEST_F(SessionTest, FramesAreTheInProcessRenderOfTheirCamera) {
   ASSERT_TRUE(ready.ok() && ready->ready) << ready.status();
   EXPECT_EQ(ready->ready->dims_size(), 3);
   EXPECT_EQ(ready->ready->dims(2), 40);
+  ASSERT_EQ(ready->ready->histogram_size(), 64);
+  ASSERT_EQ(ready->ready->range_size(), 2);
+  {
+    auto volume = ReadVolume(dir_ + "/p.nrrd");
+    uint64_t total = 0, above = 0;
+    const float mid = 0.5f * (ready->ready->range(0) + ready->ready->range(1));
+    for (int b = 0; b < 64; ++b) {
+      total += ready->ready->histogram(b);
+      if (b >= 32) above += ready->ready->histogram(b);
+    }
+    EXPECT_EQ(total, volume->VoxelCount());
+    EXPECT_EQ(ready->ready->range(0), volume->Range()[0]);
+    uint64_t want_above = 0;  // the upper half of the bins holds the values from the middle up
+    for (float v : volume->values) want_above += v >= mid;
+    EXPECT_NEAR(static_cast<double>(above), static_cast<double>(want_above), 0.001 * total);
+  }
   // The preview, a quarter of the size, then the frame.
   auto preview = (*s)->Next();
   ASSERT_TRUE(preview.ok() && preview->has_frame) << preview.status();

@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <chrono>
 
 #include "absl/strings/escaping.h"
@@ -177,6 +178,18 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
     return absl::Status(scene.status().code(),
                         absl::StrCat(Shown(ds.volume()), ": ", scene.status().message()));
   data->scene = *std::move(scene);
+  data->range = volume->Range();
+  data->histogram.assign(LoadedDataset::kHistogramBins, 0);
+  {
+    // In double: a float volume's range may span nearly all of float.
+    const double lo = data->range[0], hi = data->range[1];
+    const double width = hi > lo ? (hi - lo) / LoadedDataset::kHistogramBins : 1;
+    for (float v : volume->values) {
+      if (!std::isfinite(v)) continue;
+      const double x = (v - lo) / width;
+      ++data->histogram[std::clamp(static_cast<int>(x), 0, LoadedDataset::kHistogramBins - 1)];
+    }
+  }
   data->load_ms = MsSince(t0);
   spdlog::info("dataset {} ({}): {}x{}x{}, {} sticks, prepared in {:.0f} ms", Shown(ds.volume()),
                RenderModeName(data->mode), volume->dims[0], volume->dims[1], volume->dims[2],

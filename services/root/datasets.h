@@ -57,6 +57,11 @@ struct LoadedDataset {
   BalanceMemory balance;
   // Materials or a transfer function that show nothing of the volume.
   std::vector<std::string> warnings;
+  // The volume's smallest and largest finite value, and kHistogramBins
+  // counts of equal width between them.
+  static constexpr int kHistogramBins = 64;
+  std::array<float, 2> range = {0, 0};
+  std::vector<uint64_t> histogram;
 };
 
 class Datasets {

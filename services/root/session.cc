@@ -126,6 +126,8 @@ grpc::Status Sessions::Serve(grpc::ServerContext* ctx,
     }
     ready->set_mode((*data)->mode == RenderMode::kDvr ? v1::DVR : v1::SURFACES);
     for (const std::string& w : (*data)->warnings) ready->add_warnings(w);
+    for (float r : (*data)->range) ready->add_range(r);
+    for (uint64_t n : (*data)->histogram) ready->add_histogram(n);
     stream->Write(e);
     return data;
   };
