@@ -44,20 +44,23 @@ void Progress::Update(double fraction, const std::string& what) {
   if (style_ == Style::kOff) return;
   std::lock_guard lock(mu_);
   const auto now = std::chrono::steady_clock::now();
+  fraction = std::clamp(fraction, 0.0, 1.0);
   if (!started_) {
     started_ = true;
-    start_ = now;
-    last_ = now;
-    if (style_ == Style::kLines) return;  // the first line after `every`
+    first_ = now;
+    first_fraction_ = fraction;
+    last_ = created_;
   }
+  // In a log, the first line `every` after the command began, then one per `every`.
   if (style_ == Style::kLines && now - last_ < every_) return;
   last_ = now;
-  fraction = std::clamp(fraction, 0.0, 1.0);
-  const double elapsed = std::chrono::duration<double>(now - start_).count();
-  // Too early an estimate misleads: none before 1% or a quarter second.
+  const double elapsed = std::chrono::duration<double>(now - created_).count();
+  const double measured = std::chrono::duration<double>(now - first_).count();
+  const double gained = fraction - first_fraction_;
+  // Too early an estimate misleads: none before 1% more or a quarter second.
   std::string eta = "time left ?";
-  if (fraction >= 0.01 && elapsed >= 0.25) {
-    eta = "time left " + Duration(elapsed * (1 - fraction) / fraction);
+  if (gained >= 0.01 && measured >= 0.25) {
+    eta = "time left " + Duration(measured * (1 - fraction) / gained);
   }
   const std::string line =
       absl::StrFormat("%s: %5.1f%%, %s elapsed, %s", what, 100 * fraction, Duration(elapsed), eta);

@@ -36,8 +36,9 @@ class Progress {
   Progress& operator=(const Progress&) = delete;
 
   // `fraction` of the whole work is done (in [0, 1]); `what` says where
-  // ("job-3 frame 2/30"). The time left is estimated from the time since
-  // the first Update and the fraction done. Thread-safe.
+  // ("job-3 frame 2/30"). The time elapsed counts from construction; the
+  // time left follows the rate since the first Update (so time spent in a
+  // queue or loading does not inflate it). Thread-safe.
   void Update(double fraction, const std::string& what);
   // A line that stays (a frame saved, a warning), in every style but kOff.
   void Say(const std::string& line);
@@ -56,10 +57,12 @@ class Progress {
   const std::chrono::milliseconds every_;
   std::FILE* const out_;
   std::mutex mu_;
-  bool started_ ABSL_GUARDED_BY(mu_) = false;
+  bool started_ ABSL_GUARDED_BY(mu_) = false;     // an Update came
   bool line_open_ ABSL_GUARDED_BY(mu_) = false;  // a terminal line to clear
-  std::chrono::steady_clock::time_point start_ ABSL_GUARDED_BY(mu_);
-  std::chrono::steady_clock::time_point last_ ABSL_GUARDED_BY(mu_);
+  const std::chrono::steady_clock::time_point created_ = std::chrono::steady_clock::now();
+  std::chrono::steady_clock::time_point first_ ABSL_GUARDED_BY(mu_);  // the first Update
+  double first_fraction_ ABSL_GUARDED_BY(mu_) = 0;
+  std::chrono::steady_clock::time_point last_ ABSL_GUARDED_BY(mu_);   // the last line
 };
 
 }  // namespace transtick
