@@ -4,6 +4,8 @@
 // one but ends on the newest, a bad request is an error event and the
 // session goes on, and batch jobs still run beside a session.
 #include <fstream>
+#include <limits>
+#include <random>
 #include <thread>
 
 #include "absl/strings/str_cat.h"
@@ -179,6 +181,57 @@ TEST_F(SessionTest, ABadRequestIsAnErrorAndTheSessionGoesOn) {
   auto frame = NextFull(**s);
   EXPECT_EQ(frame.seq, *good);
   EXPECT_EQ(frame.image.rgb, Reference(Camera(100)).rgb);
+}
+
+// Hostile and broken cameras, thrown at a session in bursts: every one is
+// answered by an error or a frame (or superseded), nothing crashes or
+// hangs, and a good camera afterwards still gets the exact image.
+TEST_F(SessionTest, RandomBrokenCamerasNeverBreakTheSession) {
+  auto s = SessionClient::Open(cluster_->root_address(), Dataset(Camera(10)), /*preview=*/3);
+  ASSERT_TRUE(s.ok());
+  ASSERT_TRUE((*s)->Next()->ready);
+  std::mt19937 rng(20261202);
+  auto pick = [&](std::initializer_list<double> values) {
+    std::vector<double> v(values);
+    return v[std::uniform_int_distribution<size_t>(0, v.size() - 1)(rng)];
+  };
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  uint64_t last = 0;
+  for (int i = 0; i < 300; ++i) {
+    v1::View v = Camera(pick({0, 45, -720, 1e300, nan, inf}),
+                        static_cast<int>(pick({0, -5, 1, 3, 24, 9000})),
+                        static_cast<int>(pick({0, 1, 2, 17, 100000})));
+    if (rng() % 3 == 0) v.set_zoom(pick({0, -1, 1e-300, 1e300, nan, 2}));
+    if (rng() % 4 == 0) v.set_fov(pick({0, 179.9, 180, -30, nan, 60}));
+    if (rng() % 5 == 0) v.set_samples(static_cast<int>(pick({0, 1, 64, 65, -3})));
+    if (rng() % 6 == 0) {
+      for (int k = 0; k < 3; ++k) v.add_background(static_cast<float>(pick({0, 1, 2, -1, nan})));
+    }
+    if (rng() % 7 == 0) {
+      auto* e = v.mutable_explicit_view();
+      for (int k = 0; k < 3; ++k) e->add_eye(pick({0, 100, nan}));
+      for (int k = 0; k < static_cast<int>(pick({0, 2, 3})); ++k) e->add_target(0);
+    }
+    if (rng() % 8 == 0) v.set_step(pick({-1, 1e-30, 0.5}));
+    auto seq = (*s)->SetView(v);
+    ASSERT_TRUE(seq.ok()) << seq.status();
+    last = *seq;
+    if (i % 25 == 24) {  // drain now and then: answers come in order of seq
+      while (true) {
+        auto e = (*s)->Next();
+        ASSERT_TRUE(e.ok()) << e.status();
+        if (e->seq == last && (!e->error.empty() || (e->has_frame && !e->preview))) break;
+        if (e->seq == last && e->has_frame && e->preview) continue;
+        ASSERT_LE(e->seq, last);
+      }
+    }
+  }
+  auto good = (*s)->SetView(Camera(77));
+  auto frame = NextFull(**s);
+  EXPECT_EQ(frame.seq, *good);
+  EXPECT_EQ(frame.image.rgb, Reference(Camera(77)).rgb);
+  EXPECT_TRUE((*s)->Close().ok());
 }
 
 TEST_F(SessionTest, OpeningIsChecked) {
