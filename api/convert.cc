@@ -223,6 +223,58 @@ absl::StatusOr<TransferFunction> LoadTransferFunction(const std::string& path) {
       path, [](const v1::TransferFunction& t) { return ToTransferFunction(t); });
 }
 
+absl::StatusOr<v1::Dataset> ResolvePreset(const v1::Dataset& dataset,
+                                          const std::array<float, 2>& range) {
+  if (!dataset.has_preset()) return dataset;
+  const v1::Preset& preset = dataset.preset();
+  v1::RenderMode mode = preset.mode();
+  if (mode == v1::RENDER_MODE_UNSPECIFIED) {
+    mode = v1::DVR;
+    for (const PresetInfo& info : ListPresets()) {
+      if (info.name == preset.name() && info.surfaces) mode = v1::SURFACES;
+    }
+  }
+  v1::Dataset out = dataset;
+  out.clear_preset();
+  if (mode == v1::SURFACES) {
+    auto c = PresetMaterials(preset.name(), range);
+    if (!c.ok()) return c.status();
+    v1::MaterialSet& set = *out.mutable_materials();
+    for (const Material& m : c->materials) {
+      v1::Material& pm = *set.add_materials();
+      pm.set_name(m.name);
+      pm.set_min(m.min);
+      pm.set_max(m.max);
+      for (float x : m.color) pm.add_color(x);
+      pm.set_opacity(m.opacity);
+      pm.set_ambient(m.ambient);
+      pm.set_diffuse(m.diffuse);
+      pm.set_specular(m.specular);
+      pm.set_shininess(m.shininess);
+    }
+  } else if (mode == v1::DVR) {
+    auto tf = PresetTransfer(preset.name(), range);
+    if (!tf.ok()) return tf.status();
+    v1::TransferFunction& t = *out.mutable_transfer();
+    for (const TransferPoint& point : tf->points) {
+      v1::TransferPoint& pp = *t.add_points();
+      pp.set_value(point.value);
+      for (float x : point.rgba) pp.add_rgba(x);
+    }
+    t.set_reference_step(tf->reference_step);
+    t.set_shading(tf->shading);
+    t.set_ambient(tf->ambient);
+    t.set_diffuse(tf->diffuse);
+    t.set_specular(tf->specular);
+    t.set_shininess(tf->shininess);
+  } else {
+    return absl::InvalidArgumentError(
+        absl::StrCat("preset '", preset.name(), "': mode ", static_cast<int>(mode),
+                     " is not surfaces or dvr"));
+  }
+  return out;
+}
+
 absl::StatusOr<CameraSpec> ToCameraSpec(const v1::View& v) {
   CameraSpec c;
   switch (v.projection()) {
@@ -279,6 +331,26 @@ absl::StatusOr<FrameRequest> ToFrameRequest(const v1::View& view) {
   auto camera = ToCameraSpec(view);
   if (!camera.ok()) return camera.status();
   return FrameRequest{*camera, ToRenderSettings(view)};
+}
+
+absl::StatusOr<v1::View> ToVolumeFrame(const v1::View& view, const Direction& direction,
+                                       const Vec3& volume_extent) {
+  if (direction == kIdentityDirection) return view;
+  auto world = ToCameraSpec(view);
+  if (!world.ok()) return world.status();
+  auto local = ToVolumeFrame(*world, direction, volume_extent);
+  if (!local.ok()) return local.status();
+  v1::View out = view;
+  out.clear_azimuth();
+  out.clear_elevation();
+  v1::ExplicitView& e = *out.mutable_explicit_view();
+  e.Clear();
+  for (int a = 0; a < 3; ++a) {
+    e.add_eye(local->view->eye[a]);
+    e.add_target(local->view->target[a]);
+    e.add_up(local->view->up[a]);
+  }
+  return out;
 }
 
 absl::StatusOr<RenderMode> ToRenderMode(v1::RenderMode mode) {

@@ -12,6 +12,7 @@
 #include "transtick/camera.h"
 #include "transtick/classification.h"
 #include "transtick/partition.h"
+#include "transtick/presets.h"
 #include "transtick/render.h"
 #include "transtick/tracer.h"
 
@@ -32,12 +33,25 @@ absl::StatusOr<TransferFunction> ToTransferFunction(const v1::TransferFunction& 
 absl::StatusOr<Classification> LoadMaterials(const std::string& path);
 absl::StatusOr<TransferFunction> LoadTransferFunction(const std::string& path);
 
+// `dataset` with its preset (Dataset.preset) replaced by the preset's
+// materials or transfer function for a volume of value range `range`
+// (presets.h); a dataset without a preset comes back unchanged. Errors name
+// the preset: an unknown name, or a mode the preset has nothing for.
+absl::StatusOr<v1::Dataset> ResolvePreset(const v1::Dataset& dataset,
+                                          const std::array<float, 2>& range);
+
 // A view's camera and render settings. ToCameraSpec checks what Camera
 // does not: the projection name, vector lengths, finite numbers.
 absl::StatusOr<CameraSpec> ToCameraSpec(const v1::View& view);
 RenderSettings ToRenderSettings(const v1::View& view);
 // Both at once.
 absl::StatusOr<FrameRequest> ToFrameRequest(const v1::View& view);
+// `view` (in world space) with its camera in the frame of a volume of
+// `direction` and extent (camera.h's ToVolumeFrame), as an explicit view:
+// what the root sends its workers and the in-process render uses. A volume
+// of identity direction gets `view` back unchanged.
+absl::StatusOr<v1::View> ToVolumeFrame(const v1::View& view, const Direction& direction,
+                                       const Vec3& volume_extent);
 
 // The render mode between its proto and core forms; RENDER_MODE_UNSPECIFIED
 // and unknown values are an error naming them.

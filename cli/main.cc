@@ -34,6 +34,7 @@
 #include "transtick/image_io.h"
 #include "transtick/render.h"
 #include "transtick/scene.h"
+#include "transtick/orientation.h"
 #include "transtick/volume_io.h"
 #include "version.h"
 
@@ -64,8 +65,9 @@ std::vector<FlagDoc> With(std::vector<FlagDoc> a, const std::vector<FlagDoc>& b)
 
 const std::vector<FlagDoc> kVolumeFlags = {
     {"volume", "FILE",
-     "NRRD (.nrrd, .nhdr), Levoy's .den, NIfTI-1 (.nii, .nii.gz); any other\n"
-     "extension, or --raw-dims given, is headerless raw"},
+     "NRRD (.nrrd, .nhdr), NIfTI-1 (.nii, .nii.gz), MetaImage (.mha, .mhd),\n"
+     "VTK image data (.vti), a directory of one DICOM series, Levoy's .den; any\n"
+     "other extension, or --raw-dims given, is headerless raw"},
     {"raw-dims", "XxYxZ", "a raw volume's size"},
     {"raw-type", "T", "uint8|int8|uint16|int16|uint32|int32|float (default uint8)"},
     {"raw-endian", "little|big", "byte order of a raw volume (default little)"},
@@ -75,8 +77,9 @@ const std::vector<FlagDoc> kVolumeFlags = {
 };
 
 const CommandDoc kInfoDoc = {
-    "transtick info", "", "Describes a volume: its size, sample type, spacing, range of values and a "
-    "histogram\nof 16 bins, which helps choose material intervals.", 0, 0, kVolumeFlags, ""};
+    "transtick info", "", "Describes a volume: its size, sample type, spacing, range of values, its\n"
+    "orientation (docs/formats.md#orientation) and a histogram of 16 bins, which helps\n"
+    "choose material intervals.", 0, 0, kVolumeFlags, ""};
 
 const std::vector<FlagDoc> kQuietFlag = {
     {"quiet", "", "no progress (on a terminal, a line with the time left; elsewhere a line\n"
@@ -92,14 +95,20 @@ const CommandDoc kRenderDoc = {
               {
                   {"materials", "FILE", "surfaces mode classification (JSON, docs/formats.md)"},
                   {"transfer", "FILE", "dvr mode transfer function (JSON)"},
-                  {"mode", "surfaces|dvr", "default: surfaces with --materials, dvr with --transfer"},
+                  {"preset", "NAME",
+                   "a named classification instead: ct-bone, ct-skin-bone, ct-angio,\n"
+                   "mr-brain; the colormaps grey, hot, cool-warm for dvr (docs/formats.md#presets)"},
+                  {"mode", "surfaces|dvr",
+                   "default: surfaces with --materials, dvr with --transfer, surfaces\n"
+                   "with a --preset that has materials"},
                   {"surface", "smooth|voxel",
                    "surfaces on the trilinear field, hit exactly (default), or the\n"
                    "paper's voxel faces (overrides the materials file's \"surface\")"},
-                  {"azimuth", "DEG", "orbit: rotation about the volume's Y axis (0 looks along -Z)"},
+                  {"azimuth", "DEG", "orbit: rotation about the world's Y axis (0 looks along -Z)"},
                   {"elevation", "DEG", "orbit: tilt toward +Y"},
                   {"zoom", "F", "orbit: 1 frames the whole volume (default 1)"},
-                  {"eye", "X,Y,Z", "explicit view, with --target: world units, volume centred at 0"},
+                  {"eye", "X,Y,Z", "explicit view, with --target: world units (patient LPS), volume\n"
+                                   "centred at 0"},
                   {"target", "X,Y,Z", "the point looked at"},
                   {"up", "X,Y,Z", "the explicit view's up (default 0,1,0)"},
                   {"projection", "perspective|orthographic", "camera model (default perspective)"},
@@ -281,7 +290,8 @@ int Info(int argc, char** argv) {
   std::cout << flags->Get("volume") << ": " << volume->dims[0] << "x" << volume->dims[1] << "x"
             << volume->dims[2] << " " << ScalarTypeName(volume->source_type) << ", spacing "
             << volume->spacing[0] << " " << volume->spacing[1] << " " << volume->spacing[2]
-            << ", values " << range[0] << " .. " << range[1] << "\n";
+            << ", values " << range[0] << " .. " << range[1] << "\n"
+            << "  " << DescribeOrientation(*volume) << "\n";
   // A coarse histogram helps choose material intervals.
   constexpr int kBins = 16;
   // In double: a float volume's range may span nearly all of float, and
@@ -401,7 +411,8 @@ void WriteStats(const std::string& path, const google::protobuf::Message& m) {
 
 // --local 0: the reference renderer, in this process without gRPC.
 int RenderInProcess(const Flags& flags, const v1::View& view, bool dvr,
-                    const Classification& classification, const TransferFunction& transfer) {
+                    Classification classification, TransferFunction transfer,
+                    const v1::Dataset& dataset) {
   auto fail = [](const absl::Status& s) { return Fail("render", s); };
   auto threads = flags.GetInt("threads", 0);
   if (!threads.ok()) return fail(threads.status());
@@ -412,13 +423,31 @@ int RenderInProcess(const Flags& flags, const v1::View& view, bool dvr,
   auto volume = LoadVolume(flags);
   if (!volume.ok()) return fail(volume.status());
   const double load_ms = MsSince(t_load);
+  if (dataset.has_preset()) {
+    // As the root resolves it: against the volume's range.
+    auto resolved = ResolvePreset(dataset, volume->Range());
+    if (!resolved.ok()) return fail(resolved.status());
+    if (dvr) {
+      auto tf = ToTransferFunction(resolved->transfer());
+      if (!tf.ok()) return fail(tf.status());
+      transfer = *std::move(tf);
+    } else {
+      auto c = ToClassification(resolved->materials());
+      if (!c.ok()) return fail(c.status());
+      classification = *std::move(c);
+    }
+  }
   auto t_prepare = std::chrono::steady_clock::now();
   auto scene = dvr ? Scene::ForDvr(*volume, transfer) : Scene::ForSurfaces(*volume, classification);
   if (!scene.ok()) return fail(scene.status());
   const double prepare_ms = MsSince(t_prepare);
   Vec3 extent{volume->dims[0] * volume->spacing[0], volume->dims[1] * volume->spacing[1],
               volume->dims[2] * volume->spacing[2]};
-  auto camera = Camera::Create(*ToCameraSpec(view), extent);
+  // The camera in the volume's frame, mapped as the root maps it for its
+  // workers (ToVolumeFrame), so both renders see the same doubles.
+  auto local_view = ToVolumeFrame(view, volume->direction, extent);
+  if (!local_view.ok()) return fail(local_view.status());
+  auto camera = Camera::Create(*ToCameraSpec(*local_view), extent);
   if (!camera.ok()) return fail(camera.status());
   Progress progress(Progress::ForStderr(flags.Has("quiet")));
   const std::vector<std::string> warnings =
@@ -513,6 +542,8 @@ absl::Status CheckRenderFlags(const Flags& f) {
   std::vector<absl::Status> checks = {
       Exclusive(f, "materials", {"transfer"},
                 "surfaces mode takes --materials, dvr mode --transfer"),
+      Exclusive(f, "preset", {"materials", "transfer", "surface"},
+                "--preset stands for the classification"),
       Exclusive(f, "eye", {"azimuth", "elevation", "zoom"},
                 "a view is explicit (--eye, --target) or an orbit (--azimuth, --elevation, --zoom)"),
       Exclusive(f, "target", {"azimuth", "elevation", "zoom"},
@@ -531,7 +562,14 @@ absl::Status CheckRenderFlags(const Flags& f) {
         "--fov and --projection orthographic contradict each other: an orthographic camera has "
         "no field of view (--zoom sets its extent)");
   }
-  const bool dvr = mode.empty() ? f.Has("transfer") : mode == "dvr";
+  bool dvr = mode.empty() ? f.Has("transfer") : mode == "dvr";
+  if (mode.empty() && f.Has("preset")) {
+    // A preset without materials (a colormap) is for dvr.
+    dvr = true;
+    for (const PresetInfo& p : ListPresets()) {
+      if (p.name == f.Get("preset") && p.surfaces) dvr = false;
+    }
+  }
   if (mode == "surfaces" && f.Has("transfer")) {
     return absl::InvalidArgumentError("--mode surfaces and --transfer contradict each other: "
                                       "surfaces mode takes --materials");
@@ -581,16 +619,27 @@ int Render(int argc, char** argv) {
   if (absl::Status s = UseSecurity(*flags); !s.ok()) return fail(s);
 
   // Everything about the request is checked before the volume is read.
-  std::string mode_name = flags->Get("mode", flags->Has("transfer") ? "dvr" : "surfaces");
+  // --preset NAME stands for --materials or --transfer (presets.h).
+  const bool preset = flags->Has("preset");
+  std::string default_mode = flags->Has("transfer") ? "dvr" : "surfaces";
+  if (preset) {
+    v1::Dataset probe;
+    probe.mutable_preset()->set_name(flags->Get("preset"));
+    auto resolved = ResolvePreset(probe, {0.0f, 1.0f});
+    if (!resolved.ok()) return fail(absl::InvalidArgumentError(
+        absl::StrCat("--preset: ", resolved.status().message())));
+    default_mode = resolved->has_materials() ? "surfaces" : "dvr";
+  }
+  std::string mode_name = flags->Get("mode", default_mode);
   if (mode_name != "surfaces" && mode_name != "dvr") {
     return fail(absl::InvalidArgumentError("--mode must be surfaces or dvr"));
   }
   const bool dvr = mode_name == "dvr";
-  if (!dvr && !flags->Has("materials")) {
-    return fail(absl::InvalidArgumentError("surfaces mode needs --materials FILE"));
+  if (!preset && !dvr && !flags->Has("materials")) {
+    return fail(absl::InvalidArgumentError("surfaces mode needs --materials FILE or --preset NAME"));
   }
-  if (dvr && !flags->Has("transfer")) {
-    return fail(absl::InvalidArgumentError("dvr mode needs --transfer FILE"));
+  if (!preset && dvr && !flags->Has("transfer")) {
+    return fail(absl::InvalidArgumentError("dvr mode needs --transfer FILE or --preset NAME"));
   }
   auto view = ViewFromFlags(*flags);
   if (!view.ok()) return fail(view.status());
@@ -610,9 +659,18 @@ int Render(int argc, char** argv) {
   Classification classification;
   TransferFunction transfer;
   const std::string settings_file = flags->Get(dvr ? "transfer" : "materials");
-  auto text = ReadTextFile(settings_file);
-  if (!text.ok()) return fail(text.status());
-  if (dvr) {
+  absl::StatusOr<std::string> text;
+  if (!preset) {
+    text = ReadTextFile(settings_file);
+    if (!text.ok()) return fail(text.status());
+  }
+  if (preset) {
+    dataset.mutable_preset()->set_name(flags->Get("preset"));
+    dataset.mutable_preset()->set_mode(dvr ? v1::DVR : v1::SURFACES);
+    if (auto r = ResolvePreset(dataset, {0.0f, 1.0f}); !r.ok()) {
+      return fail(absl::InvalidArgumentError(absl::StrCat("--preset: ", r.status().message())));
+    }
+  } else if (dvr) {
     if (auto s = ParseJson(*text, settings_file, dataset.mutable_transfer()); !s.ok())
       return fail(s);
     auto tf = ToTransferFunction(dataset.transfer());
@@ -637,7 +695,7 @@ int Render(int argc, char** argv) {
     classification = *std::move(c);
   }
   if (*local == 0 && !flags->Has("root")) {
-    return RenderInProcess(*flags, *view, dvr, classification, transfer);
+    return RenderInProcess(*flags, *view, dvr, classification, transfer, dataset);
   }
 
   // On a cluster: an embedded one (--local N), or a running one (--root).
@@ -646,8 +704,9 @@ int Render(int argc, char** argv) {
   std::string root = flags->Get("root");
   if (root.empty()) {
     std::error_code ec;
-    const std::filesystem::path abs = std::filesystem::absolute(volume, ec);
-    if (!std::filesystem::is_regular_file(abs, ec)) {
+    std::filesystem::path abs = std::filesystem::absolute(volume, ec).lexically_normal();
+    if (!abs.has_filename()) abs = abs.parent_path();  // "series/": a DICOM directory
+    if (!std::filesystem::is_regular_file(abs, ec) && !std::filesystem::is_directory(abs, ec)) {
       return fail(absl::NotFoundError(absl::StrCat(volume, ": cannot open")));
     }
     LocalCluster::Options co;

@@ -319,7 +319,7 @@ TEST_F(VolumeIoTest, NrrdSpaceDirections) {
   const std::string path =
       Write("d.nrrd", NrrdHeader("uint8", "raw", "",
                                  "space: left-posterior-superior\n"
-                                 "space directions: (0,2,0) ( -3, 0, 4) (0,0,0.5)\n"
+                                 "space directions: (0,2,0) ( -3, 0, 4) (0.4,0,0.3)\n"
                                  "space origin: (1,2,3)\nkinds: domain domain domain\n") +
                           "\n" + Encode(values, ScalarType::kUint8, ByteOrder::kLittle));
   absl::StatusOr<Volume> volume = ReadNrrd(path);

@@ -132,4 +132,28 @@ ImageRect Camera::Footprint(const Vec3& lo, const Vec3& hi) const {
   return r;
 }
 
+absl::StatusOr<CameraSpec> ToVolumeFrame(const CameraSpec& world, const Direction& direction,
+                                         const Vec3& volume_extent) {
+  if (direction == kIdentityDirection) return world;
+  auto camera = Camera::Create(world, volume_extent);
+  if (!camera.ok()) return camera.status();
+  // Local coordinate a of a world vector w is direction[a] . w.
+  auto local = [&](const Vec3& w) {
+    Vec3 l;
+    for (int a = 0; a < 3; ++a) {
+      l[a] = direction[a][0] * w[0] + direction[a][1] * w[1] + direction[a][2] * w[2];
+    }
+    return l;
+  };
+  CameraSpec spec = world;
+  ExplicitView view;
+  view.eye = local(camera->eye());
+  view.target = local(camera->eye() + camera->forward());
+  view.up = local(camera->up());
+  spec.view = view;
+  spec.azimuth_deg = 0;
+  spec.elevation_deg = 0;
+  return spec;
+}
+
 }  // namespace transtick

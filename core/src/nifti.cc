@@ -11,6 +11,11 @@
 //      108  float32      vox_offset   where the samples start
 //      112  float32      scl_slope    value = stored * slope + inter,
 //      116  float32      scl_inter      unless slope is 0 (no scaling)
+//      252  int16        qform_code   > 0: the quaternion below is valid
+//      254  int16        sform_code   > 0: the srow affine below is valid
+//      256  float32[3]   quatern_b, quatern_c, quatern_d
+//      268  float32[3]   qoffset_x, qoffset_y, qoffset_z
+//      280  float32[12]  srow_x, srow_y, srow_z (4 each: i, j, k, offset)
 //      344  char[4]      magic        "n+1\0" (single file)
 // Samples follow at vox_offset, x fastest. Between byte 348 and vox_offset
 // may sit extensions, which are skipped; bytes after the samples are ignored
@@ -19,15 +24,23 @@
 // Accepted: dim[0] = 3, or up to 7 with every axis beyond the third of size
 // 1 (a single time point). A nonpositive or non-finite pixdim is taken as 1,
 // as many writers leave it unset; its sign is dropped.
+//
+// Orientation (world RAS in the file, converted to LPS by negating x and y):
+// the sform when sform_code > 0 and its axes are orthogonal; else the qform
+// when qform_code > 0 (a rotation by the quaternion, with pixdim[0] = -1
+// reversing k); else the identity. A sheared sform with no qform is refused.
+// The spacing stays pixdim's.
 #include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "transtick/orientation.h"
 #include "transtick/volume_io.h"
 #include "volume_io_internal.h"
 
@@ -111,7 +124,29 @@ struct Header {
   uint64_t vox_offset;
   float slope;
   float inter;
+  // The index axes and origin in RAS, from the sform or the qform; unset
+  // when the file gives neither.
+  std::optional<std::array<std::array<double, 3>, 3>> axes;
+  std::optional<std::array<std::array<double, 3>, 3>> qform_axes;  // a fallback for a sheared sform
+  std::array<double, 3> origin = {0, 0, 0};
+  std::array<double, 3> qform_origin = {0, 0, 0};
 };
+
+// The qform's axes (columns of the rotation, the k axis times qfac).
+std::array<std::array<double, 3>, 3> QformAxes(const HeaderView& h) {
+  const double b = h.F32(256), c = h.F32(260), d = h.F32(264);
+  const double aa = 1.0 - (b * b + c * c + d * d);
+  const double a = aa > 0 ? std::sqrt(aa) : 0.0;
+  const double qfac = h.F32(76) < 0 ? -1.0 : 1.0;
+  const double r[3][3] = {{a * a + b * b - c * c - d * d, 2 * (b * c - a * d), 2 * (b * d + a * c)},
+                          {2 * (b * c + a * d), a * a + c * c - b * b - d * d, 2 * (c * d - a * b)},
+                          {2 * (b * d - a * c), 2 * (c * d + a * b), a * a + d * d - c * c - b * b}};
+  std::array<std::array<double, 3>, 3> axes;
+  for (int j = 0; j < 3; ++j) {
+    for (int w = 0; w < 3; ++w) axes[j][w] = r[w][j] * (j == 2 ? qfac : 1.0);
+  }
+  return axes;
+}
 
 absl::StatusOr<Header> ParseHeader(const std::string& path, const unsigned char* bytes) {
   Header header;
@@ -195,6 +230,22 @@ absl::StatusOr<Header> ParseHeader(const std::string& path, const unsigned char*
 
   header.slope = h.F32(112);
   header.inter = h.F32(116);
+  const int qform_code = h.I16(252), sform_code = h.I16(254);
+  if (qform_code > 0) {
+    header.qform_axes = QformAxes(h);
+    header.qform_origin = {h.F32(268), h.F32(272), h.F32(276)};
+  }
+  if (sform_code > 0) {
+    std::array<std::array<double, 3>, 3> axes;
+    for (int j = 0; j < 3; ++j) {
+      for (int w = 0; w < 3; ++w) axes[j][w] = h.F32(280 + 16 * w + 4 * j);
+    }
+    header.axes = axes;
+    header.origin = {h.F32(280 + 12), h.F32(296 + 12), h.F32(312 + 12)};
+  } else if (header.qform_axes) {
+    header.axes = header.qform_axes;
+    header.origin = header.qform_origin;
+  }
   return header;
 }
 
@@ -273,6 +324,26 @@ absl::StatusOr<Volume> ReadNifti(const std::string& path, const ReadOptions& opt
     if (!status.ok()) return status;
   }
   ApplyScaling(header->slope, header->inter, &volume.values);
+  if (header->axes) {
+    // RAS to LPS.
+    auto to_lps = [](std::array<std::array<double, 3>, 3> axes, std::array<double, 3>* origin) {
+      for (auto& axis : axes) {
+        axis[0] = -axis[0];
+        axis[1] = -axis[1];
+      }
+      (*origin)[0] = -(*origin)[0];
+      (*origin)[1] = -(*origin)[1];
+      return axes;
+    };
+    std::array<double, 3> origin = header->origin;
+    absl::Status s = SetOrientation(path, to_lps(*header->axes, &origin), origin, &volume);
+    if (!s.ok() && header->qform_axes && header->axes != header->qform_axes) {
+      // A sheared sform: the qform is the scanner's rigid placement.
+      origin = header->qform_origin;
+      s = SetOrientation(path, to_lps(*header->qform_axes, &origin), origin, &volume);
+    }
+    if (!s.ok()) return s;
+  }
   return volume;
 }
 

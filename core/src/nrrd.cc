@@ -14,8 +14,18 @@
 // endian (needed for samples wider than a byte), spacings or space directions
 // (the length of each direction vector is the spacing), byte skip (>= 0, or
 // -1 for raw data: "the data are the last bytes of the file"), line skip, data
-// file (a single file, relative to the header's directory). Other fields
-// (kinds, space origin, labels, ...) are accepted and ignored.
+// file (a single file, relative to the header's directory), and for the
+// orientation space (or space dimension: 3), space directions (three 3-vectors:
+// each index axis's step in space) and space origin. Other fields (kinds,
+// labels, ...) are accepted and ignored.
+//
+// Orientation: with three 3-component space directions, the volume's
+// direction and origin are set from them (orientation.h). The space is
+// converted to LPS: right-anterior-superior (RAS) negates x and y,
+// left-anterior-superior (LAS) y, right-posterior-superior (RPS) x; LPS,
+// scanner-xyz, 3D-right-handed and a bare space dimension are taken as LPS
+// already. Left-handed spaces (3D-left-handed, ...-time) are refused. Without
+// space directions (spacings only) the direction is the identity.
 //
 // Line skip counts lines of the data file before decompression; byte skip
 // counts bytes after decompression, as teem does.
@@ -31,6 +41,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/string_view.h"
+#include "transtick/orientation.h"
 #include "transtick/volume_io.h"
 #include "volume_io_internal.h"
 
@@ -82,10 +93,54 @@ absl::StatusOr<double> CleanSpacing(const std::string& path, absl::string_view f
   return s;
 }
 
+struct SpaceDirections {
+  std::array<double, 3> lengths;
+  // Each axis's vector when all three have three components.
+  std::optional<std::array<std::array<double, 3>, 3>> vectors;
+};
+
+// "(x,y,z)" of space origin.
+absl::StatusOr<std::array<double, 3>> ParseVector(const std::string& path, absl::string_view field,
+                                                  absl::string_view value) {
+  value = absl::StripAsciiWhitespace(value);
+  if (value.size() < 2 || value.front() != '(' || value.back() != ')') {
+    return Error(path, absl::StrCat(field, ": '", value, "' is not an (x,y,z) vector"));
+  }
+  std::vector<absl::string_view> parts = absl::StrSplit(value.substr(1, value.size() - 2), ',');
+  if (parts.size() != 3) {
+    return Error(path, absl::StrCat(field, ": vector with ", parts.size(),
+                                    " components, expected 3"));
+  }
+  std::array<double, 3> v;
+  for (int i = 0; i < 3; ++i) {
+    if (!absl::SimpleAtod(absl::StripAsciiWhitespace(parts[i]), &v[i]) || !std::isfinite(v[i])) {
+      return Error(path, absl::StrCat(field, ": '", parts[i], "' is not a finite number"));
+    }
+  }
+  return v;
+}
+
+// The signs that take a NRRD space's coordinates to LPS, or an error.
+absl::StatusOr<std::array<double, 3>> ToLps(const std::string& path, absl::string_view space) {
+  const std::string s = absl::AsciiStrToLower(absl::StripAsciiWhitespace(space));
+  if (s == "left-posterior-superior" || s == "lps" || s == "scanner-xyz" ||
+      s == "3d-right-handed") {
+    return std::array<double, 3>{1, 1, 1};
+  }
+  if (s == "right-anterior-superior" || s == "ras") return std::array<double, 3>{-1, -1, 1};
+  if (s == "left-anterior-superior" || s == "las") return std::array<double, 3>{1, -1, 1};
+  if (s == "right-posterior-superior" || s == "rps") return std::array<double, 3>{-1, 1, 1};
+  return Error(path, absl::StrCat("space '", space,
+                                  "' is not supported (supported: left-posterior-superior, "
+                                  "right-anterior-superior, left-anterior-superior, "
+                                  "right-posterior-superior, scanner-xyz, 3D-right-handed)"));
+}
+
 // "(1,0,0) (0,1,0) (0,0,2)" or with "none" for non-spatial axes.
-absl::StatusOr<std::array<double, 3>> ParseSpaceDirections(const std::string& path,
-                                                           absl::string_view value) {
+absl::StatusOr<SpaceDirections> ParseSpaceDirections(const std::string& path,
+                                                     absl::string_view value) {
   std::vector<double> lengths;
+  std::vector<std::array<double, 3>> vectors;
   size_t i = 0;
   while (i < value.size()) {
     if (absl::ascii_isspace(static_cast<unsigned char>(value[i]))) {
@@ -100,14 +155,17 @@ absl::StatusOr<std::array<double, 3>> ParseSpaceDirections(const std::string& pa
       }
       double sum = 0.0;
       int components = 0;
+      std::array<double, 3> vector = {0, 0, 0};
       for (absl::string_view part : absl::StrSplit(value.substr(i + 1, close - i - 1), ',')) {
         double c = 0.0;
         if (!absl::SimpleAtod(absl::StripAsciiWhitespace(part), &c)) {
           return Error(path, absl::StrCat("space directions: '", part, "' is not a number"));
         }
         sum += c * c;
+        if (components < 3) vector[components] = c;
         ++components;
       }
+      if (components == 3) vectors.push_back(vector);
       if (components < 1 || components > 3) {
         return Error(path, absl::StrCat("space directions: vector with ", components,
                                         " components, expected 1 to 3"));
@@ -124,7 +182,10 @@ absl::StatusOr<std::array<double, 3>> ParseSpaceDirections(const std::string& pa
   if (lengths.size() != 3) {
     return Error(path, absl::StrCat("space directions: expected 3 vectors, got ", lengths.size()));
   }
-  return std::array<double, 3>{lengths[0], lengths[1], lengths[2]};
+  SpaceDirections out;
+  out.lengths = {lengths[0], lengths[1], lengths[2]};
+  if (vectors.size() == 3) out.vectors = {vectors[0], vectors[1], vectors[2]};
+  return out;
 }
 
 absl::StatusOr<int64_t> ParseInteger(const std::string& path, absl::string_view field,
@@ -134,12 +195,6 @@ absl::StatusOr<int64_t> ParseInteger(const std::string& path, absl::string_view 
     return Error(path, absl::StrCat(field, ": '", text, "' is not an integer"));
   }
   return v;
-}
-
-// The directory part of `path`, with a trailing '/', or "" for a bare name.
-std::string DirectoryOf(const std::string& path) {
-  size_t slash = path.find_last_of('/');
-  return slash == std::string::npos ? std::string() : path.substr(0, slash + 1);
 }
 
 }  // namespace
@@ -267,10 +322,30 @@ absl::StatusOr<Volume> ReadNrrd(const std::string& path, const ReadOptions& opti
 
   // spacing: space directions win over spacings, as they carry more.
   std::array<double, 3> spacing = {1.0, 1.0, 1.0};
+  std::optional<std::array<std::array<double, 3>, 3>> axes;
+  std::array<double, 3> origin = {0, 0, 0};
   if (const std::string* directions = find("space directions")) {
-    absl::StatusOr<std::array<double, 3>> lengths = ParseSpaceDirections(path, *directions);
-    if (!lengths.ok()) return lengths.status();
-    spacing = *lengths;
+    absl::StatusOr<SpaceDirections> parsed = ParseSpaceDirections(path, *directions);
+    if (!parsed.ok()) return parsed.status();
+    spacing = parsed->lengths;
+    axes = parsed->vectors;
+    std::array<double, 3> to_lps = {1, 1, 1};
+    if (const std::string* space = find("space")) {
+      absl::StatusOr<std::array<double, 3>> signs = ToLps(path, *space);
+      if (!signs.ok()) return signs.status();
+      to_lps = *signs;
+    }
+    if (const std::string* o = find("space origin")) {
+      absl::StatusOr<std::array<double, 3>> parsed_origin = ParseVector(path, "space origin", *o);
+      if (!parsed_origin.ok()) return parsed_origin.status();
+      origin = *parsed_origin;
+    }
+    for (int w = 0; w < 3; ++w) {
+      origin[w] *= to_lps[w];
+      if (axes) {
+        for (auto& axis : *axes) axis[w] *= to_lps[w];
+      }
+    }
   } else if (const std::string* spacings = find("spacings")) {
     std::vector<absl::string_view> tokens = Tokens(*spacings);
     if (tokens.size() != 3) {
@@ -320,7 +395,7 @@ absl::StatusOr<Volume> ReadNrrd(const std::string& path, const ReadOptions& opti
           path, absl::StrCat("data file '", *data_file, "': only a single data file is supported"));
     }
     data_path =
-        data_file->front() == '/' ? *data_file : absl::StrCat(DirectoryOf(path), *data_file);
+        data_file->front() == '/' ? *data_file : absl::StrCat(vi::DirectoryOf(path), *data_file);
   } else {
     offset = *data_offset;  // present: checked above
   }
@@ -361,6 +436,9 @@ absl::StatusOr<Volume> ReadNrrd(const std::string& path, const ReadOptions& opti
     }
     absl::Status status = vi::ReadRawSamples(data_path, start, count, *type, order, &volume.values, options);
     if (!status.ok()) return status;
+    if (axes) {
+      if (absl::Status s = SetOrientation(path, *axes, origin, &volume); !s.ok()) return s;
+    }
     return volume;
   }
 
@@ -381,6 +459,9 @@ absl::StatusOr<Volume> ReadNrrd(const std::string& path, const ReadOptions& opti
   if (!at_end.ok()) return Annotate(at_end.status(), context);
   if (!*at_end) {
     return Error(path, absl::StrCat(context, ", gzip data in ", where, " holds more"));
+  }
+  if (axes) {
+    if (absl::Status s = SetOrientation(path, *axes, origin, &volume); !s.ok()) return s;
   }
   return volume;
 }

@@ -17,6 +17,8 @@
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_split.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "volume_io_internal.h"
@@ -93,6 +95,22 @@ absl::StatusOr<FilePtr> OpenFile(const std::string& path, const ReadOptions& opt
   return file;
 }
 
+bool IsDirectory(const std::string& path, const ReadOptions& options) {
+  int fd = -1;
+  if (options.open) {
+    absl::StatusOr<int> opened = options.open(path);
+    if (!opened.ok()) return false;
+    fd = *opened;
+  } else {
+    fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return false;
+  }
+  struct stat info;
+  const bool directory = ::fstat(fd, &info) == 0 && S_ISDIR(info.st_mode);
+  ::close(fd);
+  return directory;
+}
+
 absl::StatusOr<uint64_t> FileSize(const std::string& path, const ReadOptions& options) {
   absl::StatusOr<FilePtr> file = OpenFile(path, options);
   if (!file.ok()) return file.status();
@@ -136,6 +154,29 @@ absl::StatusOr<uint64_t> SkipLines(const std::string& path, uint64_t offset, uin
     }
     position += got;
   }
+}
+
+absl::StatusOr<std::vector<double>> ParseNumbers(const std::string& path, const std::string& what,
+                                                 const std::string& text, size_t want) {
+  std::vector<double> out;
+  for (absl::string_view t : absl::StrSplit(text, absl::ByAnyChar(" \t\r\n"), absl::SkipEmpty())) {
+    double v = 0;
+    if (!absl::SimpleAtod(t, &v) || !std::isfinite(v)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(path, ": ", what, ": '", t, "' is not a finite number"));
+    }
+    out.push_back(v);
+  }
+  if (out.size() != want) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(path, ": ", what, ": expected ", want, " numbers, got ", out.size()));
+  }
+  return out;
+}
+
+std::string DirectoryOf(const std::string& path) {
+  size_t slash = path.find_last_of('/');
+  return slash == std::string::npos ? std::string() : path.substr(0, slash + 1);
 }
 
 bool CheckedMul(uint64_t a, uint64_t b, uint64_t* out) {
@@ -459,6 +500,13 @@ absl::StatusOr<Volume> ReadVolume(const std::string& path, const ReadOptions& op
   if (absl::EndsWith(lower, ".nii") || absl::EndsWith(lower, ".nii.gz")) {
     return ReadNifti(path, options);
   }
+  if (absl::EndsWith(lower, ".mha") || absl::EndsWith(lower, ".mhd")) {
+    return ReadMetaImage(path, options);
+  }
+  if (absl::EndsWith(lower, ".vti")) return ReadVti(path, options);
+  if (absl::EndsWith(path, "/") || vi::IsDirectory(path, options)) {
+    return ReadDicomSeries(path, options);
+  }
   // Name the extension we saw so a typo ("cthead.nrd") is easy to spot.
   size_t slash = path.find_last_of('/');
   size_t dot = path.find_last_of('.');
@@ -466,7 +514,8 @@ absl::StatusOr<Volume> ReadVolume(const std::string& path, const ReadOptions& op
                               ? "no extension"
                               : absl::StrCat("extension '", path.substr(dot), "'");
   return absl::InvalidArgumentError(absl::StrCat(path, ": unknown volume format (", extension,
-                                                 "; expected .nrrd, .nhdr, .den, .nii, .nii.gz)"));
+                                                 "; expected .nrrd, .nhdr, .den, .nii, .nii.gz, .mha, .mhd, .vti, "
+                                                 "or a directory of DICOM files)"));
 }
 
 }  // namespace transtick

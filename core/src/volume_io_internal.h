@@ -31,6 +31,9 @@ using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
 // InvalidArgument if it is a directory or unreadable.
 absl::StatusOr<FilePtr> OpenFile(const std::string& path, const ReadOptions& options);
 
+// True if `path` opens (through options.open) as a directory.
+bool IsDirectory(const std::string& path, const ReadOptions& options);
+
 // Size in bytes of the regular file at `path`.
 absl::StatusOr<uint64_t> FileSize(const std::string& path, const ReadOptions& options);
 
@@ -40,6 +43,15 @@ absl::StatusOr<std::string> ReadPrefix(const std::string& path, uint64_t max_len
 
 // Returns the offset just past the `lines`-th '\n' at or after `offset`.
 absl::StatusOr<uint64_t> SkipLines(const std::string& path, uint64_t offset, uint64_t lines, const ReadOptions& options);
+
+// The whitespace-separated numbers of a header field, exactly `want` of
+// them, each finite; errors name the file and `what`.
+absl::StatusOr<std::vector<double>> ParseNumbers(const std::string& path, const std::string& what,
+                                                 const std::string& text, size_t want);
+
+// The directory part of `path`, with a trailing '/', or "" for a bare name:
+// where a detached header's data file is named from.
+std::string DirectoryOf(const std::string& path);
 
 // a * b, a + b; false on unsigned 64-bit overflow.
 bool CheckedMul(uint64_t a, uint64_t b, uint64_t* out);

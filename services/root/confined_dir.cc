@@ -1,6 +1,7 @@
 #include "confined_dir.h"
 
 #include <fcntl.h>
+#include <dirent.h>
 #include <linux/openat2.h>
 #include <sys/syscall.h>
 #include <unistd.h>
@@ -70,6 +71,23 @@ absl::StatusOr<int> ConfinedDir::OpenFile(const std::string& relative) const {
     return OpenError(relative, EXDEV);
   }
   return fd;
+}
+
+absl::StatusOr<std::vector<std::string>> ConfinedDir::ListDir(const std::string& relative) const {
+  auto fd = OpenFile(relative);
+  if (!fd.ok()) return fd.status();
+  DIR* dir = ::fdopendir(*fd);  // takes the descriptor; fails on a file
+  if (dir == nullptr) {
+    ::close(*fd);
+    return absl::InvalidArgumentError(absl::StrCat("'", relative, "' is not a directory"));
+  }
+  std::vector<std::string> names;
+  while (const dirent* e = ::readdir(dir)) {
+    if (names.size() >= kMaxListed) break;
+    names.emplace_back(e->d_name);
+  }
+  ::closedir(dir);
+  return names;
 }
 
 }  // namespace transtick

@@ -7,6 +7,7 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "absl/status/statusor.h"
 
@@ -28,6 +29,12 @@ class ConfinedDir {
   // PERMISSION_DENIED for a path that leads outside, NOT_FOUND for one
   // that does not exist.
   absl::StatusOr<int> OpenFile(const std::string& relative) const;
+
+  // The names in directory `relative` (a DICOM series), opened as OpenFile
+  // opens, with "." and ".."; at most kMaxListed of them. Errors as
+  // OpenFile's, or INVALID_ARGUMENT when it is not a directory.
+  static constexpr size_t kMaxListed = 1 << 17;
+  absl::StatusOr<std::vector<std::string>> ListDir(const std::string& relative) const;
 
  private:
   ConfinedDir(int fd, std::string real) : fd_(fd), real_(std::move(real)) {}

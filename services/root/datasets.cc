@@ -32,10 +32,12 @@ absl::Status CheckVolume(const ConfinedDir& dir, const std::string& relative) {
   auto fd = dir.OpenFile(relative);
   if (!fd.ok()) return absl::Status(fd.status().code(), Shown(std::string(fd.status().message())));
   struct stat st {};
-  const bool regular = ::fstat(*fd, &st) == 0 && S_ISREG(st.st_mode);
+  // A directory is a DICOM series.
+  const bool regular = ::fstat(*fd, &st) == 0 && (S_ISREG(st.st_mode) || S_ISDIR(st.st_mode));
   ::close(*fd);
   if (!regular) {
-    return absl::InvalidArgumentError(absl::StrCat("'", Shown(relative), "' is not a regular file"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("'", Shown(relative), "' is not a regular file or a directory"));
   }
   return absl::OkStatus();
 }
@@ -70,20 +72,27 @@ absl::StatusOr<JobPlan> Datasets::Plan(const v1::Job& job) const {
       return absl::InvalidArgumentError(
           where + ": materials_file and transfer_file are read by the client; send them inline");
     }
-    if (ds.has_materials()) {
-      auto c = ToClassification(ds.materials());
+    // A preset is checked here with a provisional range; Load resolves it
+    // against the volume's.
+    auto resolved = ResolvePreset(ds, {0.0f, 1.0f});
+    if (!resolved.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat(where, ": ", resolved.status().message()));
+    }
+    dp.preset = ds.has_preset();
+    if (resolved->has_materials()) {
+      auto c = ToClassification(resolved->materials());
       if (!c.ok()) {
         return absl::InvalidArgumentError(absl::StrCat(where, ": ", c.status().message()));
       }
       dp.classification = *std::move(c);
-    } else if (ds.has_transfer()) {
-      auto t = ToTransferFunction(ds.transfer());
+    } else if (resolved->has_transfer()) {
+      auto t = ToTransferFunction(resolved->transfer());
       if (!t.ok()) {
         return absl::InvalidArgumentError(absl::StrCat(where, ": ", t.status().message()));
       }
       dp.classification = *std::move(t);
     } else {
-      return absl::InvalidArgumentError(where + ": needs materials or a transfer function");
+      return absl::InvalidArgumentError(where + ": needs materials, a transfer function or a preset");
     }
     if (ds.has_raw()) {
       if (ds.raw().dims_size() != 3) {
@@ -152,6 +161,7 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
   ReadOptions ro;
   ro.max_bytes = max_volume_bytes_;
   ro.open = [dir = *dir](const std::string& path) { return dir->OpenFile(path); };
+  ro.list = [dir = *dir](const std::string& path) { return dir->ListDir(path); };
   absl::StatusOr<Volume> volume;
   if (plan.raw) {
     volume = ReadRaw(ds.volume(), *plan.raw, ro);
@@ -162,14 +172,31 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
   auto data = std::make_shared<LoadedDataset>();
   data->key = key;
   data->spec = identity;
+  std::variant<Classification, TransferFunction> classification = plan.classification;
+  if (plan.preset) {
+    // The workers get the preset's materials or transfer function inline,
+    // for this volume's range.
+    auto resolved = ResolvePreset(identity, volume->Range());
+    if (!resolved.ok()) return resolved.status();
+    data->spec = *std::move(resolved);
+    if (data->spec.has_materials()) {
+      auto c = ToClassification(data->spec.materials());
+      if (!c.ok()) return c.status();
+      classification = *std::move(c);
+    } else {
+      auto t = ToTransferFunction(data->spec.transfer());
+      if (!t.ok()) return t.status();
+      classification = *std::move(t);
+    }
+  }
   absl::StatusOr<Scene> scene;
-  if (const auto* c = std::get_if<Classification>(&plan.classification)) {
+  if (const auto* c = std::get_if<Classification>(&classification)) {
     data->mode = RenderMode::kSurfaces;
     scene = Scene::ForSurfaces(*volume, *c);
     data->warnings = UnseenMaterials(*c, *volume);
   } else {
     data->mode = RenderMode::kDvr;
-    const auto& transfer = std::get<TransferFunction>(plan.classification);
+    const auto& transfer = std::get<TransferFunction>(classification);
     scene = Scene::ForDvr(*volume, transfer);
     data->warnings = UnseenTransfer(transfer, *volume);
   }
@@ -190,6 +217,7 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
       ++data->histogram[std::clamp(static_cast<int>(x), 0, LoadedDataset::kHistogramBins - 1)];
     }
   }
+  data->direction = volume->direction;
   data->load_ms = MsSince(t0);
   spdlog::info("dataset {} ({}): {}x{}x{}, {} sticks, prepared in {:.0f} ms", Shown(ds.volume()),
                RenderModeName(data->mode), volume->dims[0], volume->dims[1], volume->dims[2],

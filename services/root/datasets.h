@@ -38,7 +38,9 @@ struct BalanceMemory {
 // and kept with it: what the runner needs in core types.
 struct DatasetPlan {
   std::optional<RawSpec> raw;  // a headerless raw file's layout
+  // A preset's is provisional: Load resolves it against the volume's range.
   std::variant<Classification, TransferFunction> classification;
+  bool preset = false;
   std::vector<FrameRequest> views;
   std::vector<v1::BalanceMode> balance;  // by view: its own or else its job's
 };
@@ -53,6 +55,9 @@ struct LoadedDataset {
   RenderMode mode = RenderMode::kSurfaces;
   v1::Dataset spec;  // without its views
   Scene scene;
+  // The volume's orientation (orientation.h): views go to the workers mapped
+  // into its frame (ToVolumeFrame).
+  Direction direction = kIdentityDirection;
   double load_ms = 0;
   BalanceMemory balance;
   // Materials or a transfer function that show nothing of the volume.

@@ -138,6 +138,17 @@ void FrameTurns::Release() {
 absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
   LoadedDataset& data = *task.data;
   const int planes = data.scene.dims()[1];
+  // The workers trace in the volume's frame; the client's view is in world
+  // space (ToVolumeFrame). Unchanged for a volume of identity direction.
+  const auto& dims = data.scene.dims();
+  const auto& spacing = data.scene.spacing();
+  auto local_view = ToVolumeFrame(
+      *task.view, data.direction,
+      Vec3{dims[0] * spacing[0], dims[1] * spacing[1], dims[2] * spacing[2]});
+  if (!local_view.ok()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(task.who, ": ", local_view.status().message()));
+  }
   absl::Status status = absl::CancelledError("cancelled");
   for (int attempt = 0; attempt < kAttempts; ++attempt) {
     if (attempt > 0) SleepUnless(kFirstBackoff * (1 << (attempt - 1)), task.cancelled);
@@ -166,7 +177,7 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
     const auto balance_start = Clock::now();
     bool prerendered = false;
     status = task.balancer->Plan(
-        *task.view, data.balance, layout,
+        *local_view, data.balance, layout,
         [&](const v1::View& test, Layout& probe) -> absl::StatusOr<FrameResult> {
           prerendered = true;
           if (absl::Status s = slabs_.Distribute(data, probe); !s.ok()) return s;
@@ -182,7 +193,7 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
     if (prerendered) out.report.balance_ms = MsSince(balance_start);
     if (task.on_attempt) task.on_attempt();
     auto result =
-        driver_.Run(*task.view, data, layout, task.cancelled, task.on_progress, task.on_chunk);
+        driver_.Run(*local_view, data, layout, task.cancelled, task.on_progress, task.on_chunk);
     if (!result.ok()) {
       status = result.status();
       if (status.code() != absl::StatusCode::kUnavailable || task.cancelled()) return status;

@@ -7,6 +7,7 @@
 
 #include "absl/status/statusor.h"
 #include "transtick/vec.h"
+#include "transtick/volume.h"
 
 namespace transtick {
 
@@ -18,8 +19,11 @@ struct ExplicitView {
   Vec3 up = {0, 1, 0};
 };
 
-// World space puts the volume's centre at the origin, axes along the volume's
-// x, y, z, units of the volume's spacing.
+// World space puts the volume's centre at the origin, units of the volume's
+// spacing, axes the world's (patient LPS, orientation.h). The tracer works in
+// the volume's own frame (axes along its index axes); ToVolumeFrame below
+// maps a world-space spec there. For a volume of identity direction the two
+// frames are the same.
 struct CameraSpec {
   static constexpr int kMaxImageSize = 8192;
   Projection projection = Projection::kPerspective;
@@ -78,6 +82,7 @@ class Camera {
 
   int width() const { return width_; }
   int height() const { return height_; }
+  const Vec3& eye() const { return eye_; }
   const Vec3& forward() const { return forward_; }
   const Vec3& right() const { return right_; }
   const Vec3& up() const { return up_; }
@@ -88,6 +93,18 @@ class Camera {
   Vec3 eye_, forward_, right_, up_;
   double half_height_ = 1;  // tan(fov/2) (perspective) or half the view height
 };
+
+// The camera `world` describes (in world space about the volume's centre),
+// as an explicit view in the frame of a volume whose index axes point along
+// `direction`: eye, target and up each multiplied by the inverse (the
+// transpose) of the rotation. The light follows, being camera-relative. A
+// volume of identity direction gets `world` back unchanged, bit for bit.
+// Every render (in-process, and the root for its workers) maps with this,
+// so all see the same doubles.
+// REQUIRES: `direction` is a rotation (orthonormal, determinant +1), as the
+// readers leave it (orientation.h).
+absl::StatusOr<CameraSpec> ToVolumeFrame(const CameraSpec& world, const Direction& direction,
+                                         const Vec3& volume_extent);
 
 }  // namespace transtick
 

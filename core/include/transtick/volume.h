@@ -17,10 +17,23 @@ enum class ScalarType { kUint8, kInt8, kUint16, kInt16, kUint32, kInt32, kFloat3
 std::string_view ScalarTypeName(ScalarType type);
 size_t ScalarTypeSize(ScalarType type);
 
+// Index axis a's unit vector in world coordinates is direction[a].
+using Direction = std::array<std::array<double, 3>, 3>;
+inline constexpr Direction kIdentityDirection = {{{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}};
+
 // A regular grid of scalar samples, x fastest, then y, then z. Voxel (x, y, z)
-// covers the box [x, x+1) x [y, y+1) x [z, z+1) in index space; world space is
-// index space scaled by `spacing` (millimetres, or whatever the file says).
-// Samples are stored as float whatever the source type: 4 bytes per voxel.
+// covers the box [x, x+1) x [y, y+1) x [z, z+1) in index space; the volume's
+// own frame is index space scaled by `spacing` (millimetres, or whatever the
+// file says). Samples are stored as float whatever the source type: 4 bytes
+// per voxel.
+//
+// Orientation (docs/formats.md, "Orientation"): the centre of sample
+// (i, j, k) lies in world space (patient coordinates, LPS: +x toward the
+// patient's left, +y posterior, +z superior) at
+//   origin + direction[0]·i·spacing[0] + direction[1]·j·spacing[1] + direction[2]·k·spacing[2].
+// The readers leave `direction` a rotation (orthonormal, determinant +1): a
+// file whose axes are a reflection is read with its x samples reversed
+// (`x_reversed`), which describes the same world geometry.
 //
 // A value type; not thread-safe for concurrent mutation, safe for concurrent
 // reads.
@@ -29,6 +42,9 @@ struct Volume {
   std::array<double, 3> spacing = {1.0, 1.0, 1.0};
   ScalarType source_type = ScalarType::kFloat32;
   std::vector<float> values;  // dims[0] * dims[1] * dims[2] samples
+  std::array<double, 3> origin = {0.0, 0.0, 0.0};
+  Direction direction = kIdentityDirection;
+  bool x_reversed = false;  // the reader reversed x to turn a reflection into a rotation
 
   size_t VoxelCount() const {
     return static_cast<size_t>(dims[0]) * static_cast<size_t>(dims[1]) *

@@ -1,4 +1,5 @@
-// Readers for volume files: NRRD, Levoy's .den, NIfTI-1 and headerless raw.
+// Readers for volume files: NRRD, Levoy's .den, NIfTI-1, MetaImage, VTK image
+// data, DICOM series and headerless raw.
 //
 // Every reader validates what it reads: a truncated file, a header whose sizes
 // overflow or disagree with the data, an unknown type or encoding each give an
@@ -12,6 +13,7 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <vector>
 
 #include "absl/status/statusor.h"
 #include "transtick/volume.h"
@@ -26,6 +28,10 @@ struct ReadOptions {
   // then owns, or an error naming the path. Null opens the path as given.
   // The root passes one that keeps every open inside its data directory.
   std::function<absl::StatusOr<int>(const std::string& path)> open;
+  // Lists the names in a directory (a DICOM series), or an error naming it.
+  // Null lists the path as given. The root passes one that stays inside its
+  // data directory, as `open` does.
+  std::function<absl::StatusOr<std::vector<std::string>>(const std::string& path)> list;
 };
 
 enum class ByteOrder { kLittle, kBig };
@@ -39,9 +45,14 @@ struct RawSpec {
   uint64_t header_bytes = 0;  // bytes to skip at the start of the file
 };
 
+// Every reader of a format that says where its volume lies (NRRD, NIfTI-1,
+// MetaImage, VTK image data, DICOM) sets Volume::origin and direction from it
+// (orientation.h); the others leave the identity.
+
 // NRRD: attached (.nrrd) and detached (.nhdr + data file) headers, encodings
 // raw and gzip, types uint8/int8/uint16/int16/uint32/int32/float, both byte
-// orders, "spacings" or "space directions" for the voxel size. 3-D only.
+// orders, "spacings" or "space directions" for the voxel size, space
+// directions, space origin and space for the orientation. 3-D only.
 absl::StatusOr<Volume> ReadNrrd(const std::string& path, const ReadOptions& options = {});
 
 // Levoy's .den (VolPack): a 62-byte header of 16-bit fields (plus one 32-bit
@@ -50,13 +61,32 @@ absl::StatusOr<Volume> ReadNrrd(const std::string& path, const ReadOptions& opti
 absl::StatusOr<Volume> ReadDen(const std::string& path, const ReadOptions& options = {});
 
 // NIfTI-1 single file (.nii, .nii.gz): 348-byte header, vox_offset, datatypes
-// matching ScalarType, pixdim for spacing, scl_slope/scl_inter applied.
+// matching ScalarType, pixdim for spacing, scl_slope/scl_inter applied,
+// sform or qform for the orientation.
 absl::StatusOr<Volume> ReadNifti(const std::string& path, const ReadOptions& options = {});
+
+// MetaImage (.mha attached, .mhd with a data file): 3-D scalar images, raw or
+// zlib-compressed, TransformMatrix and Offset for the orientation.
+absl::StatusOr<Volume> ReadMetaImage(const std::string& path, const ReadOptions& options = {});
+
+// VTK XML image data (.vti): one piece, one scalar point-data array in
+// appended raw encoding, uncompressed or vtkZLibDataCompressor; Origin,
+// Spacing and Direction for the orientation.
+absl::StatusOr<Volume> ReadVti(const std::string& path, const ReadOptions& options = {});
+
+// A directory holding one DICOM series of single-frame CT or MR slices, read
+// with GDCM: sorted by position along the slice normal, rescaled by slope
+// and intercept, spacing from PixelSpacing and the positions. Mixed series,
+// missing slices (gaps), duplicate positions, tilted gantries and slices of
+// different sizes are refused. Every file goes through `options.open`, the
+// directory through `options.list`.
+absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOptions& options = {});
 
 absl::StatusOr<Volume> ReadRaw(const std::string& path, const RawSpec& spec,
                                const ReadOptions& options = {});
 
-// Chooses the reader by extension: .nrrd/.nhdr, .den, .nii/.nii.gz.
+// Chooses the reader by extension: .nrrd/.nhdr, .den, .nii/.nii.gz,
+// .mha/.mhd, .vti; a directory is read as a DICOM series.
 absl::StatusOr<Volume> ReadVolume(const std::string& path, const ReadOptions& options = {});
 
 // Parses "uint8", "int16", "float", ... (NRRD's names and their synonyms).

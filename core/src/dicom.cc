@@ -1,0 +1,446 @@
+// DICOM series reader: a directory of single-frame CT or MR slices, read
+// with GDCM (Debian's libgdcm, the library DICOM toolkits and ITK build on).
+//
+// Each file in the directory is one slice; DICOMDIR and names starting with
+// '.' are passed over. Every file is opened through ReadOptions::open (so
+// the root's confinement holds) and given to GDCM as a stream. Each is read
+// twice: first its header only (up to the pixel data), which is checked
+// (sizes, pixel format, one frame) before GDCM reads any pixels, then in
+// full, which decodes the pixels in whatever transfer syntax GDCM supports.
+//
+// Attributes used:
+//   (0020,000E) SeriesInstanceUID   all slices the same: one series
+//   (0028,0010/0011) Rows, Columns  all slices the same
+//   (0028,0002) SamplesPerPixel 1, (0028,0008) NumberOfFrames 1 (or absent)
+//   (0028,0100) BitsAllocated 8/16/32, (0028,0103) PixelRepresentation
+//   (0028,0030) PixelSpacing        row spacing \ column spacing, the same
+//   (0020,0037) ImageOrientationPatient  row and column directions, the same
+//   (0020,0032) ImagePositionPatient     where the first pixel lies
+//   (0028,1053/1052) RescaleSlope, RescaleIntercept   value = stored × slope + intercept
+//
+// Slices are sorted by their position along the normal (row × column), so
+// the volume's z axis is the normal and its direction a rotation. The gaps
+// between consecutive positions give the z spacing: they must all be equal
+// (to 1% or 0.01 mm). A gap that is a multiple of the others (a missing
+// slice), two slices at one position, positions off the normal (a tilted
+// gantry) and files of other series are refused, naming the files.
+#include <gdcmAttribute.h>
+#include <gdcmImage.h>
+#include <gdcmImageReader.h>
+#include <gdcmReader.h>
+#include <gdcmTrace.h>
+#include <dirent.h>
+#include <ext/stdio_filebuf.h>
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <istream>
+#include <memory>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "absl/strings/ascii.h"
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_split.h"
+#include "absl/strings/strip.h"
+#include "transtick/orientation.h"
+#include "transtick/volume_io.h"
+#include "volume_io_internal.h"
+
+namespace transtick {
+namespace {
+
+namespace vi = volume_io_internal;
+
+// More slices than this is not a series we can mean to read.
+constexpr size_t kMaxSlices = 1 << 16;
+
+absl::Status Error(const std::string& path, absl::string_view message) {
+  return absl::InvalidArgumentError(absl::StrCat(path, ": ", message));
+}
+
+struct Slice {
+  std::string path;
+  std::string series;
+  int rows = 0, columns = 0;
+  int bits = 0;
+  bool is_signed = false;
+  std::array<double, 2> pixel_spacing = {1, 1};  // between rows, between columns
+  std::array<double, 6> orientation = {1, 0, 0, 0, 1, 0};
+  std::array<double, 3> position = {0, 0, 0};
+  double slope = 1, intercept = 0;
+  double along_normal = 0;
+  bool native = true;            // pixel data not encapsulated (compressed)
+  uint32_t pixel_length = 0;     // the pixel data's declared value length
+  uint64_t pixel_available = 0;  // bytes of the file from its value on
+};
+
+// A string element's value, trimmed of DICOM's padding; "" when absent.
+std::string Text(const gdcm::DataSet& ds, uint16_t group, uint16_t element) {
+  const gdcm::Tag tag(group, element);
+  if (!ds.FindDataElement(tag)) return "";
+  const gdcm::DataElement& de = ds.GetDataElement(tag);
+  const gdcm::ByteValue* bv = de.GetByteValue();
+  if (bv == nullptr) return "";
+  std::string s(bv->GetPointer(), bv->GetLength());
+  while (!s.empty() && (s.back() == '\0' || s.back() == ' ')) s.pop_back();
+  return std::string(absl::StripAsciiWhitespace(s));
+}
+
+// A US element's value, or -1 when absent or malformed.
+int Unsigned16(const gdcm::DataSet& ds, uint16_t group, uint16_t element) {
+  const gdcm::Tag tag(group, element);
+  if (!ds.FindDataElement(tag)) return -1;
+  const gdcm::ByteValue* bv = ds.GetDataElement(tag).GetByteValue();
+  if (bv == nullptr || bv->GetLength() < 2) return -1;
+  // Explicit and implicit little endian; a big-endian file's header fields
+  // are swapped by GDCM when it reads the data set.
+  const unsigned char* p = reinterpret_cast<const unsigned char*>(bv->GetPointer());
+  return p[0] | p[1] << 8;
+}
+
+// A decimal string's backslash-separated numbers.
+absl::StatusOr<std::vector<double>> Decimals(const std::string& path, const gdcm::DataSet& ds,
+                                             uint16_t group, uint16_t element, const char* name,
+                                             size_t want, bool required) {
+  const std::string text = Text(ds, group, element);
+  if (text.empty()) {
+    if (required) {
+      return Error(path, absl::StrFormat("has no %s (%04X,%04X)", name, group, element));
+    }
+    return std::vector<double>{};
+  }
+  std::vector<double> out;
+  for (absl::string_view part : absl::StrSplit(text, '\\')) {
+    double v = 0;
+    if (!absl::SimpleAtod(absl::StripAsciiWhitespace(part), &v) || !std::isfinite(v)) {
+      return Error(path, absl::StrCat(name, " '", text, "' is not ", want, " numbers"));
+    }
+    out.push_back(v);
+  }
+  if (out.size() != want) {
+    return Error(path, absl::StrCat(name, " '", text, "' is not ", want, " numbers"));
+  }
+  return out;
+}
+
+// GDCM reads from a stream over a descriptor opened through the hook.
+class FileStream {
+ public:
+  static absl::StatusOr<std::unique_ptr<FileStream>> Open(const std::string& path,
+                                                          const ReadOptions& options) {
+    absl::StatusOr<vi::FilePtr> file = vi::OpenFile(path, options);
+    if (!file.ok()) return file.status();
+    return std::unique_ptr<FileStream>(new FileStream(*std::move(file)));
+  }
+  std::istream& stream() { return stream_; }
+
+ private:
+  explicit FileStream(vi::FilePtr file)
+      : file_(std::move(file)), buffer_(file_.get(), std::ios::in), stream_(&buffer_) {}
+  vi::FilePtr file_;
+  __gnu_cxx::stdio_filebuf<char> buffer_;
+  std::istream stream_;
+};
+
+absl::StatusOr<Slice> ReadHeader(const std::string& path, const ReadOptions& options) {
+  absl::StatusOr<std::unique_ptr<FileStream>> file = FileStream::Open(path, options);
+  if (!file.ok()) return file.status();
+  absl::StatusOr<uint64_t> file_size = vi::FileSize(path, options);
+  if (!file_size.ok()) return file_size.status();
+  gdcm::Reader reader;
+  std::istream& stream = (*file)->stream();
+  reader.SetStream(stream);
+  // Skipping the pixel data leaves the stream at its value: nothing of it
+  // is read, and its length is checked below before GDCM reads it.
+  const gdcm::Tag pixel_tag(0x7fe0, 0x0010);
+  std::set<gdcm::Tag> skip = {pixel_tag};
+  if (!reader.ReadUpToTag(pixel_tag, skip)) {
+    return Error(path, "is not a DICOM file GDCM can read");
+  }
+  const gdcm::DataSet& ds = reader.GetFile().GetDataSet();
+  Slice s;
+  s.path = path;
+  const gdcm::TransferSyntax& syntax = reader.GetFile().GetHeader().GetDataSetTransferSyntax();
+  s.native = !syntax.IsEncapsulated();
+  stream.clear();
+  const std::streamoff value_at = stream.tellg();
+  if (value_at < 4 || static_cast<uint64_t>(value_at) > *file_size) {
+    return Error(path, "has no pixel data (7FE0,0010)");
+  }
+  {
+    // The value length precedes the value, in either VR form.
+    unsigned char vl[4];
+    stream.seekg(value_at - 4);
+    if (!stream.read(reinterpret_cast<char*>(vl), 4)) return Error(path, "has no pixel data");
+    const bool big = syntax.GetSwapCode() == gdcm::SwapCode::BigEndian;
+    s.pixel_length = big ? (uint32_t{vl[0]} << 24 | vl[1] << 16 | vl[2] << 8 | vl[3])
+                         : (uint32_t{vl[3]} << 24 | vl[2] << 16 | vl[1] << 8 | vl[0]);
+    s.pixel_available = *file_size - static_cast<uint64_t>(value_at);
+  }
+  s.series = Text(ds, 0x0020, 0x000e);
+  s.rows = Unsigned16(ds, 0x0028, 0x0010);
+  s.columns = Unsigned16(ds, 0x0028, 0x0011);
+  if (s.rows <= 0 || s.columns <= 0) {
+    return Error(path, absl::StrCat("has no image size (Rows ", s.rows, ", Columns ", s.columns, ")"));
+  }
+  const int samples = Unsigned16(ds, 0x0028, 0x0002);
+  if (samples != -1 && samples != 1) {
+    return Error(path, absl::StrCat("has ", samples,
+                                    " samples per pixel: only grey-level (1) images are supported"));
+  }
+  const std::string frames = Text(ds, 0x0028, 0x0008);
+  if (!frames.empty() && frames != "1") {
+    return Error(path, absl::StrCat("has ", frames,
+                                    " frames: only single-frame slices are supported"));
+  }
+  s.bits = Unsigned16(ds, 0x0028, 0x0100);
+  if (s.bits != 8 && s.bits != 16 && s.bits != 32) {
+    return Error(path, absl::StrCat("BitsAllocated ", s.bits, " is not 8, 16 or 32"));
+  }
+  const int representation = Unsigned16(ds, 0x0028, 0x0103);
+  s.is_signed = representation == 1;
+  absl::StatusOr<std::vector<double>> v =
+      Decimals(path, ds, 0x0028, 0x0030, "PixelSpacing", 2, false);
+  if (!v.ok()) return v.status();
+  if (!v->empty()) {
+    if (!((*v)[0] > 0) || !((*v)[1] > 0)) {
+      return Error(path, absl::StrCat("PixelSpacing ", (*v)[0], "\\", (*v)[1], " is not positive"));
+    }
+    s.pixel_spacing = {(*v)[0], (*v)[1]};
+  }
+  v = Decimals(path, ds, 0x0020, 0x0037, "ImageOrientationPatient", 6, true);
+  if (!v.ok()) return v.status();
+  std::copy(v->begin(), v->end(), s.orientation.begin());
+  v = Decimals(path, ds, 0x0020, 0x0032, "ImagePositionPatient", 3, true);
+  if (!v.ok()) return v.status();
+  std::copy(v->begin(), v->end(), s.position.begin());
+  v = Decimals(path, ds, 0x0028, 0x1053, "RescaleSlope", 1, false);
+  if (!v.ok()) return v.status();
+  if (!v->empty()) s.slope = (*v)[0];
+  v = Decimals(path, ds, 0x0028, 0x1052, "RescaleIntercept", 1, false);
+  if (!v.ok()) return v.status();
+  if (!v->empty()) s.intercept = (*v)[0];
+  // Before GDCM reads the pixels (and allocates their declared length):
+  // native pixel data must hold the image and lie within the file.
+  const uint64_t bytes = uint64_t{static_cast<uint32_t>(s.rows)} * s.columns * (s.bits / 8);
+  if (s.native && (s.pixel_length < bytes || s.pixel_length > s.pixel_available)) {
+    return Error(path, absl::StrCat("pixel data of ", s.pixel_length, " bytes (", s.pixel_available,
+                                    " in the file) for ", s.columns, "x", s.rows, " ", s.bits,
+                                    "-bit pixels that need ", bytes, " (truncated?)"));
+  }
+  if (!s.native && s.pixel_length != 0xffffffffu && s.pixel_length > s.pixel_available) {
+    return Error(path, absl::StrCat("pixel data of ", s.pixel_length, " bytes, the file holds ",
+                                    s.pixel_available, " (truncated?)"));
+  }
+  return s;
+}
+
+ScalarType TypeOf(const Slice& s) {
+  switch (s.bits) {
+    case 8:
+      return s.is_signed ? ScalarType::kInt8 : ScalarType::kUint8;
+    case 16:
+      return s.is_signed ? ScalarType::kInt16 : ScalarType::kUint16;
+    default:
+      return s.is_signed ? ScalarType::kInt32 : ScalarType::kUint32;
+  }
+}
+
+// Appends the slice's pixels, rescaled, to `out`.
+absl::Status ReadPixels(const Slice& s, const ReadOptions& options, std::vector<float>* out) {
+  absl::StatusOr<std::unique_ptr<FileStream>> file = FileStream::Open(s.path, options);
+  if (!file.ok()) return file.status();
+  gdcm::ImageReader reader;
+  reader.SetStream((*file)->stream());
+  if (!reader.Read()) return Error(s.path, "GDCM cannot read its pixel data");
+  const gdcm::Image& image = reader.GetImage();
+  const unsigned int* dims = image.GetDimensions();
+  const gdcm::PixelFormat& pf = image.GetPixelFormat();
+  if (image.GetNumberOfDimensions() < 2 || dims[0] != static_cast<unsigned>(s.columns) ||
+      dims[1] != static_cast<unsigned>(s.rows) ||
+      (image.GetNumberOfDimensions() == 3 && dims[2] != 1) ||
+      pf.GetSamplesPerPixel() != 1 || pf.GetBitsAllocated() != s.bits) {
+    return Error(s.path, "its pixel data does not match its header");
+  }
+  const size_t bytes = static_cast<size_t>(s.rows) * s.columns * (s.bits / 8);
+  // GDCM accepts native pixel data cut short (it keeps what it read, and
+  // GetBuffer pads): check what the file held.
+  const gdcm::DataSet& ds = reader.GetFile().GetDataSet();
+  const gdcm::Tag pixel_tag(0x7fe0, 0x0010);
+  if (!ds.FindDataElement(pixel_tag)) return Error(s.path, "has no pixel data (7FE0,0010)");
+  const gdcm::DataElement& pixel_data = ds.GetDataElement(pixel_tag);
+  if (const gdcm::ByteValue* bv = pixel_data.GetByteValue();
+      bv != nullptr && bv->GetLength() < bytes) {
+    return Error(s.path, absl::StrCat("pixel data holds ", static_cast<uint32_t>(bv->GetLength()), " bytes, ",
+                                      s.columns, "x", s.rows, " ", s.bits,
+                                      "-bit pixels need ", bytes, " (truncated?)"));
+  }
+  if (image.GetBufferLength() != bytes) {
+    return Error(s.path, absl::StrCat("pixel data holds ", image.GetBufferLength(),
+                                      " bytes, the header says ", bytes));
+  }
+  std::vector<char> buffer(bytes);
+  if (!image.GetBuffer(buffer.data())) return Error(s.path, "GDCM cannot decode its pixel data");
+  const size_t old = out->size();
+  const size_t count = static_cast<size_t>(s.rows) * s.columns;
+  out->resize(old + count);
+  // GDCM hands pixels over in the host's byte order.
+  vi::ConvertSamples(reinterpret_cast<const unsigned char*>(buffer.data()), count, TypeOf(s),
+                     ByteOrder::kLittle, out->data() + old);
+  if (s.slope != 1 || s.intercept != 0) {
+    for (size_t i = old; i < out->size(); ++i) {
+      (*out)[i] = static_cast<float>((*out)[i] * s.slope + s.intercept);
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::vector<std::string>> ListDirectory(const std::string& path,
+                                                       const ReadOptions& options) {
+  if (options.list) return options.list(path);
+  DIR* dir = ::opendir(path.c_str());
+  if (dir == nullptr) return absl::NotFoundError(absl::StrCat(path, ": cannot list the directory"));
+  std::vector<std::string> names;
+  while (dirent* e = ::readdir(dir)) {
+    if (names.size() > kMaxSlices) break;
+    names.push_back(e->d_name);
+  }
+  ::closedir(dir);
+  return names;
+}
+
+double Dot(const std::array<double, 3>& a, const std::array<double, 3>& b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+}  // namespace
+
+absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOptions& options) {
+  // GDCM's own warnings go to stderr; every problem that matters here is
+  // reported in the status instead.
+  gdcm::Trace::WarningOff();
+  gdcm::Trace::DebugOff();
+  gdcm::Trace::ErrorOff();
+  absl::StatusOr<std::vector<std::string>> names = ListDirectory(path, options);
+  if (!names.ok()) return names.status();
+  std::sort(names->begin(), names->end());
+  const std::string dir = absl::StrCat(absl::StripSuffix(path, "/"), "/");
+  std::vector<Slice> slices;
+  for (const std::string& name : *names) {
+    if (name.empty() || name[0] == '.' || absl::AsciiStrToUpper(name) == "DICOMDIR") continue;
+    if (slices.size() >= kMaxSlices) {
+      return Error(path, absl::StrCat("more than ", kMaxSlices, " files"));
+    }
+    absl::StatusOr<Slice> s = ReadHeader(dir + name, options);
+    if (!s.ok()) return s.status();
+    slices.push_back(*std::move(s));
+  }
+  if (slices.empty()) return Error(path, "the directory holds no DICOM files");
+  const Slice& first = slices.front();
+  for (const Slice& s : slices) {
+    if (s.series != first.series) {
+      return Error(path, absl::StrCat("mixed series: ", first.path, " is of series '", first.series,
+                                      "', ", s.path, " of '", s.series,
+                                      "'; put each series in a directory of its own"));
+    }
+    if (s.rows != first.rows || s.columns != first.columns || s.bits != first.bits ||
+        s.is_signed != first.is_signed) {
+      return Error(path, absl::StrCat(s.path, " is ", s.columns, "x", s.rows, " ", s.bits,
+                                      "-bit, ", first.path, " ", first.columns, "x", first.rows,
+                                      " ", first.bits, "-bit: the slices differ"));
+    }
+    for (int i = 0; i < 6; ++i) {
+      if (std::fabs(s.orientation[i] - first.orientation[i]) > 1e-4) {
+        return Error(path, absl::StrCat(s.path, " and ", first.path,
+                                        " have different ImageOrientationPatient"));
+      }
+    }
+    for (int i = 0; i < 2; ++i) {
+      if (std::fabs(s.pixel_spacing[i] - first.pixel_spacing[i]) > 1e-4 * first.pixel_spacing[i]) {
+        return Error(path, absl::StrCat(s.path, " and ", first.path, " have different PixelSpacing"));
+      }
+    }
+  }
+  const std::array<double, 3> row = {first.orientation[0], first.orientation[1], first.orientation[2]};
+  const std::array<double, 3> column = {first.orientation[3], first.orientation[4], first.orientation[5]};
+  std::array<double, 3> normal = {row[1] * column[2] - row[2] * column[1],
+                                  row[2] * column[0] - row[0] * column[2],
+                                  row[0] * column[1] - row[1] * column[0]};
+  const double n_len = std::sqrt(Dot(normal, normal));
+  if (!(n_len > 0.5)) {
+    return Error(path, absl::StrCat(first.path,
+                                    ": ImageOrientationPatient's row and column are not "
+                                    "orthogonal unit vectors"));
+  }
+  for (double& c : normal) c /= n_len;
+  for (Slice& s : slices) s.along_normal = Dot(s.position, normal);
+  std::sort(slices.begin(), slices.end(),
+            [](const Slice& a, const Slice& b) { return a.along_normal < b.along_normal; });
+
+  double z_spacing = 1;
+  if (slices.size() > 1) {
+    std::vector<double> gaps;
+    for (size_t i = 1; i < slices.size(); ++i) {
+      gaps.push_back(slices[i].along_normal - slices[i - 1].along_normal);
+    }
+    std::vector<double> sorted = gaps;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    const double typical = sorted[sorted.size() / 2];
+    for (size_t i = 0; i < gaps.size(); ++i) {
+      const Slice& a = slices[i];
+      const Slice& b = slices[i + 1];
+      if (gaps[i] < 1e-3) {
+        return Error(path, absl::StrCat(a.path, " and ", b.path,
+                                        " lie at the same position (a duplicate slice, or two "
+                                        "series in one directory)"));
+      }
+      if (std::fabs(gaps[i] - typical) > 0.01 * typical + 0.01) {
+        return Error(path, absl::StrFormat(
+                               "%s a gap of %.3f mm between %s and %s, where the slices are "
+                               "%.3f mm apart (a missing slice?)",
+                               gaps[i] > typical ? "" : "uneven spacing:", gaps[i], a.path, b.path,
+                               typical));
+      }
+      // Successive positions must move along the normal only.
+      std::array<double, 3> step;
+      for (int w = 0; w < 3; ++w) step[w] = b.position[w] - a.position[w];
+      const double off = std::sqrt(std::max(0.0, Dot(step, step) - gaps[i] * gaps[i]));
+      if (off > 0.01 * gaps[i] + 0.01) {
+        return Error(path, absl::StrFormat(
+                               "%s lies %.3f mm off the normal of %s (a tilted gantry or a sheared "
+                               "series), which is not supported",
+                               b.path, off, a.path));
+      }
+    }
+    double sum = 0;
+    for (double g : gaps) sum += g;
+    z_spacing = sum / gaps.size();
+  }
+  const std::array<int64_t, 3> dims = {first.columns, first.rows,
+                                       static_cast<int64_t>(slices.size())};
+  absl::StatusOr<uint64_t> data_bytes = vi::CheckedDataBytes(path, dims, TypeOf(first), options);
+  if (!data_bytes.ok()) return data_bytes.status();
+
+  Volume volume;
+  volume.dims = {first.columns, first.rows, static_cast<int>(slices.size())};
+  volume.spacing = {first.pixel_spacing[1], first.pixel_spacing[0], z_spacing};
+  volume.source_type = TypeOf(first);
+  volume.values.reserve(volume.VoxelCount());
+  for (const Slice& s : slices) {
+    if (absl::Status st = ReadPixels(s, options, &volume.values); !st.ok()) return st;
+  }
+  if (absl::Status s = SetOrientation(path, {row, column, normal}, slices.front().position, &volume);
+      !s.ok()) {
+    return s;
+  }
+  return volume;
+}
+
+}  // namespace transtick

@@ -1,0 +1,723 @@
+// The readers of MetaImage, VTK image data and DICOM series, orientation
+// (every reader's, and the camera's mapping into the volume's frame), and
+// the presets. Files are written by the tests: MetaImage and .vti by hand,
+// DICOM with GDCM.
+#include <gdcmAttribute.h>
+#include <gdcmImage.h>
+#include <gdcmImageWriter.h>
+#include <gdcmReader.h>
+#include <gdcmWriter.h>
+#include <gdcmUIDGenerator.h>
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <fcntl.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "transtick/camera.h"
+#include "transtick/classification.h"
+#include "transtick/orientation.h"
+#include "transtick/presets.h"
+#include "transtick/render.h"
+#include "transtick/scene.h"
+#include "transtick/volume_io.h"
+
+namespace transtick {
+namespace {
+
+using ::testing::HasSubstr;
+
+class FormatsTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    char tmpl[] = "/tmp/transtick_formats_XXXXXX";
+    ASSERT_NE(::mkdtemp(tmpl), nullptr);
+    dir_ = tmpl;
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+
+  std::string Write(const std::string& name, const std::string& bytes) {
+    const std::string path = dir_ + "/" + name;
+    std::filesystem::create_directories(std::filesystem::path(path).parent_path());
+    std::ofstream(path, std::ios::binary) << bytes;
+    return path;
+  }
+
+  static void ExpectError(const absl::StatusOr<Volume>& v, const std::string& path,
+                          const std::string& hint) {
+    ASSERT_FALSE(v.ok()) << "read " << path << " though it is malformed (" << hint << ")";
+    EXPECT_THAT(std::string(v.status().message()),
+                HasSubstr(std::filesystem::path(path).filename().string()));
+    EXPECT_THAT(std::string(v.status().message()), HasSubstr(hint));
+  }
+
+  std::string dir_;
+};
+
+// int16 samples 0, 7, 14, ... minus 100 (some negative), little-endian.
+std::vector<int16_t> Samples(int n) {
+  std::vector<int16_t> s(n);
+  for (int i = 0; i < n; ++i) s[i] = static_cast<int16_t>(i * 7 - 100);
+  return s;
+}
+
+std::string Bytes(const std::vector<int16_t>& s) {
+  return std::string(reinterpret_cast<const char*>(s.data()), s.size() * 2);
+}
+
+std::string Zlib(const std::string& raw) {
+  uLongf n = compressBound(raw.size());
+  std::string out(n, '\0');
+  EXPECT_EQ(compress(reinterpret_cast<Bytef*>(out.data()), &n,
+                     reinterpret_cast<const Bytef*>(raw.data()), raw.size()),
+            Z_OK);
+  out.resize(n);
+  return out;
+}
+
+void ExpectSamples(const Volume& v, const std::vector<int16_t>& s) {
+  ASSERT_EQ(v.values.size(), s.size());
+  for (size_t i = 0; i < s.size(); ++i) ASSERT_EQ(v.values[i], s[i]) << "sample " << i;
+}
+
+// ---------------------------------------------------------------------------
+// MetaImage
+
+std::string MhaHeader(const std::string& extra, bool compressed = false) {
+  return "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n"
+         "CompressedData = " +
+         std::string(compressed ? "True" : "False") +
+         "\nDimSize = 4 3 2\nElementSpacing = 0.5 0.75 2\nElementType = MET_SHORT\n" + extra +
+         "ElementDataFile = LOCAL\n";
+}
+
+TEST_F(FormatsTest, MetaImageRawCompressedAndDetached) {
+  const auto s = Samples(24);
+  const std::string raw = Write("a.mha", MhaHeader("") + Bytes(s));
+  const std::string zipped = Write("z.mha", MhaHeader("", true) + Zlib(Bytes(s)));
+  for (const std::string& path : {raw, zipped}) {
+    auto v = ReadVolume(path);
+    ASSERT_TRUE(v.ok()) << v.status();
+    EXPECT_EQ(v->dims, (std::array<int, 3>{4, 3, 2}));
+    EXPECT_EQ(v->spacing, (std::array<double, 3>{0.5, 0.75, 2}));
+    EXPECT_EQ(v->source_type, ScalarType::kInt16);
+    EXPECT_TRUE(IsIdentity(v->direction));
+    ExpectSamples(*v, s);
+  }
+  Write("d.raw", Bytes(s));
+  std::string header = MhaHeader("");
+  header.replace(header.find("LOCAL"), 5, "d.raw");
+  auto v = ReadVolume(Write("d.mhd", header));
+  ASSERT_TRUE(v.ok()) << v.status();
+  ExpectSamples(*v, s);
+}
+
+TEST_F(FormatsTest, MetaImageTransformMatrixAndOffset) {
+  const auto s = Samples(24);
+  // x along world y, y along world -x, z along z: a rotation by 90 degrees.
+  auto v = ReadVolume(Write("r.mha", MhaHeader("TransformMatrix = 0 1 0 -1 0 0 0 0 1\n"
+                                               "Offset = 10 20 30\n") +
+                                         Bytes(s)));
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ(v->direction, (Direction{{{0, 1, 0}, {-1, 0, 0}, {0, 0, 1}}}));
+  EXPECT_EQ(v->origin, (std::array<double, 3>{10, 20, 30}));
+  EXPECT_FALSE(v->x_reversed);
+  EXPECT_EQ(OrientationCode(v->direction), "PRS");
+  ExpectSamples(*v, s);
+}
+
+TEST_F(FormatsTest, MetaImageErrorsNameTheFile) {
+  const auto s = Samples(24);
+  ExpectError(ReadVolume(Write("short.mha", MhaHeader("") + Bytes(s).substr(0, 40))), "short.mha",
+              "holds 40");
+  ExpectError(ReadVolume(Write("long.mha", MhaHeader("") + Bytes(s) + "xx")), "long.mha",
+              "holds 50");
+  std::string bad_type = MhaHeader("");
+  bad_type.replace(bad_type.find("MET_SHORT"), 9, "MET_DOUBLE");
+  ExpectError(ReadVolume(Write("double.mha", bad_type + Bytes(s))), "double.mha", "MET_DOUBLE");
+  ExpectError(ReadVolume(Write("zcut.mha", MhaHeader("", true) + Zlib(Bytes(s)).substr(0, 10))),
+              "zcut.mha", "truncated");
+  std::string huge = MhaHeader("");
+  huge.replace(huge.find("4 3 2"), 5, "100000 100000 100000");
+  auto v = ReadVolume(Write("huge.mha", huge));
+  ASSERT_FALSE(v.ok());
+  EXPECT_EQ(v.status().code(), absl::StatusCode::kResourceExhausted);
+  ExpectError(ReadVolume(Write("noend.mha", "ObjectType = Image\nNDims = 3\n")), "noend.mha",
+              "ElementDataFile");
+  ExpectError(ReadVolume(Write("shear.mha", MhaHeader("TransformMatrix = 1 0 0 0.5 1 0 0 0 1\n") +
+                                                Bytes(s))),
+              "shear.mha", "not orthogonal");
+  ExpectError(ReadVolume(Write("list.mha", MhaHeader("") + "")), "list.mha", "holds 0");
+}
+
+// ---------------------------------------------------------------------------
+// VTK image data
+
+std::string Vti(const std::string& file_attrs, const std::string& image_attrs,
+                const std::string& array, const std::string& appended) {
+  return "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\" version=\"1.0\" "
+         "byte_order=\"LittleEndian\" header_type=\"UInt64\" " +
+         file_attrs + ">\n  <ImageData WholeExtent=\"0 3 0 2 0 1\" Origin=\"1 2 3\" " +
+         image_attrs + ">\n    <Piece Extent=\"0 3 0 2 0 1\">\n      <PointData Scalars=\"v\">\n" +
+         "        <DataArray type=\"Int8\" Name=\"other\" format=\"appended\" offset=\"0\"/>\n" +
+         "        " + array + "\n      </PointData>\n    </Piece>\n  </ImageData>\n" +
+         "  <AppendedData encoding=\"raw\">\n   _" + appended + "\n  </AppendedData>\n</VTKFile>\n";
+}
+
+std::string U64(uint64_t v) { return std::string(reinterpret_cast<const char*>(&v), 8); }
+
+TEST_F(FormatsTest, VtiRawAndZlibAppended) {
+  const auto s = Samples(24);
+  const std::string data = Bytes(s);
+  // The other array (8 bytes of Int8 at offset 0) comes first; "v" follows.
+  const std::string other = U64(24) + std::string(24, '\1');
+  const std::string offset = std::to_string(other.size());
+  const std::string array =
+      "<DataArray type=\"Int16\" Name=\"v\" format=\"appended\" offset=\"" + offset + "\"/>";
+  auto raw = ReadVolume(
+      Write("raw.vti", Vti("", "Spacing=\"0.5 0.75 2\"", array, other + U64(data.size()) + data)));
+  ASSERT_TRUE(raw.ok()) << raw.status();
+  EXPECT_EQ(raw->dims, (std::array<int, 3>{4, 3, 2}));
+  EXPECT_EQ(raw->spacing, (std::array<double, 3>{0.5, 0.75, 2}));
+  EXPECT_EQ(raw->origin, (std::array<double, 3>{1, 2, 3}));
+  ExpectSamples(*raw, s);
+
+  // Two blocks of 32 bytes and a last one of 48 - 32 = 16.
+  const std::string b0 = Zlib(data.substr(0, 32)), b1 = Zlib(data.substr(32));
+  const std::string zipped = U64(2) + U64(32) + U64(16) + U64(b0.size()) + U64(b1.size()) + b0 + b1;
+  auto z = ReadVolume(Write("z.vti", Vti("compressor=\"vtkZLibDataCompressor\"",
+                                         "Spacing=\"0.5 0.75 2\" Direction=\"0 -1 0 1 0 0 0 0 1\"",
+                                         array, other + zipped)));
+  ASSERT_TRUE(z.ok()) << z.status();
+  ExpectSamples(*z, s);
+  // Direction is row-major with the axes as columns: x along world y.
+  EXPECT_EQ(z->direction, (Direction{{{0, 1, 0}, {-1, 0, 0}, {0, 0, 1}}}));
+}
+
+TEST_F(FormatsTest, VtiErrorsNameTheFile) {
+  const auto s = Samples(24);
+  const std::string data = Bytes(s);
+  const std::string array = "<DataArray type=\"Int16\" Name=\"v\" format=\"appended\" offset=\"0\"/>";
+  ExpectError(ReadVolume(Write("count.vti", Vti("", "", array, U64(47) + data))), "count.vti",
+              "byte count is 47");
+  ExpectError(ReadVolume(Write("cut.vti", Vti("", "", array, U64(48) + data.substr(0, 5)))),
+              "cut.vti", "");
+  ExpectError(ReadVolume(Write("f64.vti", Vti("", "", "<DataArray type=\"Float64\" Name=\"v\" "
+                                                      "format=\"appended\" offset=\"0\"/>",
+                                              U64(48) + data))),
+              "f64.vti", "Float64");
+  ExpectError(ReadVolume(Write("b64.vti", Vti("", "", "<DataArray type=\"Int16\" Name=\"v\" "
+                                                      "format=\"binary\">AAAA</DataArray>",
+                                              ""))),
+              "b64.vti", "binary");
+  const std::string lie = U64(1000000) + U64(32) + U64(0) + U64(10);
+  ExpectError(ReadVolume(Write("blocks.vti",
+                               Vti("compressor=\"vtkZLibDataCompressor\"", "", array, lie))),
+              "blocks.vti", "blocks");
+  const std::string corrupt = U64(1) + U64(48) + U64(0) + U64(6) + "garbag";
+  ExpectError(ReadVolume(Write("corrupt.vti",
+                               Vti("compressor=\"vtkZLibDataCompressor\"", "", array, corrupt))),
+              "corrupt.vti", "corrupt");
+  ExpectError(ReadVolume(Write("notxml.vti", "hello")), "notxml.vti", "not a VTK XML file");
+}
+
+// ---------------------------------------------------------------------------
+// DICOM series, written with GDCM
+
+struct SliceSpec {
+  std::string series = "1.2.3.4";
+  std::array<double, 3> position = {0, 0, 0};
+  std::array<double, 6> orientation = {1, 0, 0, 0, 1, 0};
+  double slope = 1, intercept = -1024;
+  int columns = 4, rows = 3;
+  int frame_value = 0;  // pixel (c, r) stores frame_value * 100 + r * columns + c
+};
+
+void WriteSlice(const std::string& path, const SliceSpec& spec) {
+  gdcm::ImageWriter writer;
+  gdcm::Image& image = writer.GetImage();
+  image.SetNumberOfDimensions(2);
+  const unsigned int dims[2] = {static_cast<unsigned>(spec.columns), static_cast<unsigned>(spec.rows)};
+  image.SetDimensions(dims);
+  image.SetPixelFormat(gdcm::PixelFormat::INT16);
+  image.SetPhotometricInterpretation(gdcm::PhotometricInterpretation::MONOCHROME2);
+  image.SetTransferSyntax(gdcm::TransferSyntax::ExplicitVRLittleEndian);
+  image.SetOrigin(spec.position.data());
+  image.SetDirectionCosines(spec.orientation.data());
+  const double spacing[3] = {0.5, 0.8, 1};  // x (between columns), y, unused z
+  image.SetSpacing(spacing);
+  image.SetSlope(spec.slope);
+  image.SetIntercept(spec.intercept);
+  std::vector<int16_t> pixels(spec.columns * spec.rows);
+  for (int i = 0; i < spec.columns * spec.rows; ++i) {
+    pixels[i] = static_cast<int16_t>(spec.frame_value * 100 + i);
+  }
+  gdcm::DataElement pixel_data(gdcm::Tag(0x7fe0, 0x0010));
+  pixel_data.SetByteValue(reinterpret_cast<const char*>(pixels.data()),
+                          static_cast<uint32_t>(pixels.size() * 2));
+  image.SetDataElement(pixel_data);
+  gdcm::DataSet& ds = writer.GetFile().GetDataSet();
+  gdcm::Attribute<0x0008, 0x0016> sop_class = {"1.2.840.10008.5.1.4.1.1.2"};  // CT Image Storage
+  ds.Replace(sop_class.GetAsDataElement());
+  gdcm::Attribute<0x0008, 0x0060> modality = {"CT"};
+  ds.Replace(modality.GetAsDataElement());
+  gdcm::Attribute<0x0020, 0x000e> series;
+  series.SetValue(spec.series);
+  ds.Replace(series.GetAsDataElement());
+  writer.SetFileName(path.c_str());
+  ASSERT_TRUE(writer.Write()) << path;
+  // GDCM writes a 2-D image's origin without its z: put the whole position
+  // in with a plain writer, which leaves the other attributes as they are.
+  gdcm::Reader reader;
+  reader.SetFileName(path.c_str());
+  ASSERT_TRUE(reader.Read()) << path;
+  gdcm::Attribute<0x0020, 0x0032> position;
+  for (int i = 0; i < 3; ++i) position.SetValue(spec.position[i], i);
+  reader.GetFile().GetDataSet().Replace(position.GetAsDataElement());
+  gdcm::Writer rewrite;
+  rewrite.SetFile(reader.GetFile());
+  rewrite.SetFileName(path.c_str());
+  ASSERT_TRUE(rewrite.Write()) << path;
+}
+
+TEST_F(FormatsTest, DicomSeriesSortedRescaledAndOriented) {
+  const std::string dir = dir_ + "/ct";
+  std::filesystem::create_directories(dir);
+  // Written in scrambled order, slices 2 mm apart along z, names unrelated
+  // to position.
+  const int order[4] = {2, 0, 3, 1};
+  for (int n = 0; n < 4; ++n) {
+    SliceSpec s;
+    s.frame_value = order[n];
+    s.position = {-10, -20, 5.0 + 2.0 * order[n]};
+    WriteSlice(dir + "/IM" + std::to_string(n), s);
+  }
+  Write("ct/DICOMDIR", "not read");
+  auto v = ReadVolume(dir);
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ(v->dims, (std::array<int, 3>{4, 3, 4}));
+  EXPECT_NEAR(v->spacing[0], 0.5, 1e-9);
+  EXPECT_NEAR(v->spacing[1], 0.8, 1e-9);
+  EXPECT_NEAR(v->spacing[2], 2.0, 1e-9);
+  EXPECT_TRUE(IsIdentity(v->direction));
+  EXPECT_EQ(v->origin, (std::array<double, 3>{-10, -20, 5}));
+  for (int z = 0; z < 4; ++z) {
+    for (int i = 0; i < 12; ++i) {
+      ASSERT_EQ(v->At(i % 4, i / 4, z), z * 100 + i - 1024) << "slice " << z << " pixel " << i;
+    }
+  }
+}
+
+TEST_F(FormatsTest, DicomSeriesOrientationFromTheHeaders) {
+  // A sagittal series: rows along world y (posterior), columns along -z
+  // (down), slices along +x... sorted by position along row x column.
+  const std::string dir = dir_ + "/sag";
+  std::filesystem::create_directories(dir);
+  for (int n = 0; n < 3; ++n) {
+    SliceSpec s;
+    s.orientation = {0, 1, 0, 0, 0, -1};
+    s.position = {3.0 * n, 0, 0};
+    s.frame_value = n;
+    WriteSlice(dir + "/s" + std::to_string(n), s);
+  }
+  auto v = ReadVolume(dir + "/");
+  ASSERT_TRUE(v.ok()) << v.status();
+  // Normal = (0,1,0) x (0,0,-1) = (-1, 0, 0): slices sorted along -x.
+  EXPECT_EQ(OrientationCode(v->direction), "PIR");
+  EXPECT_NEAR(v->spacing[2], 3.0, 1e-9);
+  EXPECT_EQ(v->At(0, 0, 0), 200 - 1024);  // the slice at x = 6 comes first
+}
+
+TEST_F(FormatsTest, DicomSeriesRefusesGapsMixedSeriesAndJunk) {
+  auto series = [&](const std::string& name, std::vector<SliceSpec> slices) {
+    const std::string dir = dir_ + "/" + name;
+    std::filesystem::create_directories(dir);
+    for (size_t n = 0; n < slices.size(); ++n) WriteSlice(dir + "/f" + std::to_string(n), slices[n]);
+    return dir;
+  };
+  auto at = [](double z) {
+    SliceSpec s;
+    s.position = {0, 0, z};
+    return s;
+  };
+  ExpectError(ReadVolume(series("gap", {at(0), at(1), at(2), at(4), at(5)})), "gap", "missing slice");
+  ExpectError(ReadVolume(series("dup", {at(0), at(1), at(1)})), "dup", "same position");
+  SliceSpec other = at(2);
+  other.series = "9.9.9";
+  ExpectError(ReadVolume(series("mixed", {at(0), at(1), other})), "mixed", "mixed series");
+  SliceSpec big = at(2);
+  big.columns = 5;
+  ExpectError(ReadVolume(series("sizes", {at(0), at(1), big})), "sizes", "differ");
+  SliceSpec tilted = at(2);
+  tilted.position = {0, 1, 2};
+  ExpectError(ReadVolume(series("tilt", {at(0), at(1), tilted})), "tilt", "tilted gantry");
+  const std::string junk = series("junk", {at(0), at(1)});
+  Write("junk/readme.txt", "not a DICOM file");
+  ExpectError(ReadVolume(junk), "readme.txt", "not a DICOM file");
+  std::filesystem::create_directories(dir_ + "/empty");
+  ExpectError(ReadVolume(dir_ + "/empty"), "empty", "no DICOM files");
+  // A slice cut short: its header reads, its pixels do not.
+  const std::string cut = series("cut", {at(0), at(1)});
+  std::filesystem::resize_file(cut + "/f1", std::filesystem::file_size(cut + "/f1") - 10);
+  ExpectError(ReadVolume(cut), "f1", "");
+}
+
+TEST_F(FormatsTest, DicomSeriesGoesThroughTheHooks) {
+  const std::string dir = dir_ + "/hooked";
+  std::filesystem::create_directories(dir);
+  for (int n = 0; n < 2; ++n) {
+    SliceSpec s;
+    s.position = {0, 0, 1.0 * n};
+    WriteSlice(dir + "/f" + std::to_string(n), s);
+  }
+  std::vector<std::string> opened, listed;
+  ReadOptions options;
+  options.open = [&](const std::string& path) -> absl::StatusOr<int> {
+    opened.push_back(path);
+    return ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  };
+  options.list = [&](const std::string& path) -> absl::StatusOr<std::vector<std::string>> {
+    listed.push_back(path);
+    return std::vector<std::string>{".", "..", "f1", "f0"};
+  };
+  auto v = ReadVolume(dir, options);
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ(listed, std::vector<std::string>{dir});
+  EXPECT_THAT(opened, ::testing::Contains(dir + "/f0"));
+  EXPECT_THAT(opened, ::testing::Contains(dir + "/f1"));
+  options.list = [](const std::string& path) -> absl::StatusOr<std::vector<std::string>> {
+    return absl::PermissionDeniedError(path + ": outside");
+  };
+  EXPECT_EQ(ReadDicomSeries(dir, options).status().code(), absl::StatusCode::kPermissionDenied);
+}
+
+// A real series when Debian's sample data is installed (gdcm-data ships none
+// as a series; this reads what a system has, else skips).
+TEST_F(FormatsTest, RealDicomSeriesIfInstalled) {
+  const char* dir = std::getenv("TRANSTICK_DICOM_SERIES");
+  if (dir == nullptr) GTEST_SKIP() << "TRANSTICK_DICOM_SERIES not set";
+  auto v = ReadVolume(dir);
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_GT(v->dims[2], 1);
+}
+
+// ---------------------------------------------------------------------------
+// Orientation: NRRD and NIfTI headers
+
+std::string Nrrd(const std::string& fields, const std::string& data) {
+  return "NRRD0004\ntype: int16\ndimension: 3\nsizes: 4 3 2\nencoding: raw\nendian: little\n" +
+         fields + "\n" + data;
+}
+
+TEST_F(FormatsTest, NrrdOrientationAndReflection) {
+  const auto s = Samples(24);
+  // RAS with x toward the right: in LPS, x runs along -x... and y along -y:
+  // a rotation by 180 degrees about z.
+  auto ras = ReadVolume(Write("ras.nrrd", Nrrd("space: right-anterior-superior\n"
+                                               "space directions: (1,0,0) (0,1,0) (0,0,2)\n"
+                                               "space origin: (5,6,7)\n",
+                                               Bytes(s))));
+  ASSERT_TRUE(ras.ok()) << ras.status();
+  EXPECT_EQ(OrientationCode(ras->direction), "RAS");
+  EXPECT_EQ(ras->origin, (std::array<double, 3>{-5, -6, 7}));
+  EXPECT_FALSE(ras->x_reversed);
+  ExpectSamples(*ras, s);
+
+  // LPS with x reversed only: a reflection, read with x reversed.
+  auto mirror = ReadVolume(Write("mirror.nrrd", Nrrd("space: left-posterior-superior\n"
+                                                     "space directions: (-2,0,0) (0,1,0) (0,0,1)\n"
+                                                     "space origin: (10,0,0)\n",
+                                                     Bytes(s))));
+  ASSERT_TRUE(mirror.ok()) << mirror.status();
+  EXPECT_TRUE(mirror->x_reversed);
+  EXPECT_TRUE(IsIdentity(mirror->direction));
+  // The file's sample x = 3 lay at world x = 10 - 2*3 = 4: now index 0.
+  EXPECT_EQ(mirror->origin, (std::array<double, 3>{4, 0, 0}));
+  EXPECT_EQ(mirror->At(0, 1, 1), s[(1 * 3 + 1) * 4 + 3]);
+  EXPECT_EQ(mirror->At(3, 1, 1), s[(1 * 3 + 1) * 4 + 0]);
+
+  ExpectError(ReadVolume(Write("shear.nrrd",
+                               Nrrd("space directions: (1,0,0) (1,1,0) (0,0,1)\n", Bytes(s)))),
+              "shear.nrrd", "not orthogonal");
+  ExpectError(ReadVolume(Write("space.nrrd", Nrrd("space: 3D-left-handed\n"
+                                                  "space directions: (1,0,0) (0,1,0) (0,0,1)\n",
+                                                  Bytes(s)))),
+              "space.nrrd", "3D-left-handed");
+  ExpectError(ReadVolume(Write("origin.nrrd", Nrrd("space directions: (1,0,0) (0,1,0) (0,0,1)\n"
+                                                   "space origin: (1,2)\n",
+                                                   Bytes(s)))),
+              "origin.nrrd", "space origin");
+}
+
+std::string NiftiHeader(int qform, int sform, float qfac, const std::array<float, 3>& quat,
+                        const std::array<float, 12>& srow) {
+  std::string h(352, '\0');
+  auto put32 = [&](size_t o, const void* p) { std::memcpy(&h[o], p, 4); };
+  auto put16 = [&](size_t o, int16_t v) { std::memcpy(&h[o], &v, 2); };
+  const int32_t size = 348;
+  put32(0, &size);
+  put16(40, 3);
+  put16(42, 4);
+  put16(44, 3);
+  put16(46, 2);
+  put16(70, 4);  // int16
+  const float pixdim[4] = {qfac, 1, 1, 1};
+  for (int i = 0; i < 4; ++i) put32(76 + 4 * i, &pixdim[i]);
+  const float vox = 352;
+  put32(108, &vox);
+  put16(252, static_cast<int16_t>(qform));
+  put16(254, static_cast<int16_t>(sform));
+  for (int i = 0; i < 3; ++i) put32(256 + 4 * i, &quat[i]);
+  const float offset[3] = {1, 2, 3};
+  for (int i = 0; i < 3; ++i) put32(268 + 4 * i, &offset[i]);
+  for (int i = 0; i < 12; ++i) put32(280 + 4 * i, &srow[i]);
+  std::memcpy(&h[344], "n+1\0", 4);
+  return h;
+}
+
+TEST_F(FormatsTest, NiftiQformAndSform) {
+  const auto s = Samples(24);
+  // No transform: the identity.
+  auto plain = ReadVolume(Write("plain.nii", NiftiHeader(0, 0, 1, {0, 0, 0}, {}) + Bytes(s)));
+  ASSERT_TRUE(plain.ok()) << plain.status();
+  EXPECT_TRUE(IsIdentity(plain->direction));
+  // qform: the identity quaternion in RAS is x right, y anterior in LPS.
+  auto q = ReadVolume(Write("q.nii", NiftiHeader(1, 0, 1, {0, 0, 0}, {}) + Bytes(s)));
+  ASSERT_TRUE(q.ok()) << q.status();
+  EXPECT_EQ(OrientationCode(q->direction), "RAS");
+  EXPECT_EQ(q->origin, (std::array<double, 3>{-1, -2, 3}));
+  // qfac -1 reverses k: a reflection, read with x reversed.
+  auto qf = ReadVolume(Write("qf.nii", NiftiHeader(1, 0, -1, {0, 0, 0}, {}) + Bytes(s)));
+  ASSERT_TRUE(qf.ok()) << qf.status();
+  EXPECT_TRUE(qf->x_reversed);
+  EXPECT_EQ(OrientationCode(qf->direction), "LAI");
+  // sform wins over qform: x along RAS +y (anterior), y along RAS -x (right).
+  auto sf = ReadVolume(Write(
+      "sf.nii", NiftiHeader(1, 1, 1, {0, 0, 0}, {0, -1, 0, 9, 1, 0, 0, 8, 0, 0, 1, 7}) + Bytes(s)));
+  ASSERT_TRUE(sf.ok()) << sf.status();
+  EXPECT_EQ(OrientationCode(sf->direction), "AL" "S");
+  EXPECT_EQ(sf->origin, (std::array<double, 3>{-9, -8, 7}));
+  // A sheared sform falls back to the qform; without one it is refused.
+  const std::array<float, 12> shear = {1, 1, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
+  auto fallback = ReadVolume(Write("fb.nii", NiftiHeader(1, 1, 1, {0, 0, 0}, shear) + Bytes(s)));
+  ASSERT_TRUE(fallback.ok()) << fallback.status();
+  EXPECT_EQ(OrientationCode(fallback->direction), "RAS");
+  ExpectError(ReadVolume(Write("shear.nii", NiftiHeader(0, 1, 1, {0, 0, 0}, shear) + Bytes(s))),
+              "shear.nii", "not orthogonal");
+}
+
+// ---------------------------------------------------------------------------
+// A known asymmetric volume against its expected projection
+
+// An L of voxels (a foot along x, a stem along y, the stem deeper in z)
+// in a grid of nx x ny x nz with spacing (1, 1.5, 2), in the world's axes.
+constexpr int kNx = 12, kNy = 10, kNz = 6;
+constexpr double kSpacing[3] = {1, 1.5, 2};
+bool InL(int i, int j, int k) {
+  const bool foot = i >= 2 && i < 10 && j >= 2 && j < 4 && k >= 1 && k < 3;
+  const bool stem = i >= 2 && i < 4 && j >= 2 && j < 9 && k >= 1 && k < 5;
+  return foot || stem;
+}
+
+// The orthographic image of the L seen along a world axis, from the
+// definition: a pixel is lit when its ray's (right, up) coordinates fall in
+// a voxel's world box. -1 where the pixel's centre lies within a quarter
+// pixel of a voxel's edge (either answer is right there).
+std::vector<int> ExpectedMask(const Camera& world_camera, double half_height, int size) {
+  std::vector<int> mask(size * size, 0);
+  const Vec3 right = world_camera.right(), up = world_camera.up();
+  const double pixel = 2 * half_height / size, slack = 0.25 * pixel;
+  for (int py = 0; py < size; ++py) {
+    for (int px = 0; px < size; ++px) {
+      const double sx = (2.0 * (px + 0.5) / size - 1.0) * half_height;
+      const double sy = (1.0 - 2.0 * (py + 0.5) / size) * half_height;
+      int lit = 0;
+      bool edge = false;
+      for (int k = 0; k < kNz; ++k)
+        for (int j = 0; j < kNy; ++j)
+          for (int i = 0; i < kNx; ++i) {
+            if (!InL(i, j, k)) continue;
+            const Vec3 lo{(i - kNx / 2.0) * kSpacing[0], (j - kNy / 2.0) * kSpacing[1],
+                          (k - kNz / 2.0) * kSpacing[2]};
+            const Vec3 hi = lo + Vec3{kSpacing[0], kSpacing[1], kSpacing[2]};
+            // The box's interval along a camera axis (axis-aligned views).
+            auto interval = [&](const Vec3& axis) {
+              const double a = Dot(lo, axis), b = Dot(hi, axis);
+              return std::array<double, 2>{std::min(a, b), std::max(a, b)};
+            };
+            const auto x = interval(right), y = interval(up);
+            const bool in_x = sx > x[0] && sx < x[1], in_y = sy > y[0] && sy < y[1];
+            if (in_x && in_y) lit = 1;
+            const bool near_x = std::fabs(sx - x[0]) < slack || std::fabs(sx - x[1]) < slack;
+            const bool near_y = std::fabs(sy - y[0]) < slack || std::fabs(sy - y[1]) < slack;
+            if ((near_x && (in_y || near_y)) || (near_y && (in_x || near_x))) edge = true;
+          }
+      mask[py * size + px] = edge ? -1 : lit;
+    }
+  }
+  return mask;
+}
+
+std::vector<int> RenderedMask(const Volume& volume, const CameraSpec& world) {
+  Classification c;
+  Material m;
+  m.name = "l";
+  m.min = 50;
+  m.max = 150;
+  c.materials.push_back(m);
+  c.surface = SurfaceModel::kVoxel;
+  auto scene = Scene::ForSurfaces(volume, c);
+  EXPECT_TRUE(scene.ok()) << scene.status();
+  const Vec3 extent{volume.dims[0] * volume.spacing[0], volume.dims[1] * volume.spacing[1],
+                    volume.dims[2] * volume.spacing[2]};
+  auto local = ToVolumeFrame(world, volume.direction, extent);
+  EXPECT_TRUE(local.ok()) << local.status();
+  auto camera = Camera::Create(*local, extent);
+  EXPECT_TRUE(camera.ok()) << camera.status();
+  RenderSettings settings;
+  settings.shadows = false;
+  auto image = RenderLocal(*scene, *camera, settings, 2, nullptr);
+  EXPECT_TRUE(image.ok()) << image.status();
+  std::vector<int> mask(image->width * image->height);
+  for (size_t p = 0; p < mask.size(); ++p) {
+    mask[p] = image->rgb[3 * p] + image->rgb[3 * p + 1] + image->rgb[3 * p + 2] > 0 ? 1 : 0;
+  }
+  return mask;
+}
+
+TEST_F(FormatsTest, AsymmetricVolumeProjectsAsItsDefinitionSays) {
+  // The same object twice: in the world's axes (identity), and stored as a
+  // NRRD whose index axes are a permutation with a flip (x along world -y,
+  // y along world z, z along world x: a reflection, so the reader reverses
+  // x), with the samples placed to match.
+  Volume identity;
+  identity.dims = {kNx, kNy, kNz};
+  identity.spacing = {kSpacing[0], kSpacing[1], kSpacing[2]};
+  identity.values.resize(identity.VoxelCount());
+  for (int k = 0; k < kNz; ++k)
+    for (int j = 0; j < kNy; ++j)
+      for (int i = 0; i < kNx; ++i) identity.values[identity.Index(i, j, k)] = InL(i, j, k) ? 100 : 0;
+  // Stored sample (p, q, r) is world voxel (i, j, k) = (r, ny - 1 - p, q).
+  std::vector<int16_t> stored(kNx * kNy * kNz);
+  for (int r = 0; r < kNx; ++r)
+    for (int q = 0; q < kNz; ++q)
+      for (int p = 0; p < kNy; ++p) {
+        stored[(static_cast<size_t>(r) * kNz + q) * kNy + p] = InL(r, kNy - 1 - p, q) ? 100 : 0;
+      }
+  const std::string path = Write(
+      "l.nrrd",
+      "NRRD0004\ntype: int16\ndimension: 3\nsizes: 10 6 12\nencoding: raw\nendian: little\n"
+      "space: left-posterior-superior\nspace directions: (0,-1.5,0) (0,0,2) (1,0,0)\n"
+      "space origin: (0,0,0)\n\n" +
+          Bytes(stored));
+  auto oriented = ReadVolume(path);
+  ASSERT_TRUE(oriented.ok()) << oriented.status();
+  EXPECT_TRUE(oriented->x_reversed);
+  EXPECT_EQ(OrientationCode(oriented->direction), "PSL");
+
+  constexpr int kSize = 48;
+  for (const auto& [az, el] : std::vector<std::pair<double, double>>{{0, 0}, {90, 0}, {180, 0}, {0, 90}, {-90, 0}}) {
+    SCOPED_TRACE(::testing::Message() << "azimuth " << az << " elevation " << el);
+    CameraSpec world;
+    world.projection = Projection::kOrthographic;
+    world.azimuth_deg = az;
+    world.elevation_deg = el;
+    world.width = world.height = kSize;
+    const Vec3 extent{kNx * kSpacing[0], kNy * kSpacing[1], kNz * kSpacing[2]};
+    auto world_camera = Camera::Create(world, extent);
+    ASSERT_TRUE(world_camera.ok());
+    const double half_height = 0.5 * Length(extent) * 1.05;
+    const std::vector<int> expected = ExpectedMask(*world_camera, half_height, kSize);
+    const std::vector<int> a = RenderedMask(identity, world);
+    const std::vector<int> b = RenderedMask(*oriented, world);
+    int compared = 0, lit = 0;
+    for (int p = 0; p < kSize * kSize; ++p) {
+      if (expected[p] < 0) continue;
+      ++compared;
+      lit += expected[p];
+      ASSERT_EQ(a[p], expected[p]) << "identity volume, pixel " << p % kSize << "," << p / kSize;
+      ASSERT_EQ(b[p], expected[p]) << "oriented volume, pixel " << p % kSize << "," << p / kSize;
+    }
+    EXPECT_GT(lit, 20);
+    EXPECT_GT(compared, kSize * kSize / 2);
+  }
+}
+
+TEST(ToVolumeFrameTest, IdentityKeepsTheSpecAndRotationsKeepTheImagePlane) {
+  CameraSpec world;
+  world.azimuth_deg = 33;
+  world.elevation_deg = -12;
+  auto same = ToVolumeFrame(world, kIdentityDirection, Vec3{10, 20, 30});
+  ASSERT_TRUE(same.ok());
+  EXPECT_FALSE(same->view.has_value());
+  EXPECT_EQ(same->azimuth_deg, 33);
+  // Under a rotation, the local camera's axes are the world camera's
+  // rotated: right, up and forward each.
+  const Direction d = {{{0, 0, 1}, {1, 0, 0}, {0, 1, 0}}};
+  auto local = ToVolumeFrame(world, d, Vec3{10, 20, 30});
+  ASSERT_TRUE(local.ok());
+  auto wc = Camera::Create(world, Vec3{10, 20, 30});
+  auto lc = Camera::Create(*local, Vec3{10, 20, 30});
+  ASSERT_TRUE(wc.ok() && lc.ok());
+  auto rotate = [&](const Vec3& w) {
+    return Vec3{Dot(Vec3{d[0][0], d[0][1], d[0][2]}, w), Dot(Vec3{d[1][0], d[1][1], d[1][2]}, w),
+                Dot(Vec3{d[2][0], d[2][1], d[2][2]}, w)};
+  };
+  for (const auto& [w, l] : {std::pair{wc->right(), lc->right()}, std::pair{wc->up(), lc->up()},
+                             std::pair{wc->forward(), lc->forward()}}) {
+    const Vec3 r = rotate(w);
+    for (int a = 0; a < 3; ++a) EXPECT_NEAR(r[a], l[a], 1e-12);
+  }
+}
+
+// ---------------------------------------------------------------------------
+// Presets
+
+TEST(PresetsTest, EveryPresetResolvesAndValidates) {
+  const auto presets = ListPresets();
+  ASSERT_GE(presets.size(), 4u);
+  for (const char* name : {"ct-bone", "ct-skin-bone", "ct-angio", "mr-brain"}) {
+    bool found = false;
+    for (const PresetInfo& p : presets) found = found || p.name == name;
+    EXPECT_TRUE(found) << name;
+  }
+  for (const PresetInfo& p : presets) {
+    SCOPED_TRACE(p.name);
+    EXPECT_FALSE(p.description.empty());
+    EXPECT_TRUE(p.dvr) << "every preset has a colormap for dvr";
+    EXPECT_TRUE(PresetTransfer(p.name, {0, 255}).ok());
+    EXPECT_EQ(PresetMaterials(p.name, {0, 255}).ok(), p.surfaces);
+  }
+}
+
+TEST(PresetsTest, AbsoluteAndRelativeValues) {
+  // CT presets are in Hounsfield units whatever the range.
+  auto bone = PresetMaterials("ct-bone", {0, 255});
+  ASSERT_TRUE(bone.ok());
+  EXPECT_EQ(bone->materials[0].min, 300);
+  // MR is relative: a fraction of the range.
+  auto mr = PresetMaterials("mr-brain", {100, 1100});
+  ASSERT_TRUE(mr.ok());
+  EXPECT_FLOAT_EQ(mr->materials[1].min, 100 + 0.3f * 1000);
+  // A volume of one value still gets increasing points.
+  EXPECT_TRUE(PresetTransfer("hot", {7, 7}).ok());
+}
+
+TEST(PresetsTest, ErrorsNameThePresetAndTheChoices) {
+  auto unknown = PresetMaterials("ct-bones", {0, 1});
+  EXPECT_EQ(unknown.status().code(), absl::StatusCode::kNotFound);
+  EXPECT_THAT(std::string(unknown.status().message()), HasSubstr("ct-bones"));
+  EXPECT_THAT(std::string(unknown.status().message()), HasSubstr("ct-skin-bone"));
+  auto colormap = PresetMaterials("hot", {0, 1});
+  EXPECT_THAT(std::string(colormap.status().message()), HasSubstr("dvr"));
+}
+
+}  // namespace
+}  // namespace transtick
