@@ -8,7 +8,7 @@ cd "$(dirname "$0")/.."
 packages=(build-essential cmake ninja-build ccache pkg-config git
   libabsl-dev libprotobuf-dev protobuf-compiler libgrpc++-dev protobuf-compiler-grpc
   libspdlog-dev libopenimageio-dev libgtest-dev libgmock-dev zlib1g-dev libsqlite3-dev
-  libcpp-httplib-dev openssl curl
+  libcpp-httplib-dev libgdcm-dev openssl curl
   python3-grpcio python3-protobuf python3-numpy python3-pil)
 
 missing=()

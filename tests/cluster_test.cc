@@ -16,6 +16,7 @@
 #include "local_cluster.h"
 #include "testing.h"
 #include "transtick/image_io.h"
+#include "transtick/orientation.h"
 #include "transtick/render.h"
 #include "transtick/synthetic.h"
 #include "transtick/volume_io.h"
@@ -69,7 +70,8 @@ Image DvrReference(const std::string& path, const v1::View& view) {
   auto scene = Scene::ForDvr(*volume, *ToTransferFunction(Transfer()));
   Vec3 extent{volume->dims[0] * volume->spacing[0], volume->dims[1] * volume->spacing[1],
               volume->dims[2] * volume->spacing[2]};
-  auto camera = Camera::Create(*ToCameraSpec(view), extent);
+  // As the command's in-process render does: the view into the volume's frame.
+  auto camera = Camera::Create(*ToCameraSpec(*ToVolumeFrame(view, volume->direction, extent)), extent);
   return testing::RenderWhole(*scene, *camera, ToRenderSettings(view));
 }
 
@@ -79,7 +81,8 @@ Image Reference(const std::string& path, const v1::MaterialSet& m, const v1::Vie
   auto scene = Scene::ForSurfaces(*volume, *ToClassification(m));
   Vec3 extent{volume->dims[0] * volume->spacing[0], volume->dims[1] * volume->spacing[1],
               volume->dims[2] * volume->spacing[2]};
-  auto camera = Camera::Create(*ToCameraSpec(view), extent);
+  // As the command's in-process render does: the view into the volume's frame.
+  auto camera = Camera::Create(*ToCameraSpec(*ToVolumeFrame(view, volume->direction, extent)), extent);
   return testing::RenderWhole(*scene, *camera, ToRenderSettings(view));
 }
 
@@ -145,6 +148,57 @@ TEST_F(ClusterTest, ImagesEqualTheInProcessRender) {
         ASSERT_TRUE(got.ok()) << got.status();
         EXPECT_EQ(got->rgb, want[i].rgb) << workers << " workers, view " << i;
       }
+    }
+  }
+}
+
+// A volume whose axes are a permutation with a flip (read with x reversed),
+// and a preset resolved by the root against the volume's range: the cluster
+// maps the camera as the in-process render does, to the bit.
+TEST_F(ClusterTest, OrientedVolumesAndPresetsEqualTheInProcessRender) {
+  const std::array<int, 3> dims = {36, 30, 28};
+  Volume phantom = MakeNoisyPhantom(dims, 33);
+  {
+    std::ofstream f(dir_ + "/oriented.nrrd", std::ios::binary);
+    f << "NRRD0004\ntype: float\ndimension: 3\nsizes: " << dims[0] << " " << dims[1] << " "
+      << dims[2] << "\nendian: little\nencoding: raw\nspace: right-anterior-superior\n"
+      << "space directions: (0,1.5,0) (0,0,-1) (1,0,0)\nspace origin: (10,20,30)\n\n";
+    f.write(reinterpret_cast<const char*>(phantom.values.data()), phantom.values.size() * 4);
+  }
+  const std::string path = dir_ + "/oriented.nrrd";
+  auto volume = ReadVolume(path);
+  ASSERT_TRUE(volume.ok()) << volume.status();
+  ASSERT_FALSE(IsIdentity(volume->direction));
+  std::vector<v1::View> views = {View(45, 10, true, "o1.exr"), View(-120, -35, false, "o2.exr")};
+  v1::Dataset preset;
+  preset.mutable_preset()->set_name("mr-brain");
+  auto resolved = ResolvePreset(preset, volume->Range());
+  ASSERT_TRUE(resolved.ok()) << resolved.status();
+  std::vector<Image> want;
+  for (const auto& v : views) want.push_back(Reference(path, resolved->materials(), v));
+  // The mapping matters: the same view without it gives another image.
+  {
+    Vec3 extent{volume->dims[0] * volume->spacing[0], volume->dims[1] * volume->spacing[1],
+                volume->dims[2] * volume->spacing[2]};
+    auto scene = Scene::ForSurfaces(*volume, *ToClassification(resolved->materials()));
+    auto unmapped = Camera::Create(*ToCameraSpec(views[0]), extent);
+    EXPECT_NE(testing::RenderWhole(*scene, *unmapped, ToRenderSettings(views[0])).rgb, want[0].rgb);
+  }
+  for (auto [workers, rings] : std::vector<std::pair<int, int>>{{1, 1}, {3, 1}, {4, 2}}) {
+    auto cluster = StartCluster(workers, rings);
+    ASSERT_TRUE(cluster.ok()) << cluster.status();
+    v1::Job job;
+    v1::Dataset* d = job.add_datasets();
+    d->set_volume("oriented.nrrd");
+    *d->mutable_preset() = preset.preset();
+    for (const auto& v : views) *d->add_views() = v;
+    job.set_balance(v1::TEST_RAYS);
+    auto stats = SubmitAndWatch((*cluster)->root_address(), job, WatchOptions{});
+    ASSERT_TRUE(stats.ok()) << stats.status();
+    for (size_t i = 0; i < views.size(); ++i) {
+      auto got = ReadImage(views[i].output());
+      ASSERT_TRUE(got.ok()) << got.status();
+      EXPECT_EQ(got->rgb, want[i].rgb) << workers << " workers, " << rings << " rings, view " << i;
     }
   }
 }

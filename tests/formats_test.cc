@@ -2,12 +2,6 @@
 // (every reader's, and the camera's mapping into the volume's frame), and
 // the presets. Files are written by the tests: MetaImage and .vti by hand,
 // DICOM with GDCM.
-#include <gdcmAttribute.h>
-#include <gdcmImage.h>
-#include <gdcmImageWriter.h>
-#include <gdcmReader.h>
-#include <gdcmWriter.h>
-#include <gdcmUIDGenerator.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <fcntl.h>
@@ -21,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "dicom_writer.h"
 #include "transtick/camera.h"
 #include "transtick/classification.h"
 #include "transtick/orientation.h"
@@ -231,60 +226,18 @@ TEST_F(FormatsTest, VtiErrorsNameTheFile) {
 // ---------------------------------------------------------------------------
 // DICOM series, written with GDCM
 
-struct SliceSpec {
-  std::string series = "1.2.3.4";
-  std::array<double, 3> position = {0, 0, 0};
-  std::array<double, 6> orientation = {1, 0, 0, 0, 1, 0};
-  double slope = 1, intercept = -1024;
-  int columns = 4, rows = 3;
-  int frame_value = 0;  // pixel (c, r) stores frame_value * 100 + r * columns + c
+struct SliceSpec : testing::DicomSlice {
+  int frame_value = 0;  // pixel i stores frame_value * 100 + i
 };
 
-void WriteSlice(const std::string& path, const SliceSpec& spec) {
-  gdcm::ImageWriter writer;
-  gdcm::Image& image = writer.GetImage();
-  image.SetNumberOfDimensions(2);
-  const unsigned int dims[2] = {static_cast<unsigned>(spec.columns), static_cast<unsigned>(spec.rows)};
-  image.SetDimensions(dims);
-  image.SetPixelFormat(gdcm::PixelFormat::INT16);
-  image.SetPhotometricInterpretation(gdcm::PhotometricInterpretation::MONOCHROME2);
-  image.SetTransferSyntax(gdcm::TransferSyntax::ExplicitVRLittleEndian);
-  image.SetOrigin(spec.position.data());
-  image.SetDirectionCosines(spec.orientation.data());
-  const double spacing[3] = {0.5, 0.8, 1};  // x (between columns), y, unused z
-  image.SetSpacing(spacing);
-  image.SetSlope(spec.slope);
-  image.SetIntercept(spec.intercept);
-  std::vector<int16_t> pixels(spec.columns * spec.rows);
+void WriteSlice(const std::string& path, SliceSpec spec) {
+  spec.pixels.resize(spec.columns * spec.rows);
   for (int i = 0; i < spec.columns * spec.rows; ++i) {
-    pixels[i] = static_cast<int16_t>(spec.frame_value * 100 + i);
+    spec.pixels[i] = static_cast<int16_t>(spec.frame_value * 100 + i);
   }
-  gdcm::DataElement pixel_data(gdcm::Tag(0x7fe0, 0x0010));
-  pixel_data.SetByteValue(reinterpret_cast<const char*>(pixels.data()),
-                          static_cast<uint32_t>(pixels.size() * 2));
-  image.SetDataElement(pixel_data);
-  gdcm::DataSet& ds = writer.GetFile().GetDataSet();
-  gdcm::Attribute<0x0008, 0x0016> sop_class = {"1.2.840.10008.5.1.4.1.1.2"};  // CT Image Storage
-  ds.Replace(sop_class.GetAsDataElement());
-  gdcm::Attribute<0x0008, 0x0060> modality = {"CT"};
-  ds.Replace(modality.GetAsDataElement());
-  gdcm::Attribute<0x0020, 0x000e> series;
-  series.SetValue(spec.series);
-  ds.Replace(series.GetAsDataElement());
-  writer.SetFileName(path.c_str());
-  ASSERT_TRUE(writer.Write()) << path;
-  // GDCM writes a 2-D image's origin without its z: put the whole position
-  // in with a plain writer, which leaves the other attributes as they are.
-  gdcm::Reader reader;
-  reader.SetFileName(path.c_str());
-  ASSERT_TRUE(reader.Read()) << path;
-  gdcm::Attribute<0x0020, 0x0032> position;
-  for (int i = 0; i < 3; ++i) position.SetValue(spec.position[i], i);
-  reader.GetFile().GetDataSet().Replace(position.GetAsDataElement());
-  gdcm::Writer rewrite;
-  rewrite.SetFile(reader.GetFile());
-  rewrite.SetFileName(path.c_str());
-  ASSERT_TRUE(rewrite.Write()) << path;
+  const std::string bytes = testing::DicomSliceFile(spec);
+  ASSERT_FALSE(bytes.empty()) << path;
+  std::ofstream(path, std::ios::binary) << bytes;
 }
 
 TEST_F(FormatsTest, DicomSeriesSortedRescaledAndOriented) {

@@ -30,7 +30,10 @@ absl::Status Error(const std::string& path, const std::string& message) {
   return absl::InvalidArgumentError(absl::StrCat(path, ": ", message));
 }
 
-std::string Format(const Axis& a) { return absl::StrFormat("(%g, %g, %g)", a[0], a[1], a[2]); }
+// + 0.0 prints -0 as 0.
+std::string Format(const Axis& a) {
+  return absl::StrFormat("(%g, %g, %g)", a[0] + 0.0, a[1] + 0.0, a[2] + 0.0);
+}
 
 }  // namespace
 

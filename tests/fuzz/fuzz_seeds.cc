@@ -1,7 +1,9 @@
 // Writes the generated seed corpora of the fuzzers (scripts/fuzz.sh runs it;
 // the job seeds are text files in tests/fuzz/corpus/job and examples/):
-//   DIR/volume/  small valid NRRD (raw and gzip), NIfTI-1 (.nii and .nii.gz)
-//                and .den files, several sample types and both byte orders;
+//   DIR/volume/  small valid NRRD (raw and gzip), NIfTI-1 (.nii and .nii.gz),
+//                .den, MetaImage (raw and zlib) and .vti (raw and zlib
+//                blocks) files, several sample types and both byte orders,
+//                and a DICOM series in the volume fuzzer's form;
 //   DIR/batch/   ray batches as neighbours send them (fresh primaries, rays
 //                handed on mid-flight, shadow rays) and deposit batches as
 //                workers send them, each for the batch fuzzer's
@@ -77,6 +79,20 @@ bool WriteVolumes(const fs::path& dir) {
   extreme.values[3] = -INFINITY;
   ok &= WriteVolume(dir / "extreme.nrrd",
                     NrrdFile(extreme, ScalarType::kFloat32, ByteOrder::kLittle, false), extreme);
+  for (bool compressed : {false, true}) {
+    for (ByteOrder order : {ByteOrder::kLittle, ByteOrder::kBig}) {
+      const std::string tag = absl::StrCat(compressed ? "zlib" : "raw",
+                                           order == ByteOrder::kBig ? "-big" : "");
+      ok &= Write(dir / absl::StrCat("metaimage-", tag, ".mha"),
+                  MetaImageFile(v, ScalarType::kInt16, order, compressed)) &&
+            ReadVolume((dir / absl::StrCat("metaimage-", tag, ".mha")).string()).ok();
+      ok &= Write(dir / absl::StrCat("vti-", tag, ".vti"),
+                  VtiFile(v, ScalarType::kUint16, order, compressed)) &&
+            ReadVolume((dir / absl::StrCat("vti-", tag, ".vti")).string()).ok();
+    }
+  }
+  // The volume fuzzer makes a directory of this input's slices.
+  ok &= Write(dir / "series.dicom", DicomSeriesInput(v));
   ok &= WriteVolume(dir / "little.den", DenFile(v, ByteOrder::kLittle), v);
   ok &= WriteVolume(dir / "big.den", DenFile(v, ByteOrder::kBig), v);
   return ok;

@@ -9,6 +9,7 @@
 #include <cstring>
 
 #include "absl/strings/str_cat.h"
+#include "dicom_writer.h"
 
 namespace transtick::fuzz {
 namespace {
@@ -119,6 +120,88 @@ std::string Gzip(const std::string& data) {
   if (deflate(&stream, Z_FINISH) != Z_STREAM_END) std::abort();
   out.resize(stream.total_out);
   deflateEnd(&stream);
+  return out;
+}
+
+std::string MetaImageFile(const Volume& volume, ScalarType type, ByteOrder order, bool compressed) {
+  static const char* kTypes[] = {"MET_UCHAR", "MET_CHAR", "MET_USHORT", "MET_SHORT",
+                                 "MET_UINT",  "MET_INT",  "MET_FLOAT"};
+  const std::string data = RawSamples(volume, type, order);
+  std::string zipped;
+  if (compressed) {
+    uLongf n = compressBound(data.size());
+    zipped.resize(n);
+    compress(reinterpret_cast<Bytef*>(zipped.data()), &n,
+             reinterpret_cast<const Bytef*>(data.data()), data.size());
+    zipped.resize(n);
+  }
+  return absl::StrCat(
+      "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = ",
+      order == ByteOrder::kBig ? "True" : "False", "\nCompressedData = ",
+      compressed ? "True" : "False", "\nTransformMatrix = 0 1 0 1 0 0 0 0 1\nOffset = 1 2 3",
+      "\nElementSpacing = ", volume.spacing[0], " ", volume.spacing[1], " ", volume.spacing[2],
+      "\nDimSize = ", volume.dims[0], " ", volume.dims[1], " ", volume.dims[2],
+      "\nElementType = ", kTypes[static_cast<int>(type)], "\nElementDataFile = LOCAL\n",
+      compressed ? zipped : data);
+}
+
+std::string VtiFile(const Volume& volume, ScalarType type, ByteOrder order, bool compressed) {
+  static const char* kTypes[] = {"UInt8", "Int8", "UInt16", "Int16", "UInt32", "Int32", "Float32"};
+  const std::string data = RawSamples(volume, type, order);
+  std::string appended;
+  auto put64 = [&](uint64_t v) { Put(static_cast<uint32_t>(v), 4, order, &appended); };
+  if (!compressed) {
+    put64(data.size());
+    appended += data;
+  } else {
+    const size_t block = (data.size() + 1) / 2;
+    std::string blocks[2];
+    for (int b = 0; b < 2; ++b) {
+      const std::string part = data.substr(b * block, block);
+      uLongf n = compressBound(part.size());
+      blocks[b].resize(n);
+      compress(reinterpret_cast<Bytef*>(blocks[b].data()), &n,
+               reinterpret_cast<const Bytef*>(part.data()), part.size());
+      blocks[b].resize(n);
+    }
+    put64(2);
+    put64(block);
+    put64(data.size() - block == block ? 0 : data.size() - block);
+    put64(blocks[0].size());
+    put64(blocks[1].size());
+    appended += blocks[0] + blocks[1];
+  }
+  return absl::StrCat(
+      "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\" version=\"1.0\" byte_order=\"",
+      order == ByteOrder::kBig ? "BigEndian" : "LittleEndian", "\" header_type=\"UInt32\"",
+      compressed ? " compressor=\"vtkZLibDataCompressor\"" : "", ">\n<ImageData WholeExtent=\"0 ",
+      volume.dims[0] - 1, " 0 ", volume.dims[1] - 1, " 0 ", volume.dims[2] - 1,
+      "\" Origin=\"0 0 0\" Spacing=\"", volume.spacing[0], " ", volume.spacing[1], " ",
+      volume.spacing[2], "\" Direction=\"0 0 1 1 0 0 0 1 0\">\n<Piece Extent=\"0 ",
+      volume.dims[0] - 1, " 0 ", volume.dims[1] - 1, " 0 ", volume.dims[2] - 1,
+      "\">\n<PointData Scalars=\"v\">\n<DataArray type=\"", kTypes[static_cast<int>(type)],
+      "\" Name=\"v\" format=\"appended\" offset=\"0\"/>\n</PointData>\n</Piece>\n</ImageData>\n"
+      "<AppendedData encoding=\"raw\">\n_",
+      appended, "\n</AppendedData>\n</VTKFile>\n");
+}
+
+std::string DicomSeriesInput(const Volume& volume) {
+  std::string out = kDicomSeriesMagic;
+  for (int z = 0; z < volume.dims[2]; ++z) {
+    testing::DicomSlice slice;
+    slice.columns = volume.dims[0];
+    slice.rows = volume.dims[1];
+    slice.spacing = {volume.spacing[0], volume.spacing[1]};
+    slice.position = {0, 0, z * volume.spacing[2]};
+    for (int y = 0; y < volume.dims[1]; ++y) {
+      for (int x = 0; x < volume.dims[0]; ++x) {
+        slice.pixels.push_back(static_cast<int16_t>(std::lround(volume.At(x, y, z))));
+      }
+    }
+    slice.intercept = 0;
+    if (z > 0) out += kDicomSliceSeparator;
+    out += testing::DicomSliceFile(slice);
+  }
   return out;
 }
 

@@ -24,6 +24,20 @@ std::string NiftiFile(const Volume& volume, ScalarType type, ByteOrder order, bo
 // A Levoy .den file: the 62-byte header and uint8 samples.
 std::string DenFile(const Volume& volume, ByteOrder order);
 
+// A MetaImage (.mha) with its data attached, raw or zlib-compressed, and a
+// rotation with a flip in TransformMatrix.
+std::string MetaImageFile(const Volume& volume, ScalarType type, ByteOrder order, bool compressed);
+
+// A VTK image data file (.vti) with one appended array, raw or in two
+// vtkZLibDataCompressor blocks, and a Direction with a flip.
+std::string VtiFile(const Volume& volume, ScalarType type, ByteOrder order, bool compressed);
+
+// The volume fuzzer's form of a DICOM series: kDicomSeriesMagic, then the
+// slices' files (written by GDCM, int16) joined by kDicomSliceSeparator.
+inline constexpr char kDicomSeriesMagic[] = "DICOM-SERIES\n";
+inline constexpr char kDicomSliceSeparator[] = "\n--next-slice--\n";
+std::string DicomSeriesInput(const Volume& volume);
+
 // The gzip form of `data`.
 std::string Gzip(const std::string& data);
 

@@ -1,10 +1,14 @@
 // libFuzzer entry for the volume readers: the input becomes a file that each
-// reader parses. Every input must give a volume or a status; a crash, an
+// reader parses (NRRD, NIfTI-1, .den, MetaImage, .vti), or, when it starts
+// with kDicomSeriesMagic, a directory of DICOM slices (the rest of the input
+// cut at kDicomSliceSeparator, at most 8 files) that the DICOM series reader
+// (GDCM) reads. Every input must give a volume or a status; a crash, an
 // out-of-bounds access (under ASan), undefined behaviour (under UBSan) or a
 // large allocation is a bug. A small volume that reads is then rendered as
 // `transtick render` would render it, in both modes: classified, cut into
 // slabs and a few pixels traced on a ring (fuzz_ring.h checks the rules on
 // the way), so that hostile values and spacings reach the tracer.
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -14,9 +18,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "fuzz_ring.h"
+#include "fuzz_volumes.h"
 #include "transtick/check.h"
 #include "transtick/framebuffer.h"
 #include "transtick/partition.h"
@@ -38,7 +44,30 @@ const std::string& ScratchPath() {
   return *path;
 }
 
-void RemoveScratch() { unlink(ScratchPath().c_str()); }
+// A directory beside it for DICOM series.
+const std::string& ScratchDir() {
+  static const std::string* path = [] {
+    std::string dir = ScratchPath() + ".series";
+    if (mkdir(dir.c_str(), 0700) != 0) std::abort();
+    return new std::string(dir);
+  }();
+  return *path;
+}
+
+constexpr int kMaxSlices = 8;
+
+void RemoveScratch() {
+  for (int i = 0; i < kMaxSlices; ++i) unlink((ScratchDir() + "/s" + std::to_string(i)).c_str());
+  rmdir(ScratchDir().c_str());
+  unlink(ScratchPath().c_str());
+}
+
+void WriteFile(const std::string& path, const char* data, size_t size) {
+  std::FILE* file = std::fopen(path.c_str(), "wb");
+  if (file == nullptr) std::abort();
+  if (size > 0 && std::fwrite(data, 1, size, file) != size) std::abort();
+  std::fclose(file);
+}
 
 // Volumes larger than this are read but not rendered (inputs stay fast).
 constexpr size_t kMaxRenderedVoxels = 32 * 32 * 32;
@@ -103,22 +132,41 @@ void Check(const absl::StatusOr<Volume>& volume) {
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
   (void)transtick::fuzz::ScratchPath();
+  (void)transtick::fuzz::ScratchDir();
   std::atexit(transtick::fuzz::RemoveScratch);
   return 0;
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  const std::string& path = transtick::fuzz::ScratchPath();
-  std::FILE* file = std::fopen(path.c_str(), "wb");
-  if (file == nullptr) std::abort();
-  if (size > 0 && std::fwrite(data, 1, size, file) != size) std::abort();
-  std::fclose(file);
-
+  namespace tf = transtick::fuzz;
   // Small enough that a lying header cannot exhaust the fuzzer's memory.
   transtick::ReadOptions options;
   options.max_bytes = uint64_t{64} << 20;
-  transtick::fuzz::Check(transtick::ReadNrrd(path, options));
-  transtick::fuzz::Check(transtick::ReadNifti(path, options));
-  transtick::fuzz::Check(transtick::ReadDen(path, options));
+  const std::string_view input(reinterpret_cast<const char*>(data), size);
+  const std::string_view magic = tf::kDicomSeriesMagic;
+  if (input.substr(0, magic.size()) == magic) {
+    std::string_view rest = input.substr(magic.size());
+    const std::string_view separator = tf::kDicomSliceSeparator;
+    int files = 0;
+    while (files < tf::kMaxSlices) {
+      const size_t cut = files + 1 < tf::kMaxSlices ? rest.find(separator) : std::string_view::npos;
+      const std::string_view slice = rest.substr(0, cut);
+      tf::WriteFile(tf::ScratchDir() + "/s" + std::to_string(files++), slice.data(), slice.size());
+      if (cut == std::string_view::npos) break;
+      rest = rest.substr(cut + separator.size());
+    }
+    for (int i = files; i < tf::kMaxSlices; ++i) {
+      unlink((tf::ScratchDir() + "/s" + std::to_string(i)).c_str());
+    }
+    tf::Check(transtick::ReadDicomSeries(tf::ScratchDir(), options));
+    return 0;
+  }
+  const std::string& path = tf::ScratchPath();
+  tf::WriteFile(path, input.data(), input.size());
+  tf::Check(transtick::ReadNrrd(path, options));
+  tf::Check(transtick::ReadNifti(path, options));
+  tf::Check(transtick::ReadDen(path, options));
+  tf::Check(transtick::ReadMetaImage(path, options));
+  tf::Check(transtick::ReadVti(path, options));
   return 0;
 }
