@@ -322,6 +322,36 @@ TEST_F(FormatsTest, DicomSeriesRefusesGapsMixedSeriesAndJunk) {
   ExpectError(ReadVolume(cut), "f1", "");
 }
 
+// Found by volume_fuzzer: GDCM allocates an element's declared length before
+// reading it, so a 150-byte file declaring a 1.3 GB element cost 1.3 GB. The
+// reader walks the element lengths first and refuses the file.
+TEST_F(FormatsTest, DicomElementThatLiesAboutItsLength) {
+  std::string file(128, '\0');
+  file += "DICM";
+  const std::string syntax("1.2.840.10008.1.2.1\0", 20);
+  file += std::string("\x02\x00\x10\x00UI\x14\x00", 8) + syntax;
+  // (0009,0010) OB, 2 reserved bytes, a length of 0x50000000, 8 bytes.
+  file += std::string("\x09\x00\x10\x00OB\x00\x00\x00\x00\x00\x50", 12) + "12345678";
+  const std::string dir = dir_ + "/lie";
+  std::filesystem::create_directories(dir);
+  Write("lie/slice", file);
+  ExpectError(ReadVolume(dir), "slice", "declares 1342177280 bytes, 8 remain");
+  // Cut inside an element's header, and a sequence whose item lies.
+  Write("lie/slice", file.substr(0, 136));
+  ExpectError(ReadVolume(dir), "slice", "cut short");
+  std::string sequence = file.substr(0, 160);
+  sequence += std::string("\x08\x00\x15\x11SQ\x00\x00\xff\xff\xff\xff", 12);
+  sequence += std::string("\xfe\xff\x00\xe0\x00\x00\x00\x40", 8) + "xx";
+  Write("lie/slice", sequence);
+  ExpectError(ReadVolume(dir), "slice", "item");
+  // Also found by volume_fuzzer: an element of an unknown VR, which GDCM
+  // reads as implicit VR, taking later bytes ("0\\0\\") for a 1.5 GB length.
+  std::string unknown = file.substr(0, 160);
+  unknown += std::string("\x20\x00\x32\x00ZZ\x06\x000\\0\\0 ", 14);
+  Write("lie/slice", unknown);
+  ExpectError(ReadVolume(dir), "slice", "no valid VR");
+}
+
 TEST_F(FormatsTest, DicomSeriesGoesThroughTheHooks) {
   const std::string dir = dir_ + "/hooked";
   std::filesystem::create_directories(dir);

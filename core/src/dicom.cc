@@ -2,11 +2,13 @@
 // with GDCM (Debian's libgdcm, the library DICOM toolkits and ITK build on).
 //
 // Each file in the directory is one slice; DICOMDIR and names starting with
-// '.' are passed over. Every file is opened through ReadOptions::open (so
-// the root's confinement holds) and given to GDCM as a stream. Each is read
-// twice: first its header only (up to the pixel data), which is checked
-// (sizes, pixel format, one frame) before GDCM reads any pixels, then in
-// full, which decodes the pixels in whatever transfer syntax GDCM supports.
+// '.' are passed over. Every file is read through ReadOptions::open (so the
+// root's confinement holds), its element lengths walked (ElementWalk, below:
+// GDCM would allocate whatever a length declares), and given to GDCM from
+// memory. Each is read twice: first its header only (up to the pixel data),
+// which is checked (sizes, pixel format, one frame) before GDCM reads any
+// pixels, then in full, which decodes the pixels in whatever transfer
+// syntax GDCM supports.
 //
 // Attributes used:
 //   (0020,000E) SeriesInstanceUID   all slices the same: one series
@@ -30,7 +32,6 @@
 #include <gdcmReader.h>
 #include <gdcmTrace.h>
 #include <dirent.h>
-#include <ext/stdio_filebuf.h>
 #include <fcntl.h>
 #include <unistd.h>
 
@@ -38,6 +39,7 @@
 #include <array>
 #include <cmath>
 #include <istream>
+#include <sstream>
 #include <memory>
 #include <set>
 #include <string>
@@ -130,32 +132,221 @@ absl::StatusOr<std::vector<double>> Decimals(const std::string& path, const gdcm
   return out;
 }
 
-// GDCM reads from a stream over a descriptor opened through the hook.
-class FileStream {
+// GDCM allocates every element's declared length before it reads the
+// value (gdcm::ByteValue::SetLength): a file of a few bytes that declares a
+// 4 GB element would make it allocate 4 GB (found by volume_fuzzer). So
+// before GDCM sees a file, this walks its elements, nested sequences and
+// items included, and checks that every defined length fits in what
+// encloses it. Layout (PS3.5 section 7): a 128-byte preamble and "DICM"
+// (optional), the file meta group 0002 in explicit VR little endian, then
+// the data set in the transfer syntax (0002,0010) names: implicit VR little
+// endian (1.2.840.10008.1.2), explicit VR big endian (...1.2.2) or explicit
+// VR little endian (the others). An element is a tag (group, element: 2+2
+// bytes), in explicit VR a 2-letter VR and then a 2-byte length, or for the
+// VRs below 2 reserved bytes and a 4-byte length; in implicit VR a 4-byte
+// length. 0xFFFFFFFF is an undefined length: a sequence of items (FFFE,E000)
+// ended by (FFFE,E0DD); an item of undefined length ends with (FFFE,E00D).
+class ElementWalk {
  public:
-  static absl::StatusOr<std::unique_ptr<FileStream>> Open(const std::string& path,
-                                                          const ReadOptions& options) {
-    absl::StatusOr<vi::FilePtr> file = vi::OpenFile(path, options);
-    if (!file.ok()) return file.status();
-    return std::unique_ptr<FileStream>(new FileStream(*std::move(file)));
+  ElementWalk(const std::string& path, const std::string& bytes) : path_(path), bytes_(bytes) {}
+
+  absl::Status Run() {
+    size_t pos = 0;
+    if (bytes_.size() >= 132 && bytes_.compare(128, 4, "DICM") == 0) {
+      pos = 132;
+      // The meta group: explicit VR little endian, whatever follows.
+      explicit_ = true;
+      big_ = false;
+      std::string syntax;
+      while (pos + 8 <= bytes_.size() && U16(pos, false) == 0x0002) {
+        const size_t start = pos;
+        absl::StatusOr<size_t> next = Element(pos, bytes_.size(), 0);
+        if (!next.ok()) return next.status();
+        if (U16(start + 2, false) == 0x0010) syntax = Value(start, *next);
+        pos = *next;
+      }
+      while (!syntax.empty() && (syntax.back() == '\0' || syntax.back() == ' ')) syntax.pop_back();
+      if (syntax == "1.2.840.10008.1.2") {
+        explicit_ = false;
+      } else if (syntax == "1.2.840.10008.1.2.2") {
+        big_ = true;
+      } else if (syntax == "1.2.840.10008.1.2.1.99") {
+        return Error(path_, "deflated transfer syntax is not supported");
+      }
+    } else {
+      // No meta header: explicit VR when two capital letters follow the tag.
+      explicit_ = bytes_.size() >= 6 && absl::ascii_isupper(static_cast<unsigned char>(bytes_[4])) &&
+                  absl::ascii_isupper(static_cast<unsigned char>(bytes_[5]));
+      big_ = false;
+    }
+    return Elements(pos, bytes_.size(), 0, /*until_item_end=*/false).status();
   }
-  std::istream& stream() { return stream_; }
 
  private:
-  explicit FileStream(vi::FilePtr file)
-      : file_(std::move(file)), buffer_(file_.get(), std::ios::in), stream_(&buffer_) {}
-  vi::FilePtr file_;
-  __gnu_cxx::stdio_filebuf<char> buffer_;
-  std::istream stream_;
+  static constexpr uint32_t kUndefined = 0xffffffffu;
+  static constexpr int kMaxDepth = 16;
+
+  uint16_t U16(size_t at, bool big) const {
+    const auto* p = reinterpret_cast<const unsigned char*>(bytes_.data() + at);
+    return big ? static_cast<uint16_t>(p[0] << 8 | p[1]) : static_cast<uint16_t>(p[1] << 8 | p[0]);
+  }
+  uint32_t U32(size_t at, bool big) const {
+    return big ? (uint32_t{U16(at, true)} << 16 | U16(at + 2, true))
+               : (uint32_t{U16(at + 2, false)} << 16 | U16(at, false));
+  }
+  // The value of the element at `start` that ends at `end`, for short strings.
+  std::string Value(size_t start, size_t end) const {
+    const size_t header = 8;  // (0002,0010) is UI: a short-form header
+    return start + header <= end && end - start - header < 256
+               ? bytes_.substr(start + header, end - start - header)
+               : std::string();
+  }
+  absl::Status Short(size_t at) const {
+    return Error(path_, absl::StrCat("a data element at byte ", at, " is cut short (truncated?)"));
+  }
+
+  // Walks elements in [pos, end) and returns where it stopped: at `end`,
+  // or past the delimiter that ends an item of undefined length.
+  absl::StatusOr<size_t> Elements(size_t pos, size_t end, int depth, bool until_item_end) {
+    while (pos < end) {
+      if (end - pos < 8) return Short(pos);
+      if (U16(pos, big_) == 0xfffe && U16(pos + 2, big_) == 0xe00d) {
+        if (!until_item_end) return Error(path_, absl::StrCat("a stray item end at byte ", pos));
+        return pos + 8;
+      }
+      absl::StatusOr<size_t> next = Element(pos, end, depth);
+      if (!next.ok()) return next.status();
+      pos = *next;
+    }
+    if (until_item_end) return Short(pos);
+    return pos;
+  }
+
+  // One element at `pos` (inside [pos, end)); returns the position after it.
+  absl::StatusOr<size_t> Element(size_t pos, size_t end, int depth) {
+    if (depth > kMaxDepth) return Error(path_, "sequences nested too deep");
+    const bool meta = U16(pos, false) == 0x0002;
+    const bool big = big_ && !meta;
+    const uint16_t group = U16(pos, big), element = U16(pos + 2, big);
+    size_t header = 8;
+    uint32_t length = 0;
+    bool sequence = false;
+    if (explicit_ || meta) {
+      const std::string vr = bytes_.substr(pos + 4, 2);
+      // GDCM reads an element of an unknown VR by guesswork (as implicit VR,
+      // whose 4-byte length is then read from other bytes), which this walk
+      // cannot follow: such a file is refused.
+      static const char* kVrs[] = {"AE", "AS", "AT", "CS", "DA", "DS", "DT", "FL", "FD", "IS",
+                                   "LO", "LT", "OB", "OD", "OF", "OL", "OV", "OW", "PN", "SH",
+                                   "SL", "SQ", "SS", "ST", "SV", "TM", "UC", "UI", "UL", "UN",
+                                   "UR", "US", "UT", "UV"};
+      bool known = false;
+      for (const char* v : kVrs) known = known || vr == v;
+      if (!known) {
+        return Error(path_, absl::StrFormat("element (%04X,%04X) at byte %d has no valid VR", group,
+                                            element, pos));
+      }
+      static const char* kLong[] = {"OB", "OD", "OF", "OL", "OV", "OW", "SQ",
+                                    "SV", "UC", "UN", "UR", "UT", "UV"};
+      bool long_form = false;
+      for (const char* l : kLong) long_form = long_form || vr == l;
+      if (long_form) {
+        if (end - pos < 12) return Short(pos);
+        header = 12;
+        length = U32(pos + 8, big);
+        sequence = vr == "SQ" || (vr == "UN" && length == kUndefined);
+      } else {
+        length = U16(pos + 6, big);
+      }
+    } else {
+      length = U32(pos + 4, big);
+      sequence = length == kUndefined;
+    }
+    const size_t value = pos + header;
+    const bool pixels = group == 0x7fe0 && element == 0x0010;
+    if (length == kUndefined) {
+      if (!sequence && !pixels) {
+        return Error(path_, absl::StrFormat(
+                                "element (%04X,%04X) at byte %d has an undefined length", group,
+                                element, pos));
+      }
+      return Items(value, end, depth + 1, /*fragments=*/pixels);
+    }
+    if (length > end - value) {
+      return Error(path_, absl::StrFormat(
+                              "element (%04X,%04X) at byte %d declares %d bytes, %d remain",
+                              group, element, pos, length, end - value));
+    }
+    if (sequence) {
+      absl::StatusOr<size_t> done = Items(value, value + length, depth + 1, false);
+      if (!done.ok()) return done.status();
+    }
+    return value + length;
+  }
+
+  // Items from `pos` to `end` (a sequence of defined length) or to the
+  // sequence delimiter. Pixel fragments hold bytes, not data sets.
+  absl::StatusOr<size_t> Items(size_t pos, size_t end, int depth, bool fragments) {
+    while (pos < end) {
+      if (end - pos < 8) return Short(pos);
+      const uint16_t group = U16(pos, big_), element = U16(pos + 2, big_);
+      const uint32_t length = U32(pos + 4, big_);
+      if (group != 0xfffe) return Error(path_, absl::StrCat("a sequence holds a non-item at byte ", pos));
+      if (element == 0xe0dd) return pos + 8;  // sequence delimiter
+      if (element != 0xe000) return Error(path_, absl::StrCat("a bad item tag at byte ", pos));
+      const size_t value = pos + 8;
+      if (length == kUndefined) {
+        if (fragments) return Error(path_, "a pixel fragment of undefined length");
+        absl::StatusOr<size_t> next = Elements(value, end, depth, /*until_item_end=*/true);
+        if (!next.ok()) return next.status();
+        pos = *next;
+        continue;
+      }
+      if (length > end - value) {
+        return Error(path_, absl::StrCat("an item at byte ", pos, " declares ", length, " bytes, ",
+                                         end - value, " remain"));
+      }
+      if (!fragments) {
+        absl::StatusOr<size_t> inner = Elements(value, value + length, depth, false);
+        if (!inner.ok()) return inner.status();
+      }
+      pos = value + length;
+    }
+    return pos;
+  }
+
+  const std::string& path_;
+  const std::string& bytes_;
+  bool explicit_ = true;
+  bool big_ = false;
 };
 
+// A slice file's bytes, read through the hook and walked (ElementWalk):
+// what GDCM then reads from memory.
+absl::StatusOr<std::string> ReadChecked(const std::string& path, const ReadOptions& options) {
+  absl::StatusOr<uint64_t> size = vi::FileSize(path, options);
+  if (!size.ok()) return size.status();
+  // A slice is far smaller than the volume it belongs to.
+  if (*size > options.max_bytes) {
+    return absl::ResourceExhaustedError(absl::StrCat(path, ": a slice file of ", *size,
+                                                     " bytes, more than the volume limit"));
+  }
+  absl::StatusOr<std::string> bytes = vi::ReadPrefix(path, *size, options);
+  if (!bytes.ok()) return bytes.status();
+  if (absl::Status s = ElementWalk(path, *bytes).Run(); !s.ok()) {
+    // The walk's message starts with the path.
+    return Error(path, absl::StrCat("not a DICOM file, or a damaged one: ",
+                                    s.message().substr(path.size() + 2)));
+  }
+  return bytes;
+}
+
 absl::StatusOr<Slice> ReadHeader(const std::string& path, const ReadOptions& options) {
-  absl::StatusOr<std::unique_ptr<FileStream>> file = FileStream::Open(path, options);
-  if (!file.ok()) return file.status();
-  absl::StatusOr<uint64_t> file_size = vi::FileSize(path, options);
-  if (!file_size.ok()) return file_size.status();
+  absl::StatusOr<std::string> contents = ReadChecked(path, options);
+  if (!contents.ok()) return contents.status();
+  const uint64_t file_size = contents->size();
+  std::istringstream stream(*std::move(contents));
   gdcm::Reader reader;
-  std::istream& stream = (*file)->stream();
   reader.SetStream(stream);
   // Skipping the pixel data leaves the stream at its value: nothing of it
   // is read, and its length is checked below before GDCM reads it.
@@ -171,7 +362,7 @@ absl::StatusOr<Slice> ReadHeader(const std::string& path, const ReadOptions& opt
   s.native = !syntax.IsEncapsulated();
   stream.clear();
   const std::streamoff value_at = stream.tellg();
-  if (value_at < 4 || static_cast<uint64_t>(value_at) > *file_size) {
+  if (value_at < 4 || static_cast<uint64_t>(value_at) > file_size) {
     return Error(path, "has no pixel data (7FE0,0010)");
   }
   {
@@ -182,7 +373,7 @@ absl::StatusOr<Slice> ReadHeader(const std::string& path, const ReadOptions& opt
     const bool big = syntax.GetSwapCode() == gdcm::SwapCode::BigEndian;
     s.pixel_length = big ? (uint32_t{vl[0]} << 24 | vl[1] << 16 | vl[2] << 8 | vl[3])
                          : (uint32_t{vl[3]} << 24 | vl[2] << 16 | vl[1] << 8 | vl[0]);
-    s.pixel_available = *file_size - static_cast<uint64_t>(value_at);
+    s.pixel_available = file_size - static_cast<uint64_t>(value_at);
   }
   s.series = Text(ds, 0x0020, 0x000e);
   s.rows = Unsigned16(ds, 0x0028, 0x0010);
@@ -255,10 +446,12 @@ ScalarType TypeOf(const Slice& s) {
 
 // Appends the slice's pixels, rescaled, to `out`.
 absl::Status ReadPixels(const Slice& s, const ReadOptions& options, std::vector<float>* out) {
-  absl::StatusOr<std::unique_ptr<FileStream>> file = FileStream::Open(s.path, options);
-  if (!file.ok()) return file.status();
+  // Read and walked again: the file may have changed since its header was.
+  absl::StatusOr<std::string> contents = ReadChecked(s.path, options);
+  if (!contents.ok()) return contents.status();
+  std::istringstream stream(*std::move(contents));
   gdcm::ImageReader reader;
-  reader.SetStream((*file)->stream());
+  reader.SetStream(stream);
   if (!reader.Read()) return Error(s.path, "GDCM cannot read its pixel data");
   const gdcm::Image& image = reader.GetImage();
   const unsigned int* dims = image.GetDimensions();
