@@ -163,5 +163,28 @@ fi
   --out "$dir/q.png" >"$dir/quiet" 2>&1
 [[ -s $dir/quiet ]] && { echo "FAIL: --quiet printed:"; cat "$dir/quiet"; fails=$((fails + 1)); }
 
+# The cube with its axes permuted and flipped (space directions): info names
+# the orientation, and the embedded cluster renders what --local 0 does.
+{
+  printf 'NRRD0004\ntype: uint8\ndimension: 3\nsizes: 32 32 32\nencoding: raw\n'
+  printf 'space: right-anterior-superior\nspace directions: (0,1,0) (0,0,-1) (1,0,0)\n'
+  printf 'space origin: (5,6,7)\n\n'
+  tail -c $((32 * 32 * 32)) "$dir/cube.nrrd"
+} >"$dir/oriented.nrrd"
+expect 0 "orientation PIR" -- info --volume "$dir/oriented.nrrd"
+expect 0 "48x48 surfaces" -- render --volume "$dir/oriented.nrrd" --preset mr-brain --size 48x48 \
+  --azimuth 30 --elevation 20 --local 2 --out "$dir/o2.png"
+expect 0 "48x48 surfaces" -- render --volume "$dir/oriented.nrrd" --preset mr-brain --size 48x48 \
+  --azimuth 30 --elevation 20 --local 0 --out "$dir/o0.png"
+cmp "$dir/o2.png" "$dir/o0.png" || { echo "FAIL: oriented cluster and in-process images differ"; fails=$((fails + 1)); }
+expect 0 "dvr" -- render --volume "$dir/oriented.nrrd" --preset hot --size 24x24 --local 0 \
+  --out "$dir/o3.png"
+expect 2 "unknown preset 'ct-bones'" -- render --volume "$dir/cube.nrrd" --preset ct-bones \
+  --out "$dir/p.png"
+expect 2 "colormap for dvr" -- render --volume "$dir/cube.nrrd" --preset hot --mode surfaces \
+  --out "$dir/p.png"
+expect 2 "contradict" -- render --volume "$dir/cube.nrrd" --preset ct-bone --materials "$dir/m.json" \
+  --out "$dir/p.png"
+
 echo "cli_test: $fails failed"
 [[ $fails == 0 ]]

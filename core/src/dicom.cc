@@ -158,13 +158,20 @@ class ElementWalk {
       explicit_ = true;
       big_ = false;
       std::string syntax;
-      while (pos + 8 <= bytes_.size() && U16(pos, false) == 0x0002) {
+      // GDCM asserts (and aborts; Debian builds it with assertions) on a
+      // meta element that is cut short, holds a sequence or an undefined
+      // length, and when the file ends with the meta group.
+      while (pos + 4 <= bytes_.size() && U16(pos, false) == 0x0002) {
         const size_t start = pos;
-        absl::StatusOr<size_t> next = Element(pos, bytes_.size(), 0);
+        if (bytes_.size() - pos >= 6 && bytes_.compare(pos + 4, 2, "SQ") == 0) {
+          return Error(path_, absl::StrCat("a sequence in the file meta group at byte ", pos));
+        }
+        absl::StatusOr<size_t> next = Element(pos, bytes_.size(), kMaxDepth);
         if (!next.ok()) return next.status();
         if (U16(start + 2, false) == 0x0010) syntax = Value(start, *next);
         pos = *next;
       }
+      if (bytes_.size() - pos < 8) return Error(path_, "no data set after the file meta group");
       while (!syntax.empty() && (syntax.back() == '\0' || syntax.back() == ' ')) syntax.pop_back();
       if (syntax == "1.2.840.10008.1.2") {
         explicit_ = false;
@@ -225,6 +232,7 @@ class ElementWalk {
   // One element at `pos` (inside [pos, end)); returns the position after it.
   absl::StatusOr<size_t> Element(size_t pos, size_t end, int depth) {
     if (depth > kMaxDepth) return Error(path_, "sequences nested too deep");
+    if (end - pos < 8) return Short(pos);
     const bool meta = U16(pos, false) == 0x0002;
     const bool big = big_ && !meta;
     const uint16_t group = U16(pos, big), element = U16(pos + 2, big);
@@ -265,6 +273,7 @@ class ElementWalk {
     const size_t value = pos + header;
     const bool pixels = group == 0x7fe0 && element == 0x0010;
     if (length == kUndefined) {
+      if (meta) return Error(path_, absl::StrCat("an undefined length in the file meta group at byte ", pos));
       if (!sequence && !pixels) {
         return Error(path_, absl::StrFormat(
                                 "element (%04X,%04X) at byte %d has an undefined length", group,
