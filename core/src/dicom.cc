@@ -101,8 +101,7 @@ int Unsigned16(const gdcm::DataSet& ds, uint16_t group, uint16_t element) {
   if (!ds.FindDataElement(tag)) return -1;
   const gdcm::ByteValue* bv = ds.GetDataElement(tag).GetByteValue();
   if (bv == nullptr || bv->GetLength() < 2) return -1;
-  // Explicit and implicit little endian; a big-endian file's header fields
-  // are swapped by GDCM when it reads the data set.
+  // Little endian: big-endian files are refused (ReadHeader).
   const unsigned char* p = reinterpret_cast<const unsigned char*>(bv->GetPointer());
   return p[0] | p[1] << 8;
 }
@@ -369,6 +368,10 @@ absl::StatusOr<Slice> ReadHeader(const std::string& path, const ReadOptions& opt
   s.path = path;
   const gdcm::TransferSyntax& syntax = reader.GetFile().GetHeader().GetDataSetTransferSyntax();
   s.native = !syntax.IsEncapsulated();
+  if (syntax.GetSwapCode() == gdcm::SwapCode::BigEndian) {
+    // Retired since 2004; the attributes below are read little-endian.
+    return Error(path, "uses the retired explicit VR big endian transfer syntax, not supported");
+  }
   stream.clear();
   const std::streamoff value_at = stream.tellg();
   if (value_at < 4 || static_cast<uint64_t>(value_at) > file_size) {
