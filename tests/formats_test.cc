@@ -354,6 +354,12 @@ TEST_F(FormatsTest, DicomElementThatLiesAboutItsLength) {
   // GDCM fail an assertion ("Should not happen") and abort the process.
   Write("lie/slice", file.substr(0, 160));
   ExpectError(ReadVolume(dir), "slice", "no data set after the file meta group");
+  // Also found by volume_fuzzer: HighBit (0028,0102) of another VR than US
+  // made GDCM's image reader fail an assertion.
+  std::string high_bit = file.substr(0, 160);
+  high_bit += std::string("\x28\x00\x02\x01" "DS" "\x02\x00" "15", 10);
+  Write("lie/slice", high_bit);
+  ExpectError(ReadVolume(dir), "slice", "has VR DS, not US");
 }
 
 TEST_F(FormatsTest, DicomSeriesGoesThroughTheHooks) {

@@ -46,6 +46,7 @@
 #include <vector>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -145,6 +146,31 @@ absl::StatusOr<std::vector<double>> Decimals(const std::string& path, const gdcm
 // VRs below 2 reserved bytes and a 4-byte length; in implicit VR a 4-byte
 // length. 0xFFFFFFFF is an undefined length: a sequence of items (FFFE,E000)
 // ended by (FFFE,E0DD); an item of undefined length ends with (FFFE,E00D).
+// The VRs allowed for the attributes GDCM's image reader reads with
+// gdcm::Attribute (PS3.6), "/"-separated; null for other tags.
+const char* ImageAttributeVr(uint16_t group, uint16_t element) {
+  struct Entry {
+    uint16_t group, element;
+    const char* vrs;
+  };
+  static constexpr Entry kEntries[] = {
+      {0x0008, 0x0016, "UI"},    {0x0008, 0x0060, "CS"},    {0x0018, 0x0050, "DS"},
+      {0x0018, 0x0088, "DS"},    {0x0018, 0x1164, "DS"},    {0x0020, 0x000d, "UI"},
+      {0x0020, 0x000e, "UI"},    {0x0020, 0x0013, "IS"},    {0x0020, 0x0032, "DS"},
+      {0x0020, 0x0037, "DS"},    {0x0028, 0x0002, "US"},    {0x0028, 0x0004, "CS"},
+      {0x0028, 0x0006, "US"},    {0x0028, 0x0008, "IS"},    {0x0028, 0x0010, "US"},
+      {0x0028, 0x0011, "US"},    {0x0028, 0x0030, "DS"},    {0x0028, 0x0034, "IS"},
+      {0x0028, 0x0100, "US"},    {0x0028, 0x0101, "US"},    {0x0028, 0x0102, "US"},
+      {0x0028, 0x0103, "US"},    {0x0028, 0x0106, "US/SS"}, {0x0028, 0x0107, "US/SS"},
+      {0x0028, 0x1050, "DS"},    {0x0028, 0x1051, "DS"},    {0x0028, 0x1052, "DS"},
+      {0x0028, 0x1053, "DS"},    {0x0028, 0x1054, "LO"},    {0x7fe0, 0x0010, "OB/OW"},
+  };
+  for (const Entry& e : kEntries) {
+    if (e.group == group && e.element == element) return e.vrs;
+  }
+  return nullptr;
+}
+
 class ElementWalk {
  public:
   ElementWalk(const std::string& path, const std::string& bytes) : path_(path), bytes_(bytes) {}
@@ -252,6 +278,14 @@ class ElementWalk {
       if (!known) {
         return Error(path_, absl::StrFormat("element (%04X,%04X) at byte %d has no valid VR", group,
                                             element, pos));
+      }
+      // GDCM's image reader asserts (gdcm::Attribute::SetFromDataElement)
+      // that the attributes it reads have their dictionary VR (found by
+      // volume_fuzzer: HighBit as another VR aborted the process).
+      if (const char* want = ImageAttributeVr(group, element);
+          want != nullptr && !absl::StrContains(want, vr)) {
+        return Error(path_, absl::StrFormat("element (%04X,%04X) at byte %d has VR %s, not %s",
+                                            group, element, pos, vr, want));
       }
       static const char* kLong[] = {"OB", "OD", "OF", "OL", "OV", "OW", "SQ",
                                     "SV", "UC", "UN", "UR", "UT", "UV"};
