@@ -59,6 +59,8 @@ rm -rf "$work/seeds" "$work/tmp"
 "$build/tests/fuzz_seeds" "$work/seeds"
 mkdir -p "$work/seeds/job" "$work/seeds/sticks" "$work/artifacts" "$work/tmp"
 cp examples/*_job.json tests/fuzz/corpus/job/*.json "$work/seeds/job/"
+# Inputs that once failed, kept as seeds so that every run replays them.
+cp tests/fuzz/corpus/volume/* "$work/seeds/volume/"
 
 # UB already aborts (-fno-sanitize-recover); print where.
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1}

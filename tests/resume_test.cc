@@ -155,6 +155,46 @@ TEST(ResumeTest, ExtremeSpacingsAcrossSlabsAreBitIdentical) {
   }
 }
 
+// Voxel sizes that differ a lot, within the bound a scene accepts, still
+// give the same image across slabs; beyond it (a ray could not be placed
+// within a voxel of the thin axis: the fuzzer's NIfTI with spacing
+// 128 x 1.4e-14 x 2.5), the scene is refused, naming the spacing.
+TEST(ResumeTest, AnisotropicSpacingsAcrossSlabsAreBitIdenticalUpToTheBound) {
+  for (const std::array<double, 3>& spacing :
+       {std::array<double, 3>{100, 2e-4, 2.5}, {3e-3, 700, 1}, {1, 1, 9.9e5}}) {
+    Volume v = MakeNoisyPhantom({12, 10, 9}, 29);
+    v.spacing = spacing;
+    const auto range = v.Range();
+    Classification c;
+    c.materials = {Material{.name = "high", .min = range[1] * 0.5f, .max = range[1] + 1}};
+    for (SurfaceModel model : {SurfaceModel::kSmooth, SurfaceModel::kVoxel}) {
+      c.surface = model;
+      auto scene = Scene::ForSurfaces(v, c);
+      ASSERT_TRUE(scene.ok()) << scene.status();
+      for (const View& view : std::vector<View>{{0, 0}, {35, 25}, {0, 89}, {120, -40}}) {
+        CameraSpec spec;
+        spec.width = spec.height = 24;
+        spec.azimuth_deg = view.azimuth;
+        spec.elevation_deg = view.elevation;
+        const auto& d = scene->dims();
+        const Camera cam = *Camera::Create(
+            spec, Vec3{d[0] * spacing[0], d[1] * spacing[1], d[2] * spacing[2]});
+        ASSERT_EQ(RenderWhole(*scene, cam, RenderSettings{}).rgb,
+                  RenderSlabs(*scene, {3, 6}, cam, RenderSettings{}).rgb)
+            << "spacing " << spacing[0] << " " << spacing[1] << " " << spacing[2];
+      }
+    }
+  }
+  Volume v = MakeNoisyPhantom({12, 10, 9}, 29);
+  v.spacing = {128, 1.4e-14, 2.5};
+  Classification c;
+  c.materials = {Material{.name = "all", .min = -1e9f, .max = 1e9f}};
+  auto refused = Scene::ForSurfaces(v, c);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("128 x 1.4e-14 x 2.5"), std::string::npos)
+      << refused.status();
+}
+
 TEST(ResumeTest, VoxelSurfacesAcrossSlabsAreBitIdentical) {
   ExpectSlabsMatch(PhantomSurfaces({40, 34, 38}, SurfaceModel::kVoxel),
                    {{0, 0}, {45, 0}, {30, 40}, {0, 90}, {200, -30}}, 64);

@@ -9,17 +9,40 @@
 namespace transtick {
 namespace {
 
+// Voxel sizes that differ by more than this are refused: a ray's position,
+// in world units over the whole volume's extent (at most 65535 of the largest
+// voxels), must still place it within a small fraction of the smallest voxel
+// in double precision, or the slab that starts a ray and the one that checks
+// it disagree on its cell. 10^6 leaves 10^-5 voxel; real scans differ by 10^2
+// at most.
+constexpr double kMaxSpacingRatio = 1e6;
+
+absl::Status CheckSpacing(const std::array<double, 3>& spacing) {
+  for (int a = 0; a < 3; ++a) {
+    if (!(spacing[a] > 0) || !std::isfinite(spacing[a])) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("volume spacing ", a, " is ", spacing[a], ", must be positive"));
+    }
+  }
+  const double lo = std::min({spacing[0], spacing[1], spacing[2]});
+  const double hi = std::max({spacing[0], spacing[1], spacing[2]});
+  if (hi / lo > kMaxSpacingRatio) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "volume spacing ", spacing[0], " x ", spacing[1], " x ", spacing[2],
+        ": the voxel sizes differ ", hi / lo, " times, more than the ", kMaxSpacingRatio,
+        " a ray can resolve in double precision"));
+  }
+  return absl::OkStatus();
+}
+
 absl::Status CheckDims(const Volume& volume) {
   for (int a = 0; a < 3; ++a) {
     if (volume.dims[a] < 1 || volume.dims[a] > Sticks::kMaxExtent) {
       return absl::InvalidArgumentError(absl::StrCat("volume dimension ", a, " is ", volume.dims[a],
                                                      ", must be in [1, ", Sticks::kMaxExtent, "]"));
     }
-    if (!(volume.spacing[a] > 0) || !std::isfinite(volume.spacing[a])) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("volume spacing ", a, " is ", volume.spacing[a], ", must be positive"));
-    }
   }
+  if (auto s = CheckSpacing(volume.spacing); !s.ok()) return s;
   if (volume.values.size() != volume.VoxelCount()) {
     return absl::InvalidArgumentError(absl::StrCat("volume holds ", volume.values.size(),
                                                    " values for ", volume.VoxelCount(), " voxels"));
@@ -409,6 +432,7 @@ absl::StatusOr<Scene> Scene::FromParts(RenderMode mode, std::array<int, 3> dims,
                                        std::array<float, 2> value_range, Sticks sticks,
                                        std::vector<float> scalars, BrickMap bricks,
                                        Classification classification, TransferFunction transfer) {
+  if (auto s = CheckSpacing(spacing); !s.ok()) return s;
   Scene scene;
   scene.mode_ = mode;
   scene.dims_ = dims;
