@@ -234,6 +234,27 @@ TEST_F(SessionTest, RandomBrokenCamerasNeverBreakTheSession) {
   EXPECT_TRUE((*s)->Close().ok());
 }
 
+// A session opened with a preset takes materials afterwards (its mode is
+// the preset's), and its frames are those of the in-process render.
+TEST_F(SessionTest, APresetSessionTakesMaterialsLater) {
+  v1::Dataset d = Dataset(Camera(20));
+  d.mutable_preset()->set_name("mr-brain");
+  auto s = SessionClient::Open(cluster_->root_address(), d);
+  ASSERT_TRUE(s.ok());
+  auto ready = (*s)->Next();
+  ASSERT_TRUE(ready.ok() && ready->ready) << ready.status();
+  EXPECT_EQ(ready->ready->mode(), v1::SURFACES);
+  auto first = NextFull(**s);
+  EXPECT_FALSE(first.image.rgb.empty());
+  auto seq = (*s)->SetMaterials(Materials(45));
+  ASSERT_TRUE(seq.ok());
+  std::vector<SessionClient::Event> seen;
+  auto frame = NextFull(**s, &seen);
+  for (const auto& e : seen) EXPECT_EQ(e.error, "");
+  EXPECT_EQ(frame.seq, *seq);
+  EXPECT_EQ(frame.image.rgb, Reference(Camera(20)).rgb);
+}
+
 TEST_F(SessionTest, OpeningIsChecked) {
   v1::Dataset no_views = Dataset(Camera(0));
   no_views.clear_views();

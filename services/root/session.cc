@@ -253,10 +253,12 @@ grpc::Status Sessions::Serve(grpc::ServerContext* ctx,
     for (const v1::SessionEvent& n : notices) stream->Write(n);
     if (classification) {
       v1::Dataset next = spec;
-      if (classification->has_materials() != next.has_materials()) {
+      // The session's mode is its dataset's (a preset's too).
+      const bool surfaces = (*data)->mode == RenderMode::kSurfaces;
+      if (classification->has_materials() != surfaces) {
         stream->Write(ErrorEvent(classification->seq(),
-                                 next.has_materials() ? "a surfaces session takes materials"
-                                                      : "a dvr session takes a transfer function"));
+                                 surfaces ? "a surfaces session takes materials"
+                                          : "a dvr session takes a transfer function"));
       } else {
         if (classification->has_materials()) *next.mutable_materials() = classification->materials();
         if (classification->has_transfer()) *next.mutable_transfer() = classification->transfer();
