@@ -158,10 +158,11 @@ TEST(ResumeTest, ExtremeSpacingsAcrossSlabsAreBitIdentical) {
 // Voxel sizes that differ a lot, within the bound a scene accepts, still
 // give the same image across slabs; beyond it (a ray could not be placed
 // within a voxel of the thin axis: the fuzzer's NIfTI with spacing
-// 128 x 1.4e-14 x 2.5), the scene is refused, naming the spacing.
+// 128 x 1.4e-14 x 2.5, 10^16 of its smallest voxels across), the scene is
+// refused, naming the spacing.
 TEST(ResumeTest, AnisotropicSpacingsAcrossSlabsAreBitIdenticalUpToTheBound) {
   for (const std::array<double, 3>& spacing :
-       {std::array<double, 3>{100, 2e-4, 2.5}, {3e-3, 700, 1}, {1, 1, 9.9e5}}) {
+       {std::array<double, 3>{100, 2e-4, 2.5}, {3e-3, 700, 1}, {1, 1, 9.9e5}, {1e-7, 1, 900}}) {
     Volume v = MakeNoisyPhantom({12, 10, 9}, 29);
     v.spacing = spacing;
     const auto range = v.Range();

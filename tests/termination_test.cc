@@ -454,17 +454,21 @@ TEST(TerminationTest, FarEyesMakeRaysANeighbourAccepts) {
 // A file may give spacings many orders of magnitude apart; the tracer's
 // per-ray bound on dvr samples then overflowed int64 (undefined, and
 // negative on x86, so every dvr ray was truncated at once; found by
-// volume_fuzzer). It is capped at the frame's budget instead.
+// volume_fuzzer). It is capped at the frame's budget instead. Spacings so
+// far apart that a ray cannot be placed within a voxel (1e-20 x 1 x 1e6)
+// are refused by the scene since; these are as far apart as it accepts.
 TEST(TerminationTest, BoundsStayPositiveForSpacingsFarApart) {
   const std::array<int, 3> dims = {12, 10, 8};
   Volume v = BlobVolume(dims, 2);
   v.spacing = {1e-20, 1, 1e6};
+  EXPECT_FALSE(Scene::ForSurfaces(v, TwoMaterials()).ok());
+  v.spacing = {1e-6, 1, 1e4};
   for (bool dvr : {false, true}) {
     auto scene = dvr ? Scene::ForDvr(v, Ramp()) : Scene::ForSurfaces(v, TwoMaterials());
-    ASSERT_TRUE(scene.ok());
+    ASSERT_TRUE(scene.ok()) << scene.status();
     CameraSpec spec;
     spec.width = spec.height = 8;
-    auto camera = Camera::Create(spec, Vec3{12e-20, 10, 8e6});
+    auto camera = Camera::Create(spec, Vec3{12e-6, 10, 8e4});
     ASSERT_TRUE(camera.ok()) << camera.status();
     const Tracer tracer(*scene, RenderSettings{}, *camera);
     EXPECT_GT(tracer.max_samples(), 0);

@@ -9,27 +9,27 @@
 namespace transtick {
 namespace {
 
-// Voxel sizes that differ by more than this are refused: a ray's position,
-// in world units over the whole volume's extent (at most 65535 of the largest
-// voxels), must still place it within a small fraction of the smallest voxel
-// in double precision, or the slab that starts a ray and the one that checks
-// it disagree on its cell. 10^6 leaves 10^-5 voxel; real scans differ by 10^2
-// at most.
-constexpr double kMaxSpacingRatio = 1e6;
+// A ray's position is computed in world units, over the volume's whole
+// extent, and must still place it within a small fraction of the smallest
+// voxel in double precision, or the slab that starts a ray and the one that
+// checks it disagree on its cell. So the volume's largest extent may be at
+// most this many of its smallest voxels: the error stays near 10^-5 voxel.
+// Real scans are 10^3 to 10^4 voxels across.
+constexpr double kMaxExtentInVoxels = 1e11;
 
-absl::Status CheckSpacing(const std::array<double, 3>& spacing) {
+absl::Status CheckSpacing(const std::array<int, 3>& dims, const std::array<double, 3>& spacing) {
   for (int a = 0; a < 3; ++a) {
     if (!(spacing[a] > 0) || !std::isfinite(spacing[a])) {
       return absl::InvalidArgumentError(
           absl::StrCat("volume spacing ", a, " is ", spacing[a], ", must be positive"));
     }
   }
-  const double lo = std::min({spacing[0], spacing[1], spacing[2]});
-  const double hi = std::max({spacing[0], spacing[1], spacing[2]});
-  if (hi / lo > kMaxSpacingRatio) {
+  const double smallest = std::min({spacing[0], spacing[1], spacing[2]});
+  const double extent = std::max({dims[0] * spacing[0], dims[1] * spacing[1], dims[2] * spacing[2]});
+  if (extent / smallest > kMaxExtentInVoxels) {
     return absl::InvalidArgumentError(absl::StrCat(
-        "volume spacing ", spacing[0], " x ", spacing[1], " x ", spacing[2],
-        ": the voxel sizes differ ", hi / lo, " times, more than the ", kMaxSpacingRatio,
+        "volume spacing ", spacing[0], " x ", spacing[1], " x ", spacing[2], ": the volume is ",
+        extent / smallest, " of its smallest voxels across, more than the ", kMaxExtentInVoxels,
         " a ray can resolve in double precision"));
   }
   return absl::OkStatus();
@@ -42,7 +42,7 @@ absl::Status CheckDims(const Volume& volume) {
                                                      ", must be in [1, ", Sticks::kMaxExtent, "]"));
     }
   }
-  if (auto s = CheckSpacing(volume.spacing); !s.ok()) return s;
+  if (auto s = CheckSpacing(volume.dims, volume.spacing); !s.ok()) return s;
   if (volume.values.size() != volume.VoxelCount()) {
     return absl::InvalidArgumentError(absl::StrCat("volume holds ", volume.values.size(),
                                                    " values for ", volume.VoxelCount(), " voxels"));
@@ -432,7 +432,7 @@ absl::StatusOr<Scene> Scene::FromParts(RenderMode mode, std::array<int, 3> dims,
                                        std::array<float, 2> value_range, Sticks sticks,
                                        std::vector<float> scalars, BrickMap bricks,
                                        Classification classification, TransferFunction transfer) {
-  if (auto s = CheckSpacing(spacing); !s.ok()) return s;
+  if (auto s = CheckSpacing(dims, spacing); !s.ok()) return s;
   Scene scene;
   scene.mode_ = mode;
   scene.dims_ = dims;
