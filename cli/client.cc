@@ -38,6 +38,29 @@ fs::path ImagePath(const std::string& output, const std::string& job_id, int dat
   return path;
 }
 
+// Adds a chunk of rows the root sent to `img` (sized by the first chunk)
+// and counts them in `*rows`; DATA_LOSS for a chunk of an impossible size
+// or one that does not fit the image.
+absl::Status AddChunk(const v1::ImageChunk& c, Image* img, int* rows) {
+  if (img->rgb.empty()) {
+    if (c.width() <= 0 || c.height() <= 0 || c.width() > CameraSpec::kMaxImageSize ||
+        c.height() > CameraSpec::kMaxImageSize) {
+      return absl::DataLossError("the root sent an image chunk of an impossible size");
+    }
+    img->width = c.width();
+    img->height = c.height();
+    img->rgb.resize(static_cast<size_t>(c.width()) * c.height() * 3);
+  }
+  const size_t floats = static_cast<size_t>(c.row_end() - c.row_begin()) * c.width() * 3;
+  if (c.width() != img->width || c.height() != img->height || c.row_begin() < 0 ||
+      c.row_end() > img->height || c.row_end() < c.row_begin() || c.rgb().size() != floats * 4) {
+    return absl::DataLossError("the root sent a malformed image chunk");
+  }
+  DecodeFloats(c.rgb(), img->rgb.data() + static_cast<size_t>(c.row_begin()) * img->width * 3);
+  *rows += c.row_end() - c.row_begin();
+  return absl::OkStatus();
+}
+
 absl::Status CheckDirectory(const fs::path& dir, const std::string& what) {
   if (dir.empty()) return absl::OkStatus();
   std::error_code ec;
@@ -130,23 +153,7 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> WatchJob(const std::string& r
         const v1::ImageChunk& c = e.image();
         const int frame = e.frame();
         Image& img = images[frame];
-        if (img.rgb.empty()) {
-          if (c.width() <= 0 || c.height() <= 0 || c.width() > CameraSpec::kMaxImageSize ||
-              c.height() > CameraSpec::kMaxImageSize) {
-            return absl::DataLossError("the root sent an image chunk of an impossible size");
-          }
-          img.width = c.width();
-          img.height = c.height();
-          img.rgb.resize(static_cast<size_t>(c.width()) * c.height() * 3);
-        }
-        const size_t floats = static_cast<size_t>(c.row_end() - c.row_begin()) * c.width() * 3;
-        if (c.width() != img.width || c.height() != img.height || c.row_begin() < 0 ||
-            c.row_end() > img.height || c.row_end() < c.row_begin() ||
-            c.rgb().size() != floats * 4) {
-          return absl::DataLossError("the root sent a malformed image chunk");
-        }
-        DecodeFloats(c.rgb(), img.rgb.data() + static_cast<size_t>(c.row_begin()) * img.width * 3);
-        rows_in[frame] += c.row_end() - c.row_begin();
+        if (absl::Status s = AddChunk(c, &img, &rows_in[frame]); !s.ok()) return s;
         if (e.has_stats()) {
           stats.push_back(e.stats());
           for (const std::string& w : e.stats().warnings()) {
@@ -276,24 +283,8 @@ absl::StatusOr<SessionClient::Event> SessionClient::Next() {
       return out;
     }
     if (!e.has_image()) continue;
-    const v1::ImageChunk& c = e.image();
-    if (c.width() <= 0 || c.height() <= 0 || c.width() > CameraSpec::kMaxImageSize ||
-        c.height() > CameraSpec::kMaxImageSize) {
-      return absl::DataLossError("the root sent an image chunk of an impossible size");
-    }
     auto& [img, rows] = partial_[{e.seq(), e.preview()}];
-    if (img.rgb.empty()) {
-      img.width = c.width();
-      img.height = c.height();
-      img.rgb.resize(static_cast<size_t>(c.width()) * c.height() * 3);
-    }
-    const size_t floats = static_cast<size_t>(c.row_end() - c.row_begin()) * c.width() * 3;
-    if (c.width() != img.width || c.height() != img.height || c.row_begin() < 0 ||
-        c.row_end() > img.height || c.row_end() < c.row_begin() || c.rgb().size() != floats * 4) {
-      return absl::DataLossError("the root sent a malformed image chunk");
-    }
-    DecodeFloats(c.rgb(), img.rgb.data() + static_cast<size_t>(c.row_begin()) * img.width * 3);
-    rows += c.row_end() - c.row_begin();
+    if (absl::Status s = AddChunk(e.image(), &img, &rows); !s.ok()) return s;
     if (rows < img.height) continue;
     out.has_frame = true;
     out.preview = e.preview();

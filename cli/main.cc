@@ -142,32 +142,32 @@ const CommandDoc kRenderDoc = {
     "example:\n  transtick render --volume head.nrrd --materials examples/cthead_materials.json \\\n"
     "      --azimuth 45 --size 400x400 --out head.png"};
 
+// submit and watch: both follow a job to its end and save its images.
+const std::vector<FlagDoc> kFollowFlags = With(
+    With({{"root", "HOST:PORT", "the cluster's root (required)"},
+          {"out-dir", "DIR", "where images with relative paths go (default .); made if\n"
+                             "missing, but not its parents"},
+          {"stats", "FILE.json", "every frame's statistics, as a JSON array"}},
+         kQuietFlag),
+    ClientSecurityFlagDocs());
+
 const CommandDoc kSubmitDoc = {
     "transtick submit", "JOB.json",
     "Submits a job file (docs/formats.md, \"Job file\") to a running cluster, follows it\n"
     "to its end and saves each frame's image: a relative output path beneath --out-dir.\n"
     "If the connection breaks, it watches again and gets the frames it lacks.",
     1, 1,
-    With(With({{"root", "HOST:PORT", "the cluster's root (required)"},
-               {"out-dir", "DIR", "where images with relative paths go (default .); made if\n"
-                                  "missing, but not its parents"},
-               {"stats", "FILE.json", "every frame's statistics, as a JSON array"}},
-              kQuietFlag),
-         ClientSecurityFlagDocs()),
+    kFollowFlags,
     "example:\n  transtick submit examples/cthead_job.json --root 127.0.0.1:7000"};
 
 const CommandDoc kWatchDoc = {
     "transtick watch", "JOB_ID",
     "Follows a job already submitted (by this client, or by another with an admin token)\n"
     "to its end, showing its progress and saving every frame's image, also those\n"
-    "rendered before the watch began: `transtick submit` again after a lost terminal.",
+    "rendered before the watch began: the way back to a job after its submit's terminal\n"
+    "was lost.",
     1, 1,
-    With(With({{"root", "HOST:PORT", "the cluster's root (required)"},
-               {"out-dir", "DIR", "where images with relative paths go (default .); made if\n"
-                                  "missing, but not its parents"},
-               {"stats", "FILE.json", "every frame's statistics, as a JSON array"}},
-              kQuietFlag),
-         ClientSecurityFlagDocs()),
+    kFollowFlags,
     ""};
 
 const CommandDoc kStatusDoc = {"transtick status", "",

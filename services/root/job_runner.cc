@@ -270,7 +270,7 @@ absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data) {
            job.submitted_unix(), held->mutable_stats());
   held->mutable_stats()->set_dataset(d);
   held->mutable_stats()->set_view(v);
-  if (job.key(0).dataset == d && job.key(0).view == v) {
+  if (frame == 0) {
     metrics_.Observe("transtick_root_job_start_seconds", held->stats().since_submit_ms() / 1e3);
   }
   return job.PublishImage(*std::move(held), queue_options.max_pending_image_bytes,

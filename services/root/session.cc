@@ -178,7 +178,6 @@ grpc::Status Sessions::Serve(grpc::ServerContext* ctx,
     absl::MutexLock lock(&inbox.mu);
     return inbox.view.has_value();
   };
-  std::unique_ptr<Balancer> balancer;
   grpc::Status status = grpc::Status::OK;
   bool write_failed = false;
   // Renders `view` and sends its chunks; the last chunk with the stats.
@@ -194,7 +193,7 @@ grpc::Status Sessions::Serve(grpc::ServerContext* ctx,
         !s.ok()) {
       return s;
     }
-    balancer = MakeBalancer(plan.balance[0], planned->second.rule, 32);
+    std::unique_ptr<Balancer> balancer = MakeBalancer(plan.balance[0], planned->second.rule, 32);
     std::optional<v1::SessionEvent> held;
     FrameTask task;
     task.who = id;
