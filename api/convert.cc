@@ -379,9 +379,9 @@ RenderSettings ToRenderSettings(const v1::View& v) {
   return s;
 }
 
-std::string ToJson(const google::protobuf::Message& message) {
+std::string ToJson(const google::protobuf::Message& message, bool indent) {
   google::protobuf::util::JsonPrintOptions options;
-  options.add_whitespace = true;
+  options.add_whitespace = indent;
   options.preserve_proto_field_names = true;
   options.always_print_primitive_fields = true;
   std::string out;

@@ -82,8 +82,9 @@ std::string EnumName(E value) {
 absl::StatusOr<v1::BalanceMode> EffectiveBalance(const v1::Job& job, const v1::View& view);
 absl::StatusOr<BalanceRule> ToBalanceRule(v1::BalanceRule rule);
 
-// Protobuf JSON with the field names as written in the .proto.
-std::string ToJson(const google::protobuf::Message& message);
+// Protobuf JSON with the field names as written in the .proto and every
+// field present; indented, or on one line without `indent`.
+std::string ToJson(const google::protobuf::Message& message, bool indent = true);
 
 }  // namespace transtick
 

@@ -220,9 +220,11 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> WatchJob(const std::string& r
 
 absl::StatusOr<std::unique_ptr<SessionClient>> SessionClient::Open(const std::string& root,
                                                                    const v1::Dataset& dataset,
-                                                                   int preview) {
+                                                                   int preview,
+                                                                   const std::string& bearer) {
   auto c = std::unique_ptr<SessionClient>(new SessionClient());
   c->stub_ = v1::Root::NewStub(MakeChannel(root, Role::kRoot));
+  if (!bearer.empty()) c->ctx_.AddMetadata("authorization", "Bearer " + bearer);
   c->stream_ = c->stub_->Session(&c->ctx_);
   v1::SessionRequest open;
   *open.mutable_open() = dataset;
@@ -233,7 +235,10 @@ absl::StatusOr<std::unique_ptr<SessionClient>> SessionClient::Open(const std::st
 }
 
 SessionClient::~SessionClient() {
-  if (!stream_) return;
+  {
+    absl::MutexLock lock(&mu_);
+    if (finished_) return;
+  }
   ctx_.TryCancel();
   v1::SessionEvent e;
   while (stream_->Read(&e)) {
@@ -243,7 +248,7 @@ SessionClient::~SessionClient() {
 
 absl::StatusOr<uint64_t> SessionClient::Send(v1::SessionRequest request) {
   absl::MutexLock lock(&mu_);
-  if (closed_) return absl::FailedPreconditionError("the session is closed");
+  if (closed_ || finished_) return absl::FailedPreconditionError("the session is closed");
   request.set_seq(next_seq_++);
   if (!stream_->Write(request)) {
     return absl::UnavailableError("the session's stream is broken (see Next for why)");
@@ -270,6 +275,10 @@ absl::StatusOr<uint64_t> SessionClient::SetTransfer(const v1::TransferFunction& 
 }
 
 absl::StatusOr<SessionClient::Event> SessionClient::Next() {
+  {
+    absl::MutexLock lock(&mu_);
+    if (finished_) return absl::FailedPreconditionError("the session has ended");
+  }
   v1::SessionEvent e;
   while (stream_->Read(&e)) {
     Event out;
@@ -293,15 +302,20 @@ absl::StatusOr<SessionClient::Event> SessionClient::Next() {
     partial_.erase({e.seq(), e.preview()});
     return out;
   }
-  absl::Status s = FromGrpc(stream_->Finish());
-  stream_.reset();
+  absl::Status s;
+  {
+    // Not while a request is being written (Send holds the lock).
+    absl::MutexLock lock(&mu_);
+    s = FromGrpc(stream_->Finish());
+    finished_ = true;
+  }
   return s.ok() ? absl::OutOfRangeError("the session ended") : s;
 }
 
 absl::Status SessionClient::Close() {
   {
     absl::MutexLock lock(&mu_);
-    if (closed_) return absl::OkStatus();
+    if (closed_ || finished_) return absl::OkStatus();
     closed_ = true;
     stream_->WritesDone();
   }

@@ -78,9 +78,12 @@ class SessionClient {
   // Opens a session on `dataset` (its views[0] is the first camera), with a
   // preview at 1/preview of the size before each frame (0: none). The first
   // event Next returns is the dataset's ready notice, or the open fails.
+  // A `bearer` token is sent with the call (a gateway forwarding its
+  // browser's), besides any the process's security sends.
   static absl::StatusOr<std::unique_ptr<SessionClient>> Open(const std::string& root,
                                                              const v1::Dataset& dataset,
-                                                             int preview = 0);
+                                                             int preview = 0,
+                                                             const std::string& bearer = "");
   ~SessionClient();
 
   // A new camera; returns its seq. Thread-safe.
@@ -88,14 +91,18 @@ class SessionClient {
   // A new classification (materials for surfaces, transfer for dvr).
   absl::StatusOr<uint64_t> SetMaterials(const v1::MaterialSet& materials);
   absl::StatusOr<uint64_t> SetTransfer(const v1::TransferFunction& transfer);
+  // Any of them in one request (a camera and a classification together);
+  // its seq is set here.
+  absl::StatusOr<uint64_t> Send(v1::SessionRequest request);
   // The next event; the stream's end (the root's status) when there is none.
   absl::StatusOr<Event> Next();
   // Closes this side and waits for the root to end the session.
   absl::Status Close();
+  // Ends the session now: a Next in progress returns CANCELLED. Thread-safe.
+  void Cancel() { ctx_.TryCancel(); }
 
  private:
   SessionClient() = default;
-  absl::StatusOr<uint64_t> Send(v1::SessionRequest request);
 
   std::unique_ptr<v1::Root::Stub> stub_;
   grpc::ClientContext ctx_;
@@ -103,6 +110,7 @@ class SessionClient {
   absl::Mutex mu_;
   uint64_t next_seq_ ABSL_GUARDED_BY(mu_) = 1;
   bool closed_ ABSL_GUARDED_BY(mu_) = false;
+  bool finished_ ABSL_GUARDED_BY(mu_) = false;  // the stream's status is in: nothing more to write
   std::map<std::pair<uint64_t, bool>, std::pair<Image, int>> partial_;  // by (seq, preview): rows in
 };
 

@@ -25,6 +25,8 @@
 #include "clock.h"
 #include "cluster.grpc.pb.h"
 #include "convert.h"
+#include "daemon.h"
+#include "gateway.h"
 #include "progress.h"
 #include "flags.h"
 #include "local_cluster.h"
@@ -35,6 +37,7 @@
 #include "transtick/render.h"
 #include "transtick/scene.h"
 #include "transtick/orientation.h"
+#include "transtick/presets.h"
 #include "transtick/volume_io.h"
 #include "version.h"
 
@@ -53,6 +56,8 @@ commands:
   status    jobs and workers of a running cluster
   cancel    cancel a job
   health    exit 0 when every daemon named reports SERVING
+  view      the web viewer: look around volumes live in a browser
+  presets   list the named classifications (--preset)
   version   print the version
 
 docs: README.md, docs/formats.md (materials, transfer functions, job files, stats)
@@ -196,6 +201,35 @@ const CommandDoc kHealthDoc = {
     ""};
 
 const CommandDoc kVersionDoc = {"transtick version", "", "Prints the version.", 0, 0, {}, ""};
+
+const CommandDoc kViewDoc = {
+    "transtick view", "",
+    "Serves the web viewer (docs/viewer.md) for an embedded cluster of workers on\n"
+    "loopback, or for a running cluster with --root, and prints its address. Open it in\n"
+    "a browser: drag to orbit, wheel to zoom, edit the classification beside the\n"
+    "volume's histogram, follow jobs and each worker's load. Runs until interrupted.",
+    0, 0,
+    {{"data-dir", "DIR",
+      "the embedded root's data directory: the volumes the page lists (default:\n"
+      "--volume's directory, else $TRANSTICK_DATA_DIR, else .)"},
+     {"volume", "FILE", "the volume the page opens first (in the data directory)"},
+     {"preset", "NAME", "its classification (transtick presets lists them)"},
+     {"local", "N", "workers of the embedded cluster (default: one per core)"},
+     {"rings", "R", "rings of the embedded cluster (default 1)"},
+     {"threads", "N", "tracing threads of each embedded worker (default: one per core)"},
+     {"root", "HOST:PORT", "serve the viewer for this running cluster instead"},
+     {"listen", "HOST:PORT", "where the page is served (default 127.0.0.1:8080; port 0 picks one)"},
+     {"https-cert", "FILE", "serve HTTPS with this certificate (PEM), with --https-key"},
+     {"https-key", "FILE", "its key"},
+     {"static-dir", "DIR", "serve the page's files from DIR (working on the page)"},
+     {"tls-ca", "FILE", "the cluster's CA certificate: TLS to --root; browsers then send tokens"},
+     {"insecure", "", "allow plaintext HTTP on an address that is not loopback"}},
+    "example:\n  transtick view --volume ../shared/data/cthead.nrrd --preset ct-bone"};
+
+const CommandDoc kPresetsDoc = {"transtick presets", "",
+                                "Lists the named classifications of --preset and job files' "
+                                "\"preset\"\n(docs/formats.md#presets).",
+                                0, 0, {}, ""};
 
 // Parses a command's flags; prints its usage for --help (returning 0 in
 // *exit) and the error otherwise (returning 2).
@@ -885,6 +919,124 @@ int CancelCommand(int argc, char** argv) {
 }
 
 // Exit 0 when every daemon at --addr reports SERVING (container probes), with
+int PresetsCommand(int argc, char** argv) {
+  int exit = 0;
+  if (!ParseCommand(argc, argv, kPresetsDoc, &exit)) return exit;
+  for (const PresetInfo& p : ListPresets()) {
+    std::string modes = p.surfaces && p.dvr ? "surfaces, dvr" : p.surfaces ? "surfaces" : "dvr";
+    std::printf("%-14s %-15s %s%s\n", p.name.c_str(), modes.c_str(), p.description.c_str(),
+                p.relative ? " (relative to the volume's range)" : "");
+  }
+  return 0;
+}
+
+// `text` for a URL's query: letters, digits and -._~/ as they are, every
+// other byte as %XX.
+std::string UrlEncode(const std::string& text) {
+  static constexpr char kHex[] = "0123456789ABCDEF";
+  std::string out;
+  for (unsigned char c : text) {
+    if (std::isalnum(c) || c == '-' || c == '.' || c == '_' || c == '~' || c == '/') {
+      out += static_cast<char>(c);
+    } else {
+      out += '%';
+      out += kHex[c >> 4];
+      out += kHex[c & 15];
+    }
+  }
+  return out;
+}
+
+// The viewer: a gateway (services/web) in front of an embedded cluster or
+// --root, until SIGINT or SIGTERM.
+int View(int argc, char** argv) {
+  auto fail = [](const absl::Status& s) { return Fail("view", s); };
+  int exit = 0;
+  auto flags = ParseCommand(argc, argv, kViewDoc, &exit);
+  if (!flags) return exit;
+  for (const char* f : {"data-dir", "local", "rings", "threads"}) {
+    if (flags->Has("root") && flags->Has(f)) {
+      return fail(absl::InvalidArgumentError(absl::StrCat(
+          "--root and --", f, " contradict each other: --", f, " is of the embedded cluster")));
+    }
+  }
+  if (flags->Has("tls-ca") && !flags->Has("root")) {
+    return fail(absl::InvalidArgumentError(
+        "--tls-ca is for a --root with TLS; the embedded cluster runs on loopback"));
+  }
+  auto security = SecurityFromFlags(*flags, /*daemon=*/false);
+  if (!security.ok()) return fail(security.status());
+  security->token.clear();  // each browser sends its own
+  SetSecurity(*std::move(security));
+  BlockTerminationSignals();  // before any thread starts
+
+  std::string volume = flags->Get("volume");
+  std::string data_dir = flags->Get("data-dir");
+  if (data_dir.empty() && !volume.empty() && !flags->Has("root")) {
+    const std::filesystem::path p(volume);
+    data_dir = p.has_parent_path() ? p.parent_path().string() : ".";
+    volume = p.filename().string();
+  }
+  if (data_dir.empty()) {
+    const char* env = std::getenv("TRANSTICK_DATA_DIR");
+    data_dir = env != nullptr && *env != '\0' ? env : ".";
+  }
+  std::unique_ptr<LocalCluster> cluster;
+  std::string root = flags->Get("root");
+  if (root.empty()) {
+    const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+    LocalCluster::Options co;
+    auto local = flags->GetInt("local", cores);
+    auto rings = flags->GetInt("rings", 1);
+    auto threads = flags->GetInt("threads", cores);
+    for (const auto* v : {&local, &rings, &threads}) {
+      if (!v->ok()) return fail(v->status());
+    }
+    if (*local < 1 || *local > 64) {
+      return fail(absl::InvalidArgumentError("--local must be in [1, 64] for the viewer"));
+    }
+    if (*rings < 1 || *rings > *local) {
+      return fail(absl::InvalidArgumentError("--rings must be in [1, --local]"));
+    }
+    if (*threads < 1 || *threads > 1024) {
+      return fail(absl::InvalidArgumentError("--threads must be in [1, 1024]"));
+    }
+    if (!std::filesystem::is_directory(data_dir)) {
+      return fail(absl::NotFoundError(absl::StrCat("the data directory ", data_dir,
+                                                   " is not a directory")));
+    }
+    co.workers = *local;
+    co.rings = *rings;
+    co.threads_per_worker = *threads;
+    co.data_dir = data_dir;
+    auto c = LocalCluster::Start(co);
+    if (!c.ok()) return fail(c.status());
+    cluster = *std::move(c);
+    root = cluster->root_address();
+  }
+  WebOptions wo;
+  wo.root = root;
+  wo.listen = flags->Get("listen", "127.0.0.1:8080");
+  wo.https_cert = flags->Get("https-cert");
+  wo.https_key = flags->Get("https-key");
+  wo.static_dir = flags->Get("static-dir");
+  auto gateway = WebGateway::Start(wo);
+  if (!gateway.ok()) return fail(gateway.status());
+  std::string url = (*gateway)->url();
+  if (!volume.empty()) {
+    std::string preset = flags->Get("preset");
+    absl::StrAppend(&url, "?volume=", UrlEncode(volume));
+    if (!preset.empty()) absl::StrAppend(&url, "&preset=", UrlEncode(preset));
+  }
+  std::cout << "transtick view: root " << root << "\n"
+            << "transtick view: " << url << std::endl;
+  const int sig = WaitForSignal();
+  std::cerr << "transtick view: signal " << sig << ", stopping\n";
+  gateway->reset();
+  cluster.reset();
+  return 0;
+}
+
 // one line per daemon: its state on stdout, or why it could not be asked on
 // stderr.
 int Health(int argc, char** argv) {
@@ -955,6 +1107,8 @@ int main(int argc, char** argv) {
   if (cmd == "status") return StatusCommand(argc, argv);
   if (cmd == "cancel") return CancelCommand(argc, argv);
   if (cmd == "health") return Health(argc, argv);
+  if (cmd == "view") return View(argc, argv);
+  if (cmd == "presets") return PresetsCommand(argc, argv);
   if (cmd == "version" || cmd == "--version") {
     int exit = 0;
     if (cmd == "version" && !ParseCommand(argc, argv, kVersionDoc, &exit)) return exit;
@@ -968,7 +1122,8 @@ int main(int argc, char** argv) {
   if (cmd == "help" || cmd == "--help" || cmd == "-h") {
     if (argc == 3) {  // transtick help COMMAND
       for (const CommandDoc* doc : {&kRenderDoc, &kInfoDoc, &kSubmitDoc, &kWatchDoc, &kStatusDoc,
-                                    &kCancelDoc, &kHealthDoc, &kVersionDoc}) {
+                                    &kCancelDoc, &kHealthDoc, &kVersionDoc, &kViewDoc,
+                                    &kPresetsDoc}) {
         if (doc->name == absl::StrCat("transtick ", argv[2])) {
           std::cout << Usage(*doc);
           return 0;

@@ -13,6 +13,7 @@
 #include "convert.h"
 #include "gtest/gtest.h"
 #include "local_cluster.h"
+#include "session_fixture.h"
 #include "testing.h"
 #include "transtick/camera.h"
 #include "transtick/image_io.h"
@@ -23,36 +24,14 @@
 namespace transtick {
 namespace {
 
-v1::MaterialSet Materials(float lo) {
-  v1::MaterialSet m;
-  v1::Material* x = m.add_materials();
-  x->set_name("hard");
-  x->set_min(lo);
-  x->set_max(1000);
-  for (float c : {0.9f, 0.7f, 0.6f}) x->add_color(c);
-  return m;
-}
-
-v1::View Camera(double azimuth, int width = 40, int height = 32) {
-  v1::View v;
-  v.set_azimuth(azimuth);
-  v.set_elevation(25);
-  v.set_width(width);
-  v.set_height(height);
-  v.set_shadows(true);
-  return v;
-}
+using testing::Camera;
+using testing::Materials;
 
 class SessionTest : public ::testing::Test {
  protected:
   void SetUp() override {
     dir_ = testing::TempDir();
-    Volume v = MakeNoisyPhantom({36, 32, 40}, 7);
-    std::ofstream f(dir_ + "/p.nrrd", std::ios::binary);
-    f << "NRRD0004\ntype: float\ndimension: 3\nsizes: 36 32 40\nendian: little\nencoding: raw\n"
-         "spacings: 1 1 1.25\n\n";
-    f.write(reinterpret_cast<const char*>(v.values.data()), v.values.size() * 4);
-    f.close();
+    testing::WritePhantom(dir_);
     LocalCluster::Options o;
     o.workers = 2;
     o.data_dir = dir_;
@@ -68,13 +47,7 @@ class SessionTest : public ::testing::Test {
     return d;
   }
   Image Reference(const v1::View& view, float lo = 45) {
-    auto volume = ReadVolume(dir_ + "/p.nrrd");
-    EXPECT_TRUE(volume.ok());
-    auto scene = Scene::ForSurfaces(*volume, *ToClassification(Materials(lo)));
-    Vec3 extent{volume->dims[0] * volume->spacing[0], volume->dims[1] * volume->spacing[1],
-                volume->dims[2] * volume->spacing[2]};
-    auto camera = Camera::Create(*ToCameraSpec(view), extent);
-    return testing::RenderWhole(*scene, *camera, ToRenderSettings(view));
+    return testing::PhantomReference(dir_, view, lo);
   }
   // Events until a full frame (not a preview) arrives.
   SessionClient::Event NextFull(SessionClient& s, std::vector<SessionClient::Event>* seen = nullptr) {

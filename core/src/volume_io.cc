@@ -20,7 +20,6 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/str_cat.h"
-#include "absl/strings/str_join.h"
 #include "volume_io_internal.h"
 
 namespace transtick {
@@ -491,6 +490,22 @@ absl::StatusOr<Volume> ReadRaw(const std::string& path, const RawSpec& spec,
   return volume;
 }
 
+std::span<const std::string_view> VolumeFileExtensions() {
+  static constexpr std::string_view kExtensions[] = {".nrrd", ".nhdr", ".den", ".nii",
+                                                     ".nii.gz", ".mha", ".mhd", ".vti"};
+  return kExtensions;
+}
+
+bool IsVolumeFileName(std::string_view path) {
+  const std::string lower = absl::AsciiStrToLower(std::string(path));
+  for (std::string_view e : VolumeFileExtensions()) {
+    if (lower.size() > e.size() && lower.compare(lower.size() - e.size(), e.size(), e) == 0) {
+      return true;
+    }
+  }
+  return false;
+}
+
 absl::StatusOr<Volume> ReadVolume(const std::string& path, const ReadOptions& options) {
   const std::string lower = absl::AsciiStrToLower(path);
   if (absl::EndsWith(lower, ".nrrd") || absl::EndsWith(lower, ".nhdr")) {
@@ -513,8 +528,10 @@ absl::StatusOr<Volume> ReadVolume(const std::string& path, const ReadOptions& op
   std::string extension = (dot == std::string::npos || (slash != std::string::npos && dot < slash))
                               ? "no extension"
                               : absl::StrCat("extension '", path.substr(dot), "'");
+  std::string expected;
+  for (std::string_view e : VolumeFileExtensions()) absl::StrAppend(&expected, std::string(e), ", ");
   return absl::InvalidArgumentError(absl::StrCat(path, ": unknown volume format (", extension,
-                                                 "; expected .nrrd, .nhdr, .den, .nii, .nii.gz, .mha, .mhd, .vti, "
+                                                 "; expected ", expected,
                                                  "or a directory of DICOM files)"));
 }
 

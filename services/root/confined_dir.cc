@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <dirent.h>
 #include <linux/openat2.h>
+#include <sys/stat.h>
 #include <sys/syscall.h>
 #include <unistd.h>
 
@@ -49,19 +50,40 @@ absl::StatusOr<std::shared_ptr<const ConfinedDir>> ConfinedDir::Open(const std::
 ConfinedDir::~ConfinedDir() { ::close(fd_); }
 
 absl::StatusOr<int> ConfinedDir::OpenFile(const std::string& relative) const {
+  return OpenWith(relative, O_RDONLY);
+}
+
+absl::StatusOr<ConfinedDir::Entry> ConfinedDir::Stat(const std::string& relative) const {
+  auto fd = OpenWith(relative, O_PATH);
+  if (!fd.ok()) return fd.status();
+  struct stat st {};
+  const int r = ::fstat(*fd, &st);
+  ::close(*fd);
+  if (r != 0) return OpenError(relative, errno);
+  Entry e;
+  e.directory = S_ISDIR(st.st_mode);
+  e.regular = S_ISREG(st.st_mode);
+  e.bytes = e.regular ? static_cast<uint64_t>(st.st_size) : 0;
+  return e;
+}
+
+absl::StatusOr<int> ConfinedDir::OpenWith(const std::string& relative, int flags) const {
   if (relative.empty() || relative.front() == '/') {
     return absl::PermissionDeniedError(
         absl::StrCat("'", relative, "' must be a path relative to the data directory"));
   }
   open_how how{};
-  how.flags = O_RDONLY | O_CLOEXEC | O_NOCTTY;
+  // openat2 refuses O_PATH with flags other than O_CLOEXEC, O_DIRECTORY and
+  // O_NOFOLLOW (open ignores them).
+  const int extra = (flags & O_PATH) ? O_CLOEXEC : O_CLOEXEC | O_NOCTTY;
+  how.flags = static_cast<uint64_t>(flags | extra);
   how.resolve = RESOLVE_BENEATH | RESOLVE_NO_MAGICLINKS;
   int fd = static_cast<int>(::syscall(SYS_openat2, fd_, relative.c_str(), &how, sizeof(how)));
   if (fd >= 0) return fd;
   const int error = errno;
   // Kernels before 5.6, or a seccomp filter that refuses openat2.
   if (error != ENOSYS && error != EPERM) return OpenError(relative, error);
-  fd = ::openat(fd_, relative.c_str(), O_RDONLY | O_CLOEXEC | O_NOCTTY | O_NOFOLLOW);
+  fd = ::openat(fd_, relative.c_str(), flags | extra | O_NOFOLLOW);
   if (fd < 0) return OpenError(relative, errno);
   char real[PATH_MAX];
   const std::string self = absl::StrCat("/proc/self/fd/", fd);

@@ -5,6 +5,7 @@
 #ifndef TRANSTICK_SERVICES_ROOT_CONFINED_DIR_H_
 #define TRANSTICK_SERVICES_ROOT_CONFINED_DIR_H_
 
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -36,7 +37,19 @@ class ConfinedDir {
   static constexpr size_t kMaxListed = 1 << 17;
   absl::StatusOr<std::vector<std::string>> ListDir(const std::string& relative) const;
 
+  // What `relative` is, resolved as OpenFile resolves it (a link is
+  // followed only while it stays inside), without opening the file for
+  // reading (a FIFO does not block). Errors as OpenFile's.
+  struct Entry {
+    bool directory = false;
+    bool regular = false;
+    uint64_t bytes = 0;
+  };
+  absl::StatusOr<Entry> Stat(const std::string& relative) const;
+
  private:
+  // OpenFile with `flags` (O_RDONLY or O_PATH).
+  absl::StatusOr<int> OpenWith(const std::string& relative, int flags) const;
   ConfinedDir(int fd, std::string real) : fd_(fd), real_(std::move(real)) {}
   const int fd_;            // O_PATH descriptor of the directory
   const std::string real_;  // its resolved path, for the fallback's check

@@ -4,7 +4,9 @@
 
 #include "absl/strings/escaping.h"
 #include "absl/strings/str_cat.h"
+#include "confined_dir.h"
 #include "daemon.h"
+#include "volumes.h"
 
 namespace transtick {
 namespace {
@@ -98,6 +100,18 @@ grpc::Status RootService::Submit(grpc::ServerContext* ctx, const v1::Job* job,
   // The name is the client's: escaped, it cannot forge a line of the log.
   spdlog::info("{} queued: '{}', {} frames, {} ahead, from {}", (*record)->id(),
                Printable(job->name()), (*record)->frames_total(), position, client->name);
+  return grpc::Status::OK;
+}
+
+grpc::Status RootService::Volumes(grpc::ServerContext* ctx, const v1::VolumesRequest*,
+                                  v1::VolumesReply* reply) {
+  auto client = Caller(*ctx);
+  if (!client.ok()) return ToGrpc(client.status());
+  auto dir = ConfinedDir::Open(options_.data_dir);
+  if (!dir.ok()) return ToGrpc(absl::UnavailableError("the root's data directory cannot be opened"));
+  auto listed = ListVolumes(**dir);
+  if (!listed.ok()) return ToGrpc(listed.status());
+  *reply = *std::move(listed);
   return grpc::Status::OK;
 }
 

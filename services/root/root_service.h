@@ -41,6 +41,8 @@ class RootService final : public v1::Root::Service {
 
   grpc::Status Submit(grpc::ServerContext* ctx, const v1::Job* job,
                       v1::SubmitReply* reply) override;
+  grpc::Status Volumes(grpc::ServerContext* ctx, const v1::VolumesRequest* req,
+                       v1::VolumesReply* reply) override;
   grpc::Status Session(
       grpc::ServerContext* ctx,
       grpc::ServerReaderWriter<v1::SessionEvent, v1::SessionRequest>* stream) override;

@@ -128,6 +128,8 @@ grpc::Status Sessions::Serve(grpc::ServerContext* ctx,
     for (const std::string& w : (*data)->warnings) ready->add_warnings(w);
     for (float r : (*data)->range) ready->add_range(r);
     for (uint64_t n : (*data)->histogram) ready->add_histogram(n);
+    if ((*data)->spec.has_materials()) *ready->mutable_materials() = (*data)->spec.materials();
+    if ((*data)->spec.has_transfer()) *ready->mutable_transfer() = (*data)->spec.transfer();
     stream->Write(e);
     return data;
   };

@@ -12,7 +12,9 @@
 
 #include <cstdint>
 #include <functional>
+#include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -85,8 +87,16 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
 absl::StatusOr<Volume> ReadRaw(const std::string& path, const RawSpec& spec,
                                const ReadOptions& options = {});
 
-// Chooses the reader by extension: .nrrd/.nhdr, .den, .nii/.nii.gz,
-// .mha/.mhd, .vti; a directory is read as a DICOM series.
+// The file names ReadVolume reads, as extensions in lower case with the
+// dot: ".nrrd", ".nhdr", ".den", ".nii", ".nii.gz", ".mha", ".mhd", ".vti".
+// The one list: ReadVolume dispatches on it, the root lists the data
+// directory's volumes by it. Of static storage.
+std::span<const std::string_view> VolumeFileExtensions();
+// Whether `path` ends in one of them, in any case.
+bool IsVolumeFileName(std::string_view path);
+
+// Chooses the reader by extension (VolumeFileExtensions); a directory is
+// read as a DICOM series.
 absl::StatusOr<Volume> ReadVolume(const std::string& path, const ReadOptions& options = {});
 
 // Parses "uint8", "int16", "float", ... (NRRD's names and their synonyms).
