@@ -230,7 +230,11 @@ absl::StatusOr<std::unique_ptr<SessionClient>> SessionClient::Open(const std::st
   *open.mutable_open() = dataset;
   open.set_preview(preview);
   auto seq = c->Send(std::move(open));
-  if (!seq.ok()) return seq.status();
+  if (!seq.ok()) {
+    // The stream broke before the open went out: its status says why.
+    auto why = c->Next();
+    return why.ok() ? seq.status() : why.status();
+  }
   return c;
 }
 

@@ -61,7 +61,7 @@ done
 # ---------------------------------------------------------------- image
 tt_build_image "$image"
 "$TT_DOCKER" image prune -f --filter label=org.opencontainers.image.title=transtick >/dev/null || true
-for b in transtick transtick-root transtick-worker transtick-display; do
+for b in transtick transtick-root transtick-worker transtick-display transtick-web; do
   if "$TT_DOCKER" run --rm --network none --entrypoint sh "$image" -c "command -v $b" >/dev/null; then
     pass "image has $b"
   elif ((build_only)); then
@@ -78,6 +78,7 @@ root_port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)
   echo $((20000 + RANDOM % 20000)))
 export TRANSTICK_ROOT_PORT=$root_port  # published on 127.0.0.1, the default
 export TRANSTICK_METRICS_PORT=0         # the root's /metrics: any free port
+export TRANSTICK_WEB_PORT=0             # the web gateway's HTTPS: any free port
 compose() { "${TT_COMPOSE[@]}" -p "$project" -f deploy/docker-compose.yml "$@"; }
 if compose config -q; then pass "compose file accepted by ${TT_COMPOSE[*]}"; else fail "compose config"; fi
 if ((build_only)); then finish; exit; fi
@@ -220,6 +221,22 @@ if curl -s -f -m 10 --cacert "$work/secrets/ca.crt" \
   pass "the root's /metrics over HTTPS counts 4 workers"
 else
   fail "the root's /metrics over HTTPS"
+fi
+# The web viewer's gateway: HTTPS with web.crt (signed by the cluster's CA
+# for 127.0.0.1); it holds no token and passes each browser's on.
+web_port=$(compose port web 8443 | tail -1 | sed 's/.*://')
+web="https://127.0.0.1:$web_port"
+web_curl() { curl -s -m 10 --cacert "$work/secrets/ca.crt" "$@"; }
+deadline=$((SECONDS + 30))
+until web_curl -f "$web/healthz" >/dev/null 2>&1 || ((SECONDS > deadline)); do sleep 1; done
+if web_curl -f "$web/" | grep -q '<html'; then pass "the web gateway serves the viewer page over HTTPS"; else fail "the viewer page over HTTPS"; fi
+code=$(web_curl -o /dev/null -w '%{http_code}' "$web/api/status")
+if [[ $code == 401 ]]; then pass "the web gateway refuses a browser without a token"; else fail "web /api/status without a token: $code"; fi
+if web_curl -f -H "Authorization: Bearer $(cat "$work/secrets/client.token")" "$web/api/status" |
+  python3 -c 'import json,sys; sys.exit(len(json.load(sys.stdin)["workers"]) != 4)'; then
+  pass "the web gateway lists 4 workers with the client's token"
+else
+  fail "web /api/status with the client's token"
 fi
 deadline=$((SECONDS + 60))
 while (($(healthy_workers) < 4 && SECONDS < deadline)); do sleep 1; done

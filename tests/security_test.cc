@@ -78,6 +78,18 @@ class Process {
     waitpid(pid_, nullptr, 0);
   }
   std::string log() const { return Slurp(log_); }
+  // The exit status once the process ends within `ms`, else -1.
+  int WaitExit(int ms) {
+    for (int i = 0; i < ms / 20; ++i) {
+      int status = 0;
+      if (waitpid(pid_, &status, WNOHANG) == pid_) {
+        pid_ = -1;
+        return WIFEXITED(status) ? WEXITSTATUS(status) : 128;
+      }
+      std::this_thread::sleep_for(milliseconds(20));
+    }
+    return -1;
+  }
 
  private:
   pid_t pid_ = -1;
@@ -270,6 +282,12 @@ TEST_F(SecurityTest, AClientWithoutATokenCannotSubmitWatchCancelOrList) {
     {
       grpc::ClientContext ctx;
       Prepare(&ctx, token);
+      v1::VolumesReply reply;
+      EXPECT_EQ(root->Volumes(&ctx, {}, &reply).error_code(), grpc::StatusCode::UNAUTHENTICATED);
+    }
+    {
+      grpc::ClientContext ctx;
+      Prepare(&ctx, token);
       v1::JobRef ref;
       ref.set_job_id("job-1");
       v1::CancelReply reply;
@@ -290,6 +308,106 @@ TEST_F(SecurityTest, AClientWithoutATokenCannotSubmitWatchCancelOrList) {
   auto plain = RootAs(Creds{});
   EXPECT_EQ(Submit(*plain, SmallJob("x", {"a.nrrd"}), kAlice, nullptr, false).error_code(),
             grpc::StatusCode::UNAVAILABLE);
+}
+
+// The web gateway holds no token: each browser's goes to the root with its
+// requests, so a page without one gets nothing, and a client's session
+// answers nobody else. Off loopback it serves only HTTPS.
+TEST_F(SecurityTest, TheWebGatewayPassesEachBrowsersTokenOn) {
+  StartWorker();
+  const fs::path body = *dir_ / "web-body.txt";
+  // curl's HTTP status for `args` (0 when nothing answered); the body in `body`.
+  auto curl = [&](const std::string& args) {
+    fs::remove(body);
+    const fs::path code = *dir_ / "web-code.txt";
+    std::system(absl::StrCat("curl -s -m 20 -o ", body.string(), " -w '%{http_code}' ", args,
+                             " > ", code.string(), " 2>/dev/null").c_str());
+    return std::atoi(Slurp(code).c_str());
+  };
+  auto bearer = [](const std::string& token) {
+    return absl::StrCat("-H 'Authorization: Bearer ", token, "' ");
+  };
+  const std::vector<std::string> web = {
+      absl::StrCat(TRANSTICK_BINARY_DIR, "/services/web/transtick-web"), "--root",
+      Address(root_port_), "--tls-ca", (*dir_ / "certs" / "ca.crt").string()};
+  auto with = [&](std::vector<std::string> more) {
+    std::vector<std::string> a = web;
+    a.insert(a.end(), more.begin(), more.end());
+    return a;
+  };
+  // Each gateway picks its port (a free port chosen here could be the one
+  // the root has not bound yet) and logs where it serves.
+  auto served_at = [](const Process& p) {
+    std::string url;
+    Eventually([&] {
+      const std::string log = p.log();
+      const size_t at = log.find("serving the viewer at ");
+      if (at == std::string::npos) return false;
+      url = log.substr(at + 22, log.find('/', log.find("//", at) + 2) - at - 22);
+      return true;
+    });
+    return url;
+  };
+  Process gateway(with({"--listen", "127.0.0.1:0"}), *dir_ / "web.log");
+  const std::string url = served_at(gateway);
+  ASSERT_TRUE(Eventually([&] { return curl(url + "/healthz") == 200; })) << gateway.log();
+
+  // The root may still be starting when this test runs first.
+  ASSERT_TRUE(Eventually([&] { return curl(bearer(kAlice) + url + "/api/status") == 200; }))
+      << Slurp(body);
+  EXPECT_EQ(curl(url + "/api/config"), 200);
+  EXPECT_NE(Slurp(body).find("\"auth\":true"), std::string::npos) << Slurp(body);
+  EXPECT_EQ(curl(url + "/api/status"), 401);
+  EXPECT_NE(Slurp(body).find("Bearer"), std::string::npos) << Slurp(body);
+  EXPECT_EQ(curl(bearer("not-a-token-of-this-root") + url + "/api/status"), 401);
+  EXPECT_EQ(curl(bearer("bad\x01") + url + "/api/volumes"), 401);
+  EXPECT_EQ(curl("-X POST -H 'Content-Type: application/json' -d '{}' " + url +
+                 "/api/jobs/job-1/cancel"), 401);
+  EXPECT_EQ(curl(bearer(kAlice) + url + "/api/status"), 200) << Slurp(body);
+  EXPECT_NE(Slurp(body).find("\"workers\""), std::string::npos);
+  EXPECT_EQ(curl(bearer(kAlice) + url + "/api/volumes"), 200) << Slurp(body);
+  EXPECT_NE(Slurp(body).find("a.nrrd"), std::string::npos);
+  EXPECT_EQ(Slurp(body).find("outside"), std::string::npos);
+
+  const std::string open =
+      R"({"dataset": {"volume": "a.nrrd", "preset": {"name": "grey"}, )"
+      R"("views": [{"width": 32, "height": 32}]}})";
+  const std::string post = "-X POST -H 'Content-Type: application/json' -d '" + open + "' ";
+  EXPECT_EQ(curl(post + url + "/api/sessions"), 401);
+  ASSERT_EQ(curl(bearer(kAlice) + post + url + "/api/sessions"), 200) << Slurp(body);
+  const std::string reply = Slurp(body);
+  const size_t at = reply.find("\"session\":\"");
+  ASSERT_NE(at, std::string::npos) << reply;
+  const std::string id = reply.substr(at + 11, 32);
+  const std::string events = url + "/api/sessions/" + id + "/events?wait=0";
+  EXPECT_EQ(curl(bearer(kBob) + events), 404) << "Bob reads Alice's session";
+  EXPECT_EQ(curl(bearer(kBoss) + events), 404) << "an admin reads Alice's session";
+  EXPECT_EQ(curl(events), 401);
+  EXPECT_EQ(curl(bearer(kAlice) + events), 200) << Slurp(body);
+  EXPECT_EQ(curl(bearer(kBob) + "-X DELETE " + url + "/api/sessions/" + id), 404);
+
+  // Off loopback: tokens would cross in the clear, so plaintext is refused...
+  Process plain(with({"--listen", "0.0.0.0:0"}), *dir_ / "web-plain.log");
+  EXPECT_EQ(plain.WaitExit(10000), 1);
+  EXPECT_NE(plain.log().find("--https-cert"), std::string::npos) << plain.log();
+  // ...and HTTPS with a certificate of the gateway's own serves.
+  const fs::path cert = *dir_ / "web.crt", key = *dir_ / "web.key";
+  ASSERT_EQ(std::system(absl::StrCat("openssl req -x509 -newkey rsa:2048 -nodes -days 2 -subj "
+                                     "/CN=localhost -addext subjectAltName=IP:127.0.0.1 -keyout ",
+                                     key.string(), " -out ", cert.string(), " 2>/dev/null")
+                            .c_str()),
+            0);
+  Process secure(with({"--listen", "0.0.0.0:0", "--https-cert", cert.string(), "--https-key",
+                       key.string()}),
+                 *dir_ / "web-https.log");
+  const std::string https = served_at(secure);
+  ASSERT_EQ(https.substr(0, 8), "https://") << secure.log();
+  ASSERT_TRUE(Eventually([&] {
+    return curl("--cacert " + cert.string() + " " + https + "/healthz") == 200;
+  })) << secure.log();
+  EXPECT_EQ(curl("--cacert " + cert.string() + " " + bearer(kAlice) + https + "/api/status"), 200);
+  EXPECT_EQ(curl("http://" + https.substr(8) + "/healthz"), 0)
+      << "plaintext answered on the HTTPS port";
 }
 
 // Server reflection passes the root's token check like the API; /metrics

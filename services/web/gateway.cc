@@ -323,7 +323,8 @@ class WebGateway::Impl {
   // clients, a JSON body for POST; and counted by `route`.
   Handler Api(const std::string& route, bool post,
               std::function<void(const httplib::Request&, httplib::Response&,
-                                 const std::string& token)> handler);
+                                 const std::string& token)> handler,
+              bool needs_token = true);
   absl::StatusOr<std::string> Token(const httplib::Request& req) const;
   bool HostAllowed(const httplib::Request& req) const;
   void Call(grpc::ClientContext* ctx, const std::string& token, double timeout_s) const {
@@ -398,14 +399,18 @@ bool WebGateway::Impl::HostAllowed(const httplib::Request& req) const {
 
 WebGateway::Impl::Handler WebGateway::Impl::Api(
     const std::string& route, bool post,
-    std::function<void(const httplib::Request&, httplib::Response&, const std::string&)> handler) {
-  return [this, route, post, handler](const httplib::Request& req, httplib::Response& res) {
+    std::function<void(const httplib::Request&, httplib::Response&, const std::string&)> handler,
+    bool needs_token) {
+  return [this, route, post, handler, needs_token](const httplib::Request& req,
+                                                   httplib::Response& res) {
     res.set_header("Cache-Control", "no-store");
     if (!HostAllowed(req)) {
       SetError(res, 403, "this gateway answers only requests to a loopback host name");
     } else if (post && !absl::StartsWith(absl::AsciiStrToLower(req.get_header_value("Content-Type")),
                                          "application/json")) {
       SetError(res, 415, "a POST to the API must be Content-Type: application/json");
+    } else if (!needs_token) {
+      handler(req, res, "");
     } else if (auto token = Token(req); !token.ok()) {
       SetStatus(res, token.status());
     } else {
@@ -687,9 +692,7 @@ absl::Status WebGateway::Impl::Start() {
     c.set_max_sessions(options_.max_sessions);
     c.set_idle_s(static_cast<int>(options_.idle.count() / 1000));
     SetJson(res, c);
-  }));
-  // /api/config answers without a token: the page learns from it that it
-  // must ask for one.
+  }, /*needs_token=*/false));  // the page learns from it that it must ask for one
   http.Get("/api/volumes", Api("volumes", false, [this](const httplib::Request&,
                                                         httplib::Response& res,
                                                         const std::string& token) {
