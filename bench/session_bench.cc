@@ -1,7 +1,8 @@
 // Interactive sessions through an embedded cluster: how long a camera
 // change takes to come back as a full frame, against the frame's own time
 // at the root (the goal: within 1.5x), with and without a preview,
-// and what a drag (a camera every few ms) does.
+// and what a drag (a camera every few ms) does; then the same steps through
+// the web gateway (HTTP, PNG) paired with direct gRPC ones, interleaved.
 //
 //   session_bench [--volume cthead.nrrd] [--materials FILE] [--workers 2]
 //                 [--size 400x400] [--steps 20] [--drag-ms 3000] [--every-ms 15]
@@ -19,9 +20,13 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "bench_util.h"
+#include <httplib.h>
+
 #include "client.h"
 #include "convert.h"
+#include "gateway.h"
 #include "local_cluster.h"
+#include "web.pb.h"
 
 namespace transtick {
 namespace {
@@ -164,6 +169,86 @@ int Main(int argc, char** argv) {
     }
     if (!(*session)->Close().ok()) return 1;
   }
+
+  // The web gateway against gRPC, step for step: a camera to its full frame
+  // through HTTP (a POST, then the long poll's answer with the PNG), and the
+  // same through a SessionClient, alternately.
+  WebOptions wo;
+  wo.listen = "127.0.0.1:0";
+  wo.root = (*cluster)->root_address();
+  auto gateway = WebGateway::Start(wo);
+  if (!gateway.ok()) {
+    std::fprintf(stderr, "session_bench: %s\n", std::string(gateway.status().message()).c_str());
+    return 1;
+  }
+  httplib::Client http("127.0.0.1", (*gateway)->port());
+  http.set_read_timeout(std::chrono::seconds(60));
+  v1::WebOpenRequest open;
+  *open.mutable_dataset() = dataset;
+  open.set_preview(0);
+  auto opened = http.Post("/api/sessions", ToJson(open, false), "application/json");
+  v1::WebOpenReply reply;
+  if (!opened || opened->status != 200 || !ParseJson(opened->body, "open", &reply).ok()) {
+    std::fprintf(stderr, "session_bench: the gateway did not open a session\n");
+    return 1;
+  }
+  const std::string path = "/api/sessions/" + reply.session();
+  uint32_t after = 0;
+  size_t png_bytes = 0;
+  // Polls until the full frame of `seq`.
+  auto web_full = [&](uint32_t seq) -> bool {
+    while (true) {
+      auto res = http.Get(absl::StrCat(path, "/events?after=", after, "&wait=10"));
+      if (!res || res->status != 200 || res->body.size() < 4) return false;
+      uint32_t n = 0;
+      for (int i = 0; i < 4; ++i) n |= static_cast<uint32_t>(static_cast<unsigned char>(res->body[i])) << (8 * i);
+      v1::WebEvents events;
+      if (!ParseJson(res->body.substr(4, n), "events", &events).ok()) return false;
+      after = events.next();
+      for (const v1::WebEvent& e : events.events()) {
+        if (e.kind() == "frame" && !e.preview() && e.seq() == seq) {
+          png_bytes = e.png_size() == 2 ? e.png(1) : 0;
+          return true;
+        }
+      }
+    }
+  };
+  if (!web_full(1)) return 1;
+  auto direct = SessionClient::Open((*cluster)->root_address(), dataset, 0);
+  if (!direct.ok()) return 1;
+  for (uint64_t seq = 1;;) {  // its first frame
+    auto e = (*direct)->Next();
+    if (!e.ok()) return 1;
+    if (e->has_frame && !e->preview && e->seq == seq) break;
+  }
+  std::vector<double> web_ms, grpc_ms;
+  for (int i = 0; i < 2 * steps; ++i) {
+    const v1::View v = view(45 + 7 * (i / 2 + 1));
+    const auto t0 = std::chrono::steady_clock::now();
+    if (i % 2 == 0) {
+      v1::WebSessionUpdate u;
+      *u.mutable_view() = v;
+      auto res = http.Post(path, ToJson(u, false), "application/json");
+      v1::WebSeqReply seq;
+      if (!res || res->status != 200 || !ParseJson(res->body, "seq", &seq).ok()) return 1;
+      if (!web_full(seq.seq())) return 1;
+      web_ms.push_back(bench::MsSince(t0));
+    } else {
+      auto seq = (*direct)->SetView(v);
+      if (!seq.ok()) return 1;
+      while (true) {
+        auto e = (*direct)->Next();
+        if (!e.ok()) return 1;
+        if (e->has_frame && !e->preview && e->seq == *seq) break;
+      }
+      grpc_ms.push_back(bench::MsSince(t0));
+    }
+  }
+  std::printf("  web gateway, preview off, %d steps each, interleaved: camera -> full frame median "
+              "%.1f ms through HTTP (PNG %zu bytes), %.1f ms through gRPC; web/gRPC %.2f\n",
+              steps, bench::Median(web_ms), png_bytes, bench::Median(grpc_ms),
+              bench::Median(web_ms) / bench::Median(grpc_ms));
+  (void)http.Delete(path);
   return 0;
 }
 

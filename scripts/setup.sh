@@ -9,7 +9,11 @@ packages=(build-essential cmake ninja-build ccache pkg-config git
   libabsl-dev libprotobuf-dev protobuf-compiler libgrpc++-dev protobuf-compiler-grpc
   libspdlog-dev libopenimageio-dev libgtest-dev libgmock-dev zlib1g-dev libsqlite3-dev
   libcpp-httplib-dev libgdcm-dev openssl curl
-  python3-grpcio python3-protobuf python3-numpy python3-pil)
+  python3-grpcio python3-protobuf python3-numpy python3-pil
+  chromium)  # the web viewer's browser test (tests/web_viewer_test.sh)
+# Node.js and npm for the browser test's driver: Debian's, unless the machine
+# has them already (from any package).
+if ! type -P node >/dev/null || ! type -P npm >/dev/null; then packages+=(nodejs npm); fi
 
 missing=()
 for p in "${packages[@]}"; do
