@@ -21,7 +21,7 @@
 #include "gateway.h"
 #include "gtest/gtest.h"
 #include "local_cluster.h"
-#include "png.h"
+#include "transtick/png.h"
 #include "session_fixture.h"
 #include "testing.h"
 #include "transtick/camera.h"
@@ -394,8 +394,12 @@ TEST_F(WebGatewayTest, VolumesListsWhatCanBeOpenedAndNothingOutside) {
   std::vector<std::string> paths;
   for (const auto& v : reply.volumes()) {
     paths.push_back(v.path() + (v.series() ? "/" : ""));
-    if (v.path() == "p.nrrd") EXPECT_EQ(v.bytes(), fs::file_size(dir_ + "/p.nrrd"));
-    if (v.series()) EXPECT_EQ(v.bytes(), 400u);
+    if (v.path() == "p.nrrd") {
+      EXPECT_EQ(v.bytes(), fs::file_size(dir_ + "/p.nrrd"));
+    }
+    if (v.series()) {
+      EXPECT_EQ(v.bytes(), 400u);
+    }
   }
   EXPECT_EQ(paths, (std::vector<std::string>{"ct/head.nii.gz", "ct/series1/", "link.nrrd",
                                              "p.nrrd"}));

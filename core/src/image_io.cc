@@ -1,15 +1,77 @@
+// PNG is written here with zlib (png.h); the other formats, and reading,
+// go through OpenImageIO in libtranstick_imageio.so (image_io_oiio.cc),
+// loaded on first use, so a program that writes no such file never loads
+// OpenImageIO's libraries.
 #include "transtick/image_io.h"
 
-#include <OpenImageIO/imageio.h>
+#include <dlfcn.h>
+#include <unistd.h>
 
 #include <array>
+#include <climits>
+#include <cstdio>
+#include <cstdlib>
 #include <optional>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
+#include "image_io_module.h"
+#include "transtick/png.h"
 
 namespace transtick {
 namespace {
+
+// The module's functions, or why it could not be loaded.
+struct Module {
+  TranstickImageioWrite write = nullptr;
+  TranstickImageioRead read = nullptr;
+  TranstickImageioFree free = nullptr;
+  std::string error;
+};
+
+// Where the module is looked for, in order: $TRANSTICK_IMAGEIO_MODULE;
+// beside the program (PROGRAM_DIR/../lib/transtick/, as the image installs
+// it, and PROGRAM_DIR itself); the build tree it was built in; the
+// library search path.
+const Module& LoadModule() {
+  static const Module module = [] {
+    constexpr char kName[] = "libtranstick_imageio.so";
+    std::vector<std::string> candidates;
+    if (const char* env = std::getenv("TRANSTICK_IMAGEIO_MODULE"); env && *env) {
+      candidates.push_back(env);
+    }
+    char exe[PATH_MAX];
+    const ssize_t n = ::readlink("/proc/self/exe", exe, sizeof(exe) - 1);
+    if (n > 0) {
+      std::string dir(exe, static_cast<size_t>(n));
+      dir = dir.substr(0, dir.rfind('/'));
+      candidates.push_back(absl::StrCat(dir, "/../lib/transtick/", kName));
+      candidates.push_back(absl::StrCat(dir, "/", kName));
+    }
+#ifdef TRANSTICK_IMAGEIO_BUILD_PATH
+    candidates.push_back(TRANSTICK_IMAGEIO_BUILD_PATH);
+#endif
+    candidates.push_back(kName);
+    Module m;
+    std::string tried;
+    for (const std::string& path : candidates) {
+      void* handle = ::dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
+      if (handle == nullptr) {
+        absl::StrAppend(&tried, tried.empty() ? "" : "; ", ::dlerror());
+        continue;
+      }
+      m.write = reinterpret_cast<TranstickImageioWrite>(::dlsym(handle, "transtick_imageio_write"));
+      m.read = reinterpret_cast<TranstickImageioRead>(::dlsym(handle, "transtick_imageio_read"));
+      m.free = reinterpret_cast<TranstickImageioFree>(::dlsym(handle, "transtick_imageio_free"));
+      if (m.write && m.read && m.free) return m;
+      m = Module();
+      absl::StrAppend(&tried, tried.empty() ? "" : "; ", path, " lacks transtick_imageio_*");
+    }
+    m.error = absl::StrCat(kName, " (OpenImageIO) could not be loaded: ", tried);
+    return m;
+  }();
+  return module;
+}
 
 // The 8-bit formats first, then the float ones.
 constexpr std::array<std::string_view, 7> kExtensions = {"png",  "jpg", "jpeg", "tif",
@@ -51,49 +113,53 @@ absl::Status WriteImage(const std::string& path, const Image& image) {
     return absl::InvalidArgumentError(
         absl::StrCat(path, ": not an image format transtick writes (", SupportedImageList(), ")"));
   }
-  auto out = OIIO::ImageOutput::create(path);
-  if (!out) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(path, ": cannot write this image format (", OIIO::geterror(), ")"));
+  if (image.width <= 0 || image.height <= 0 ||
+      image.rgb.size() != static_cast<size_t>(image.width) * image.height * 3) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ": the image is empty or malformed"));
+  }
+  if (kExtensions[*format] == "png") {
+    auto png = EncodePng(image, /*level=*/6);
+    if (!png.ok()) return absl::InvalidArgumentError(absl::StrCat(path, ": ", png.status().message()));
+    FILE* f = std::fopen(path.c_str(), "wb");
+    if (f == nullptr) return absl::UnavailableError(absl::StrCat(path, ": cannot be created"));
+    const bool written = std::fwrite(png->data(), 1, png->size(), f) == png->size();
+    if (std::fclose(f) != 0 || !written) {
+      return absl::UnavailableError(absl::StrCat(path, ": could not be written in full"));
+    }
+    return absl::OkStatus();
+  }
+  const Module& m = LoadModule();
+  if (!m.write) {
+    return absl::UnavailableError(absl::StrCat(path, ": writing .", std::string(kExtensions[*format]),
+                                               " needs ", m.error));
   }
   const bool as_float = *format >= kFirstFloat;
-  OIIO::ImageSpec spec(image.width, image.height, 3,
-                       as_float ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::UINT8);
-  spec.attribute("Software", "transtick");
-  if (!out->open(path, spec)) {
-    return absl::UnavailableError(absl::StrCat(path, ": ", out->geterror()));
-  }
-  bool ok;
-  if (as_float) {
-    ok = out->write_image(OIIO::TypeDesc::FLOAT, image.rgb.data());
-  } else {
-    std::vector<uint8_t> bytes(image.rgb.size());
+  std::vector<uint8_t> bytes;
+  if (!as_float) {
+    bytes.resize(image.rgb.size());
     for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = ToByte(image.rgb[i]);
-    ok = out->write_image(OIIO::TypeDesc::UINT8, bytes.data());
   }
-  if (!ok || !out->close()) {
-    return absl::UnavailableError(absl::StrCat(path, ": ", out->geterror()));
-  }
+  char error[512] = "";
+  const int r = m.write(path.c_str(), image.width, image.height,
+                        as_float ? image.rgb.data() : nullptr, as_float ? nullptr : bytes.data(),
+                        error, sizeof(error));
+  if (r == kTranstickImageioFormat) return absl::InvalidArgumentError(absl::StrCat(path, ": ", error));
+  if (r != kTranstickImageioOk) return absl::UnavailableError(absl::StrCat(path, ": ", error));
   return absl::OkStatus();
 }
 
 absl::StatusOr<Image> ReadImage(const std::string& path) {
-  auto in = OIIO::ImageInput::open(path);
-  if (!in) {
-    return absl::InvalidArgumentError(absl::StrCat(path, ": ", OIIO::geterror()));
-  }
-  const OIIO::ImageSpec& spec = in->spec();
-  if (spec.nchannels < 3) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(path, ": has ", spec.nchannels, " channels, need RGB"));
-  }
+  const Module& m = LoadModule();
+  if (!m.read) return absl::UnavailableError(absl::StrCat(path, ": reading needs ", m.error));
   Image img;
-  img.width = spec.width;
-  img.height = spec.height;
-  img.rgb.resize(static_cast<size_t>(spec.width) * spec.height * 3);
-  if (!in->read_image(0, 0, 0, 3, OIIO::TypeDesc::FLOAT, img.rgb.data())) {
-    return absl::InvalidArgumentError(absl::StrCat(path, ": ", in->geterror()));
+  float* rgb = nullptr;
+  char error[512] = "";
+  if (m.read(path.c_str(), &img.width, &img.height, &rgb, error, sizeof(error)) !=
+      kTranstickImageioOk) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ": ", error));
   }
+  img.rgb.assign(rgb, rgb + static_cast<size_t>(img.width) * img.height * 3);
+  m.free(rgb);
   return img;
 }
 

@@ -25,7 +25,7 @@
 #include "client.h"
 #include "cluster.grpc.pb.h"
 #include "convert.h"
-#include "png.h"
+#include "transtick/png.h"
 #include "rpc_channel.h"
 #include "rpc_status.h"
 #include "security.h"

@@ -1,4 +1,4 @@
-#include "png.h"
+#include "transtick/png.h"
 
 #include <zlib.h>
 

@@ -1,8 +1,8 @@
-// PNG encoding of frames for the browser: 8-bit RGB, each channel the byte
-// transtick writes to a .png file (ToByte, image_io.h), so the page shows
-// the pixels `transtick render` saves.
-#ifndef TRANSTICK_SERVICES_WEB_PNG_H_
-#define TRANSTICK_SERVICES_WEB_PNG_H_
+// PNG encoding, with zlib alone: what WriteImage writes to a .png file and
+// what the web gateway sends the browser. 8-bit RGB, each channel ToByte of
+// the float (image_io.h).
+#ifndef TRANSTICK_PNG_H_
+#define TRANSTICK_PNG_H_
 
 #include <string>
 
@@ -18,4 +18,4 @@ absl::StatusOr<std::string> EncodePng(const Image& image, int level = 1);
 
 }  // namespace transtick
 
-#endif  // TRANSTICK_SERVICES_WEB_PNG_H_
+#endif  // TRANSTICK_PNG_H_
