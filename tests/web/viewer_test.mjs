@@ -168,11 +168,12 @@ let cliRenders = 0;
 
 // The in-process reference render of `view` (a page View) with `classify`:
 // ['--preset', 'ct-bone'] or ['--materials', FILE].
-async function cliRender(view, classify) {
+// In dvr mode (`dvr`) shadows are not a thing: the CLI refuses --shadows.
+async function cliRender(view, classify, dvr = false) {
   const out = path.join(TMP, `cli_${++cliRenders}.png`);
   const args = ['render', '--volume', path.join(DATA, 'cthead.nrrd'), ...classify,
     '--azimuth', String(view.azimuth), '--elevation', String(view.elevation), '--zoom', String(view.zoom),
-    '--size', `${view.width}x${view.height}`, '--shadows', view.shadows ? 'on' : 'off',
+    '--size', `${view.width}x${view.height}`, ...(dvr ? [] : ['--shadows', view.shadows ? 'on' : 'off']),
     '--samples', String(view.samples), '--projection', view.projection.toLowerCase(),
     '--local', '0', '--quiet', '--out', out];
   const start = Date.now();
@@ -233,15 +234,17 @@ const viewer = () => page.evaluate(() => {
 });
 
 // Waits for a full frame of the page's current view; with `afterSeq`, one
-// of a later request. Returns the viewer's state and the wait.
-async function fullFrameOfView(what, afterSeq = -1, timeout = 30000) {
+// of a later request; with `afterFrames`, one after that many full frames.
+// Returns the viewer's state and the wait.
+async function fullFrameOfView(what, afterSeq = -1, timeout = 30000, afterFrames = -1) {
   const start = Date.now();
   try {
-    await page.waitForFunction((after) => {
+    await page.waitForFunction(([after, frames]) => {
       const v = window.transtickViewer;
       const f = v.lastFrame;
-      return f && !f.preview && f.seq > after && JSON.stringify(f.view) === JSON.stringify(v.view);
-    }, afterSeq, {timeout});
+      return f && !f.preview && f.seq > after && v.frames > frames &&
+             JSON.stringify(f.view) === JSON.stringify(v.view);
+    }, [afterSeq, afterFrames], {timeout});
   } catch (e) {
     const s = await viewer().catch(() => null);
     const status = await page.textContent('#status').catch(() => '?');
@@ -407,6 +410,44 @@ await check('classification edit (bone min 300 -> 1200) changes the frame, equal
   const applyDisabled = await page.isDisabled('#class-apply');
   assert(applyDisabled, 'Apply is still enabled after the classification came back');
 });
+
+let dvrOpen = false;
+await check('Open with ct-bone in dvr mode from the pickers: a frame equal to the CLI render', async () => {
+  const before = state;
+  await page.selectOption('#preset', 'ct-bone|DVR');
+  await page.click('#open');
+  state = await fullFrameOfView('dvr open', -1, 60000, before.frames);
+  timing('dvr session open to full frame', state.ms);
+  const mode = await page.textContent('#class-mode');
+  assert(mode === 'dvr', `the editor's mode is '${mode}'`);
+  assert(/[?&]mode=dvr/.test(page.url()), `the URL ${page.url()} does not say mode=dvr`);
+  assertSamePixels(state.lastFrame.png, await cliRender(state.view, ['--preset', 'ct-bone', '--mode', 'dvr'], true),
+                   'dvr');
+  dvrOpen = true;
+});
+
+if (dvrOpen) {
+  await check('transfer function edit (a point added on the canvas) changes the frame, equal to the CLI render',
+              async () => {
+    const before = state;
+    const points = await page.locator('#class-editor tbody tr').count();
+    const box = await page.locator('#histogram').boundingBox();
+    await page.mouse.click(box.x + box.width * 0.45, box.y + 30);
+    const after = await page.locator('#class-editor tbody tr').count();
+    assert(after === points + 1, `a click on the canvas left ${after} points (had ${points})`);
+    await page.click('#class-apply');
+    const start = Date.now();
+    state = await fullFrameOfView('transfer edit', before.lastFrame.seq);
+    timing('transfer apply to full frame', Date.now() - start);
+    assert(!samePng(state.lastFrame.png, before.lastFrame.png), 'the PNG did not change');
+    const sent = sentBodies.filter((b) => b.transfer).pop();
+    assert(sent && sent.transfer.points.length === points + 1,
+           `the page sent ${JSON.stringify(sent)}, not ${points + 1} points`);
+    const file = path.join(TMP, 'edited_transfer.json');
+    fs.writeFileSync(file, JSON.stringify(sent.transfer));
+    assertSamePixels(state.lastFrame.png, await cliRender(state.view, ['--transfer', file], true), 'edited transfer');
+  });
+}
 
 await check('Cancel button cancels a running job', async () => {
   const name = 'web viewer test long job';

@@ -367,7 +367,7 @@ function setupViewport() {
 //   live: the gateway holds it (false once ended, expired or closed)
 //   abort: AbortController of its polls and requests
 //   seqViews: Map seq -> the View that seq's frames are rendered with
-//   sentAt: Map seq -> performance.now() when that camera was sent
+//   sentAt: Map seq -> performance.now() when that request was sent
 //   lastSent: the last View sent; viewDirty: the page's view is newer
 //   pendingClass: a classification to send; inFlight: a POST is out
 //   ready: the last SessionReady; readySeq: its seq
@@ -483,7 +483,7 @@ async function flushRequests() {
     const r = await api('POST', `/api/sessions/${encodeURIComponent(s.id)}`, body, s.abort.signal);
     const seq = Number(r.seq);
     s.seqViews.set(seq, frameView);
-    if (body.view) s.sentAt.set(seq, sentAt);
+    s.sentAt.set(seq, sentAt);
     if (isClass) s.appliedSeq = seq;
     pruneSeqs(s);
   } catch (e) {
@@ -583,7 +583,7 @@ function parseEvents(buf) {
   const msg = JSON.parse(new TextDecoder().decode(bytes.subarray(4, 4 + len)));
   const base = 4 + len;
   for (const ev of msg.events || []) {
-    if (!ev.png) continue;
+    if (!ev.png || ev.png.length === 0) continue;
     const [off, n] = ev.png.map(Number);
     if (!(off >= 0 && n > 0 && base + off + n <= bytes.length)) {
       throw new Error(`event ${ev.index}: png [${off}, ${n}] is outside the answer`);
@@ -615,7 +615,7 @@ async function onEvents(s, events) {
 }
 
 function onError(s, ev) {
-  const seq = Number(ev.seq);
+  const seq = num(ev.seq);
   const what = seq === s.appliedSeq ? 'Classification refused' : `Request ${seq} failed`;
   setStatus(`${what}: ${ev.error}`, 'error');
   if (seq === s.appliedSeq) markClassDirty(true);
@@ -643,7 +643,7 @@ function onReady(s, ev) {
 }
 
 async function onFrame(s, ev) {
-  const seq = Number(ev.seq);
+  const seq = num(ev.seq);
   const frameView = viewOfSeq(s, seq);
   const blob = new Blob([ev.pngBytes], {type: 'image/png'});
   const url = URL.createObjectURL(blob);
@@ -666,14 +666,19 @@ async function onFrame(s, ev) {
   if (preview) return;
   framesShown++;
   const now = performance.now();
+  // frames/s over the recent run of frames: a pause of 2 s starts a new run.
+  if (fullTimes.length && now - fullTimes[fullTimes.length - 1] > 2000) fullTimes.length = 0;
   fullTimes.push(now);
-  while (fullTimes.length > 20 || (fullTimes.length > 1 && now - fullTimes[0] > 5000)) fullTimes.shift();
+  while (fullTimes.length > 20) fullTimes.shift();
   const stats = ev.stats || {};
   $('stat-frame-ms').textContent = fmtMs(num(stats.frame_ms, NaN));
   $('stat-fps').textContent = fullTimes.length > 1
     ? ((fullTimes.length - 1) / ((now - fullTimes[0]) / 1000)).toFixed(1) : '–';
-  if (s.sentAt.has(seq)) {
-    $('stat-latency').textContent = fmtMs(now - s.sentAt.get(seq));
+  // The request's answer (its seq) may come after its frame.
+  const sent = s.sentAt.has(seq) ? s.sentAt.get(seq)
+    : s.inFlight && !s.seqViews.has(seq) ? s.inFlight.sentAt : undefined;
+  if (sent !== undefined) {
+    $('stat-latency').textContent = fmtMs(now - sent);
     s.sentAt.delete(seq);
   }
   $('stat-frames').textContent = String(framesShown);
@@ -762,6 +767,8 @@ function loadEditor(ready) {
   editor.range = r.length === 2 && r[1] >= r[0] ? r : [0, 1];
   if (editor.selected >= itemCount()) editor.selected = -1;
   $('class-mode').textContent = editor.mode === 'DVR' ? 'dvr' : 'surfaces';
+  // Shadow rays are a surfaces-mode thing: the root ignores them in dvr.
+  $('shadows').disabled = editor.mode === 'DVR';
   $('class-help').textContent = editor.mode === 'DVR'
     ? 'Drag a point; click to add one; right-click or Delete removes it. Then Apply.'
     : 'Drag a band\u2019s edge or edit the numbers; then Apply.';
@@ -1101,7 +1108,7 @@ function addPoint(value, alpha) {
   const pts = editor.transfer.points;
   if (pts.some((p) => p.value === value)) return -1;
   const rgba = transferAt(value);
-  rgba[3] = clamp(alpha, 0, 1);
+  rgba[3] = Number(clamp(alpha, 0, 1).toFixed(3));
   const p = {value, rgba: rgba.map((x) => Number(x.toFixed(4)))};
   let i = pts.findIndex((q) => q.value > value);
   if (i < 0) i = pts.length;
@@ -1233,7 +1240,7 @@ function setupEditor() {
       const lo = drag.i > 0 ? pts[drag.i - 1].value : -Infinity;
       const hi = drag.i < pts.length - 1 ? pts[drag.i + 1].value : Infinity;
       if (v > lo && v < hi) p.value = v;
-      p.rgba[3] = Number(clamp(g.A(y), 0, 1).toFixed(4));
+      p.rgba[3] = Number(clamp(g.A(y), 0, 1).toFixed(3));
     } else {
       const m = editor.materials.materials[drag.i];
       if (drag.edge === 'min' && v < num(m.max)) m.min = v;
@@ -1423,7 +1430,7 @@ function showJobs(reply) {
                                      'aria-label': `${done} of ${total} frames`});
     const tr = el('tr', {'data-job': j.job_id, 'data-state': state},
       el('td', {text: j.name || j.job_id, title: `${j.job_id}${j.error ? `: ${j.error}` : ''}`}),
-      el('td', {text: j.owner || ''}),
+      el('td', {text: j.owner || '', title: j.owner || ''}),
       el('td', {class: `state ${state.toLowerCase()}`, text: state.toLowerCase(), title: j.error || ''}),
       el('td', {class: 'progress-cell'}, progress, el('span', {class: 'num', text: ` ${done}/${total}`})),
       el('td', {}, cancel));
