@@ -207,7 +207,7 @@ const browser = await chromium.launch({
   executablePath: process.env.TRANSTICK_CHROMIUM || '/usr/bin/chromium',
   args: ['--no-sandbox'],
 });
-const context = await browser.newContext({viewport: {width: 1280, height: 900}});
+const context = await browser.newContext({viewport: {width: 1280, height: 720}});
 const page = await context.newPage();
 const pageProblems = [];
 page.on('pageerror', (e) => pageProblems.push(`page error: ${e.message}`));

@@ -155,6 +155,10 @@ async function errorOf(r) {
   return new ApiError(r.status, `HTTP ${r.status}${text ? `: ${text.slice(0, 200)}` : ` ${r.statusText}`}`);
 }
 
+function authHint(e) {
+  return e.status === 401 ? ' (enter a bearer token above)' : '';
+}
+
 async function api(method, path, body, signal) {
   const r = await apiFetch(method, path, body, signal);
   if (!r.ok) throw await errorOf(r);
@@ -164,11 +168,15 @@ async function api(method, path, body, signal) {
 
 // ------------------------------------------------------------ auth
 
+// Shows the token field; says why once for each token (the job list asks
+// every 2 s).
+let tokenAsked = null;
 function needToken(why) {
   const form = $('auth');
-  const first = form.hidden;
+  if (form.hidden) $('token').focus();
   form.hidden = false;
-  if (first) $('token').focus();
+  if (tokenAsked === token()) return;
+  tokenAsked = token();
   setStatus(`${why} Enter a bearer token above.`, 'error');
 }
 
@@ -428,7 +436,7 @@ async function openSession(volume, presetValue) {
   } catch (e) {
     if (s !== session) return;
     session = null;
-    setStatus(`Could not open ${volume}: ${e.message}`, 'error');
+    setStatus(`Could not open ${volume}: ${e.message}${authHint(e)}`, 'error');
     showReopen(true);
     return;
   } finally {
@@ -1315,7 +1323,7 @@ async function loadVolumes() {
   try {
     reply = await api('GET', '/api/volumes');
   } catch (e) {
-    setStatus(`Could not list the volumes: ${e.message}`, 'error');
+    setStatus(`Could not list the volumes: ${e.message}${authHint(e)}`, 'error');
     return false;
   }
   const vsel = $('volume');
