@@ -380,6 +380,17 @@ await check('wheel zooms: a new frame of the zoomed view', async () => {
   assert(!samePng(state.lastFrame.png, before.lastFrame.png), 'the PNG did not change');
 });
 
+await check('keyboard: ArrowRight on the focused image turns the azimuth by 5°', async () => {
+  const before = state;
+  await page.focus('#viewport');
+  await page.keyboard.press('ArrowRight');
+  state = await fullFrameOfView('ArrowRight');
+  timing('key to full frame', state.ms);
+  const want = before.view.azimuth + 5;
+  assert(Math.abs(state.view.azimuth - want) < 1e-9, `azimuth ${state.view.azimuth}, want ${want}`);
+  assert(!samePng(state.lastFrame.png, before.lastFrame.png), 'the PNG did not change');
+});
+
 await check('shadows off: a new frame, equal to the CLI render with --shadows off', async () => {
   const before = state;
   await page.click('#shadows');

@@ -1,6 +1,7 @@
 // transtick viewer: the page transtick-web serves (docs/viewer.md).
 //
-// It speaks the gateway's JSON API (docs/formats.md, "Web gateway"): it
+// It speaks the gateway's JSON API (docs/formats.md, "Web gateway"), by
+// paths relative to the page (so a proxy may serve it under a prefix): it
 // opens an interactive session, sends cameras and classifications with
 // POST /api/sessions/ID, and long-polls the session's events, whose answer
 // is binary (a little-endian u32 length, that much JSON, then the PNGs).
@@ -8,13 +9,11 @@
 // CSP allows only this origin.
 
 const SIZES = [256, 400, 512, 800];
-const SAMPLES = [1, 4, 9, 16];
 const PROJECTIONS = ['PERSPECTIVE', 'ORTHOGRAPHIC'];
 const TOKEN_KEY = 'transtick.token';
 const PREVIEW = 4;           // preview at 1/4 of the width and height
 const EVENTS_WAIT_S = 20;    // long-poll time the gateway may hold a poll
 const STATUS_PERIOD_MS = 2000;
-const HIST_BINS = 64;
 
 const $ = (id) => document.getElementById(id);
 
@@ -298,6 +297,7 @@ function setupViewControls() {
       return;
     }
     setView({[field]: v});
+    e.target.value = fmtValue(view[field]);   // as clamped
   });
   onNumber('azimuth', 'azimuth');
   onNumber('elevation', 'elevation');
@@ -376,6 +376,7 @@ function setupViewport() {
 //   abort: AbortController of its polls and requests
 //   seqViews: Map seq -> the View that seq's frames are rendered with
 //   sentAt: Map seq -> performance.now() when that request was sent
+//   kinds: Map seq -> what that request was, for its errors
 //   lastSent: the last View sent; viewDirty: the page's view is newer
 //   pendingClass: a classification to send; inFlight: a POST is out
 //   ready: the last SessionReady; readySeq: its seq
@@ -395,7 +396,7 @@ function closeSession(reason) {
   s.abort.abort();
   if (s.id) {
     // Best effort: the gateway closes idle sessions itself.
-    apiFetch('DELETE', `/api/sessions/${encodeURIComponent(s.id)}`).catch(() => {});
+    apiFetch('DELETE', `api/sessions/${encodeURIComponent(s.id)}`).catch(() => {});
   }
   if (reason) setStatus(reason);
 }
@@ -416,7 +417,7 @@ async function openSession(volume, presetValue) {
   const first = normView(view);
   const s = {
     id: null, volume, presetValue, live: false, abort: new AbortController(),
-    seqViews: new Map(), sentAt: new Map(), lastSent: first, viewDirty: false,
+    seqViews: new Map(), sentAt: new Map(), kinds: new Map(), lastSent: first, viewDirty: false,
     pendingClass: null, inFlight: null, ready: null, readySeq: null, openAt: performance.now(),
     openView: first, appliedSeq: null,
   };
@@ -431,7 +432,7 @@ async function openSession(volume, presetValue) {
   $('open').disabled = true;
   let reply;
   try {
-    reply = await api('POST', '/api/sessions',
+    reply = await api('POST', 'api/sessions',
                       {dataset: {volume, preset, views: [first]}, preview: PREVIEW}, s.abort.signal);
   } catch (e) {
     if (s !== session) return;
@@ -444,7 +445,7 @@ async function openSession(volume, presetValue) {
   }
   if (s !== session) {
     // Another open or a close came first: this one is not wanted.
-    apiFetch('DELETE', `/api/sessions/${encodeURIComponent(reply.session)}`).catch(() => {});
+    apiFetch('DELETE', `api/sessions/${encodeURIComponent(reply.session)}`).catch(() => {});
     return;
   }
   s.id = String(reply.session);
@@ -488,10 +489,11 @@ async function flushRequests() {
   const sentAt = performance.now();
   s.inFlight = {view: frameView, sentAt, camera: Boolean(body.view)};
   try {
-    const r = await api('POST', `/api/sessions/${encodeURIComponent(s.id)}`, body, s.abort.signal);
+    const r = await api('POST', `api/sessions/${encodeURIComponent(s.id)}`, body, s.abort.signal);
     const seq = Number(r.seq);
     s.seqViews.set(seq, frameView);
     s.sentAt.set(seq, sentAt);
+    s.kinds.set(seq, body.view && isClass ? 'Camera and classification' : isClass ? 'Classification' : 'Camera');
     if (isClass) s.appliedSeq = seq;
     pruneSeqs(s);
   } catch (e) {
@@ -514,6 +516,7 @@ function pruneSeqs(s) {
   for (const k of keys.slice(0, keys.length - 128)) {
     s.seqViews.delete(k);
     s.sentAt.delete(k);
+    s.kinds.delete(k);
   }
 }
 
@@ -543,7 +546,7 @@ async function pollEvents(s) {
   while (s === session && s.live) {
     let r;
     try {
-      r = await apiFetch('GET', `/api/sessions/${encodeURIComponent(s.id)}/events?after=${after}&wait=${EVENTS_WAIT_S}`,
+      r = await apiFetch('GET', `api/sessions/${encodeURIComponent(s.id)}/events?after=${after}&wait=${EVENTS_WAIT_S}`,
                          undefined, s.abort.signal);
     } catch (e) {
       if (s !== session || e.name === 'AbortError') return;
@@ -624,7 +627,8 @@ async function onEvents(s, events) {
 
 function onError(s, ev) {
   const seq = num(ev.seq);
-  const what = seq === s.appliedSeq ? 'Classification refused' : `Request ${seq} failed`;
+  const kind = s.kinds.get(seq) || (s.inFlight ? 'The request' : seq === s.readySeq ? 'Opening' : `Request ${seq}`);
+  const what = `${kind} refused`;
   setStatus(`${what}: ${ev.error}`, 'error');
   if (seq === s.appliedSeq) markClassDirty(true);
 }
@@ -653,18 +657,25 @@ function onReady(s, ev) {
 async function onFrame(s, ev) {
   const seq = num(ev.seq);
   const frameView = viewOfSeq(s, seq);
-  const blob = new Blob([ev.pngBytes], {type: 'image/png'});
-  const url = URL.createObjectURL(blob);
+  const url = URL.createObjectURL(new Blob([ev.pngBytes], {type: 'image/png'}));
+  // Decoded off screen first, so the image on screen changes at once.
+  const decoded = new Image();
+  decoded.src = url;
+  try {
+    await decoded.decode();
+  } catch (e) {
+    URL.revokeObjectURL(url);
+    if (s === session) setStatus(`Frame ${seq}: the PNG could not be decoded (${e.message})`, 'error');
+    return;
+  }
+  if (s !== session) {
+    URL.revokeObjectURL(url);
+    return;
+  }
   const img = $('frame');
   img.src = url;
-  try {
-    await img.decode();
-  } catch (e) {
-    setStatus(`Frame ${seq}: the image could not be decoded (${e.message})`, 'error');
-  }
   if (frameUrl) URL.revokeObjectURL(frameUrl);
   frameUrl = url;
-  if (s !== session) return;
   const preview = Boolean(ev.preview);
   $('placeholder').hidden = true;
   $('badge').hidden = !preview;
@@ -1321,7 +1332,7 @@ let presets = [];
 async function loadVolumes() {
   let reply;
   try {
-    reply = await api('GET', '/api/volumes');
+    reply = await api('GET', 'api/volumes');
   } catch (e) {
     setStatus(`Could not list the volumes: ${e.message}${authHint(e)}`, 'error');
     return false;
@@ -1387,7 +1398,7 @@ function setupOpen() {
   window.addEventListener('pagehide', () => {
     if (session && session.id) {
       // keepalive lets the DELETE outlive the page.
-      fetch(`/api/sessions/${encodeURIComponent(session.id)}`,
+      fetch(`api/sessions/${encodeURIComponent(session.id)}`,
             {method: 'DELETE', headers: headers(false), keepalive: true, credentials: 'omit'}).catch(() => {});
     }
   });
@@ -1402,7 +1413,7 @@ async function pollStatus() {
   if (statusBusy) return;
   statusBusy = true;
   try {
-    const reply = await api('GET', '/api/status');
+    const reply = await api('GET', 'api/status');
     showJobs(reply);
     if (statusError) setStatus('Cluster status: answering again.', 'ok');
     statusError = '';
@@ -1449,7 +1460,7 @@ function showJobs(reply) {
 async function cancelJob(job, button) {
   button.disabled = true;
   try {
-    const r = await api('POST', `/api/jobs/${encodeURIComponent(job.job_id)}/cancel`, {});
+    const r = await api('POST', `api/jobs/${encodeURIComponent(job.job_id)}/cancel`, {});
     setStatus(r.cancelled ? `Job ${job.name || job.job_id} cancelled.` : `Job ${job.name || job.job_id} had already ended.`, 'ok');
   } catch (e) {
     setStatus(`Cancel ${job.name || job.job_id}: ${e.message}`, 'error');
@@ -1480,7 +1491,7 @@ async function start() {
   sizeViewport();
   drawHistogram();
   try {
-    const config = await api('GET', '/api/config');
+    const config = await api('GET', 'api/config');
     if (config.auth && !token()) needToken('This gateway needs a token.');
     if (config.version) document.title = `transtick viewer · ${config.version}`;
   } catch (e) {
