@@ -964,6 +964,21 @@ function transferAt(v) {
 function drawTransfer(ctx, g) {
   const {pad, w, h, X, Y, lo, hi} = g;
   const pts = editor.transfer.points;
+  // The opacity axis: faint lines at 0.5 and 1.
+  ctx.strokeStyle = 'rgba(232, 237, 242, 0.15)';
+  ctx.setLineDash([3, 3]);
+  ctx.beginPath();
+  for (const a of [0.5, 1]) {
+    ctx.moveTo(pad.l, Y(a) + 0.5);
+    ctx.lineTo(w - pad.r, Y(a) + 0.5);
+  }
+  ctx.stroke();
+  ctx.setLineDash([]);
+  ctx.fillStyle = '#9aa5b1';
+  ctx.font = '10px system-ui, sans-serif';
+  ctx.textAlign = 'right';
+  ctx.textBaseline = 'top';
+  ctx.fillText('opacity 1', w - pad.r - 2, Y(1) + 2);
   if (pts.length === 0) return;
   // Colour strip under the plot, and the curve filled with the colours.
   const grad = ctx.createLinearGradient(pad.l, 0, w - pad.r, 0);
