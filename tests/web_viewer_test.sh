@@ -44,7 +44,8 @@ if [[ ! -f $mods/node_modules/playwright-core/package.json ]] ||
   cp "$here/web/package.json" "$mods/package.json"
   rm -f "$mods/package-lock.json"
   echo "web_viewer_test: installing playwright-core into $mods"
-  if ! npm install --prefix "$mods" --no-audit --no-fund --loglevel=error; then
+  # npm's cache in the build directory too: nothing is written to $HOME.
+  if ! npm install --prefix "$mods" --cache "$mods/.npm-cache" --no-audit --no-fund --loglevel=error; then
     rm -f "$mods/package.json"   # so the next run tries again
     echo "web_viewer_test: npm install failed"
     exit 1

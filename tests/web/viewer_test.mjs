@@ -39,9 +39,10 @@ const timings = [];
 const results = [];
 let failed = 0;
 
-function timing(name, ms) {
+// `latency`: the page's own figure, from sending the request to showing its frame.
+function timing(name, ms, latency) {
   timings.push([name, ms]);
-  console.log(`timing: ${name} ${ms.toFixed(0)} ms`);
+  console.log(`timing: ${name} ${ms.toFixed(0)} ms${latency ? ` (the page's latency: ${latency})` : ''}`);
 }
 
 // Runs one named check; a failure is reported with its name and the run goes on.
@@ -253,7 +254,8 @@ async function fullFrameOfView(what, afterSeq = -1, timeout = 30000, afterFrames
                     {...s.lastFrame, png: s.lastFrame.png.length})}; status: ${status})`);
   }
   const s = await viewer();
-  return {...s, ms: Date.now() - start};
+  const latency = await page.textContent('#stat-latency');
+  return {...s, ms: Date.now() - start, latency};
 }
 
 let state = null;   // the viewer after the last frame checked
@@ -264,7 +266,7 @@ await page.goto(`${URL_}?volume=cthead.nrrd&preset=ct-bone`);
 
 const opened = await check('open cthead.nrrd with ct-bone from the URL: first full frame', async () => {
   state = await fullFrameOfView('first frame', -1, 60000);
-  timing('first frame (page load to full frame)', Date.now() - openStart);
+  timing('first frame (page load to full frame)', Date.now() - openStart, state.latency);
   const v = state.view;
   assert(v.azimuth === 0 && v.elevation === 0 && v.zoom === 1 && v.width === 400 && v.height === 400 &&
          v.shadows === true && v.samples === 1 && v.projection === 'PERSPECTIVE',
@@ -352,7 +354,7 @@ await check('drag orbits: a new frame of the new view, equal to the CLI render',
   for (let i = 1; i <= 12; i++) await page.mouse.move(x + 10 * i, y - (40 * i) / 12);
   await page.mouse.up();
   state = await fullFrameOfView('drag');
-  timing('drag to full frame', state.ms);
+  timing('drag to full frame', state.ms, state.latency);
   const v = state.view;
   assert(Math.abs(v.azimuth - 48) < 1e-9 && Math.abs(v.elevation - 16) < 1e-9,
          `after a drag of 120 px right and 40 px up, azimuth ${v.azimuth} and elevation ${v.elevation} ` +
@@ -374,7 +376,7 @@ await check('wheel zooms: a new frame of the zoomed view', async () => {
   const before = state;
   await page.mouse.wheel(0, -200);
   state = await fullFrameOfView('wheel');
-  timing('wheel to full frame', state.ms);
+  timing('wheel to full frame', state.ms, state.latency);
   const want = before.view.zoom * 1.1 ** 2;
   assert(Math.abs(state.view.zoom - want) < 1e-9, `zoom ${state.view.zoom}, want ${want}`);
   assert(!samePng(state.lastFrame.png, before.lastFrame.png), 'the PNG did not change');
@@ -385,7 +387,7 @@ await check('keyboard: ArrowRight on the focused image turns the azimuth by 5°'
   await page.focus('#viewport');
   await page.keyboard.press('ArrowRight');
   state = await fullFrameOfView('ArrowRight');
-  timing('key to full frame', state.ms);
+  timing('key to full frame', state.ms, state.latency);
   const want = before.view.azimuth + 5;
   assert(Math.abs(state.view.azimuth - want) < 1e-9, `azimuth ${state.view.azimuth}, want ${want}`);
   assert(!samePng(state.lastFrame.png, before.lastFrame.png), 'the PNG did not change');
@@ -395,7 +397,7 @@ await check('shadows off: a new frame, equal to the CLI render with --shadows of
   const before = state;
   await page.click('#shadows');
   state = await fullFrameOfView('shadows off');
-  timing('shadows toggle to full frame', state.ms);
+  timing('shadows toggle to full frame', state.ms, state.latency);
   assert(state.view.shadows === false, `view.shadows is ${state.view.shadows}`);
   assert(!samePng(state.lastFrame.png, before.lastFrame.png), 'the PNG did not change');
   assertSamePixels(state.lastFrame.png, await cliRender(state.view, ['--preset', 'ct-bone']), 'shadows off');
@@ -410,7 +412,7 @@ await check('classification edit (bone min 300 -> 1200) changes the frame, equal
   await page.click('#class-apply');
   const start = Date.now();
   state = await fullFrameOfView('classification', before.lastFrame.seq);
-  timing('classification apply to full frame', Date.now() - start);
+  timing('classification apply to full frame', Date.now() - start, state.latency);
   assert(!samePng(state.lastFrame.png, before.lastFrame.png), 'the PNG did not change');
   const sent = sentBodies.filter((b) => b.materials).pop();
   assert(sent && sent.materials.materials[0].min === 1200,
@@ -428,7 +430,7 @@ await check('Open with ct-bone in dvr mode from the pickers: a frame equal to th
   await page.selectOption('#preset', 'ct-bone|DVR');
   await page.click('#open');
   state = await fullFrameOfView('dvr open', -1, 60000, before.frames);
-  timing('dvr session open to full frame', state.ms);
+  timing('dvr session open to full frame', state.ms, state.latency);
   const mode = await page.textContent('#class-mode');
   assert(mode === 'dvr', `the editor's mode is '${mode}'`);
   assert(/[?&]mode=dvr/.test(page.url()), `the URL ${page.url()} does not say mode=dvr`);
@@ -449,7 +451,7 @@ if (dvrOpen) {
     await page.click('#class-apply');
     const start = Date.now();
     state = await fullFrameOfView('transfer edit', before.lastFrame.seq);
-    timing('transfer apply to full frame', Date.now() - start);
+    timing('transfer apply to full frame', Date.now() - start, state.latency);
     assert(!samePng(state.lastFrame.png, before.lastFrame.png), 'the PNG did not change');
     const sent = sentBodies.filter((b) => b.transfer).pop();
     assert(sent && sent.transfer.points.length === points + 1,

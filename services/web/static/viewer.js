@@ -406,8 +406,11 @@ function presetOf(value) {
   return {name, mode};
 }
 
+let lastOpened = null;
+
 async function openSession(volume, presetValue) {
   closeSession();
+  lastOpened = {volume, presetValue};
   showReopen(false);
   const {name, mode} = presetOf(presetValue);
   const info = presets.find((p) => p.name === name);
@@ -1405,10 +1408,9 @@ function setupOpen() {
     }
     openSession(volume, preset);
   });
+  // Reopen opens again what was open last, whatever the pickers say now.
   $('reopen').addEventListener('click', () => {
-    const volume = $('volume').value;
-    const preset = $('preset').value;
-    if (volume && preset) openSession(volume, preset);
+    if (lastOpened) openSession(lastOpened.volume, lastOpened.presetValue);
   });
   window.addEventListener('pagehide', () => {
     if (session && session.id) {
