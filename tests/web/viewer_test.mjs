@@ -227,12 +227,22 @@ page.on('request', (r) => {
   }
 });
 
-const viewer = () => page.evaluate(() => {
-  const v = window.transtickViewer;
-  const f = v.lastFrame;
-  return {view: v.view, frames: v.frames,
-          lastFrame: f && {seq: f.seq, preview: f.preview, view: f.view, png: Array.from(f.png)}};
-});
+// The page's transtickViewer, its PNG carried over as base64.
+const viewer = async () => {
+  const s = await page.evaluate(() => {
+    const v = window.transtickViewer;
+    const f = v.lastFrame;
+    let b64 = '';
+    if (f) {
+      let bin = '';
+      for (let i = 0; i < f.png.length; i += 0x8000) bin += String.fromCharCode(...f.png.subarray(i, i + 0x8000));
+      b64 = btoa(bin);
+    }
+    return {view: v.view, frames: v.frames, lastFrame: f && {seq: f.seq, preview: f.preview, view: f.view, png: b64}};
+  });
+  if (s.lastFrame) s.lastFrame.png = Buffer.from(s.lastFrame.png, 'base64');
+  return s;
+};
 
 // Waits for a full frame of the page's current view; with `afterSeq`, one
 // of a later request; with `afterFrames`, one after that many full frames.
@@ -253,9 +263,10 @@ async function fullFrameOfView(what, afterSeq = -1, timeout = 30000, afterFrames
                     `(view ${JSON.stringify(s && s.view)}, last frame ${JSON.stringify(s && s.lastFrame &&
                     {...s.lastFrame, png: s.lastFrame.png.length})}; status: ${status})`);
   }
+  const ms = Date.now() - start;
   const s = await viewer();
   const latency = await page.textContent('#stat-latency');
-  return {...s, ms: Date.now() - start, latency};
+  return {...s, ms, latency};
 }
 
 let state = null;   // the viewer after the last frame checked
