@@ -1,6 +1,8 @@
-# Writes OUT, a C++ source that holds the files FILES (paths beneath DIR) as
+# Writes OUT, a C++ source that holds the files FILES (paths beneath DIR,
+# joined with |) as
 # byte arrays, for the web gateway's page (services/web/assets.h). Run by the
 # build whenever one of the files changes.
+string(REPLACE "|" ";" FILES "${FILES}")  # the caller joins the list with |
 set(body "")
 set(table "")
 set(i 0)

@@ -106,7 +106,18 @@ grpc::Status Sessions::Serve(grpc::ServerContext* ctx,
     *job.add_datasets() = dataset;
     *job.mutable_datasets(0)->add_views() = view;
     auto plan = runner_.Plan(job);
-    if (!plan.ok()) return plan.status();
+    if (!plan.ok()) {
+      // The job's paths mean nothing to a session: its dataset and camera.
+      std::string message(plan.status().message());
+      for (const auto& [from, to] : {std::pair<std::string, std::string>{"datasets[0].views[0]", "the camera"},
+                                     {"datasets[0]", "the dataset"}}) {
+        if (message.rfind(from, 0) == 0) {
+          message = to + message.substr(from.size());
+          break;
+        }
+      }
+      return absl::Status(plan.status().code(), message);
+    }
     return std::make_pair(std::move(job), *std::move(plan));
   };
   auto load = [&](const v1::Dataset& dataset, const v1::View& view, uint64_t seq)
@@ -183,18 +194,26 @@ grpc::Status Sessions::Serve(grpc::ServerContext* ctx,
   grpc::Status status = grpc::Status::OK;
   bool write_failed = false;
   // Renders `view` and sends its chunks; the last chunk with the stats.
-  auto render = [&](const v1::View& view, uint64_t seq, bool is_preview,
-                    double arrived) -> absl::Status {
+  // What a camera must pass to render: the job's checks, and its render
+  // settings against the scene.
+  auto check = [&](const v1::View& view) -> absl::StatusOr<std::pair<v1::Job, JobPlan>> {
     auto planned = plan_view(spec, view);
     if (!planned.ok()) return planned.status();
-    const DatasetPlan& plan = planned->second.datasets[0];
-    const FrameRequest& request = plan.views[0];
+    const FrameRequest& request = planned->second.datasets[0].views[0];
     if (absl::Status s = CheckRenderSettings(request.settings, (*data)->scene.mode(),
                                              (*data)->scene.dims(), (*data)->scene.spacing(),
                                              int64_t{request.camera.width} * request.camera.height);
         !s.ok()) {
       return s;
     }
+    return planned;
+  };
+  auto render = [&](const v1::View& view, uint64_t seq, bool is_preview,
+                    double arrived) -> absl::Status {
+    auto planned = check(view);
+    if (!planned.ok()) return planned.status();
+    const DatasetPlan& plan = planned->second.datasets[0];
+    const FrameRequest& request = plan.views[0];
     std::unique_ptr<Balancer> balancer = MakeBalancer(plan.balance[0], planned->second.rule, 32);
     std::optional<v1::SessionEvent> held;
     FrameTask task;
@@ -282,8 +301,9 @@ grpc::Status Sessions::Serve(grpc::ServerContext* ctx,
     }
     if (view) {
       first.mutable_open()->mutable_views(0)->CopyFrom(view->view());  // the camera now
-      absl::Status s = absl::OkStatus();
-      if (preview) {
+      // The camera itself is checked first: an error names it, not its preview.
+      absl::Status s = check(view->view()).status();
+      if (s.ok() && preview) {
         v1::View small = view->view();
         small.set_width(std::max(1, small.width() / preview));
         small.set_height(std::max(1, small.height() / preview));

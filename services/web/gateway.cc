@@ -668,6 +668,9 @@ absl::Status WebGateway::Impl::Start() {
   http.set_write_timeout(std::chrono::seconds(10));
   http.set_keep_alive_timeout(5);
   http.set_payload_max_length(kMaxBody);
+  // Headers and body go out in separate writes: without this, Nagle's
+  // algorithm and the browser's delayed ACK held small answers ~40 ms.
+  http.set_tcp_nodelay(true);
 
   http.set_post_routing_handler([](const httplib::Request&, httplib::Response& res) {
     res.set_header("X-Content-Type-Options", "nosniff");
@@ -749,6 +752,28 @@ absl::Status WebGateway::Impl::Start() {
                                                                  const std::string& token) {
     PollSession(req, res, token);
   }));
+  // A known API path asked with another method: 405 with the methods it has.
+  const std::vector<std::pair<std::string, std::string>> allowed = {
+      {"/api/config", "GET"},           {"/api/volumes", "GET"},
+      {"/api/status", "GET"},           {R"(/api/jobs/[^/]+/cancel)", "POST"},
+      {"/api/sessions", "POST"},        {session_path, "POST, DELETE"},
+      {session_path + "/events", "GET"}};
+  for (const auto& [pattern, methods] : allowed) {
+    auto refuse = [this, methods = methods](const httplib::Request& req, httplib::Response& res) {
+      res.set_header("Allow", methods);
+      SetError(res, 405, absl::StrCat(req.method, " is not one of this path's methods (", methods,
+                                      ")"));
+      metrics_->Add("transtick_web_requests_total", 1, {{"code", "405"}, {"route", "method"}});
+    };
+    for (const char* m : {"GET", "POST", "PUT", "DELETE", "PATCH"}) {
+      if (methods.find(m) != std::string::npos) continue;
+      if (std::string(m) == "GET") http.Get(pattern, refuse);
+      if (std::string(m) == "POST") http.Post(pattern, refuse);
+      if (std::string(m) == "PUT") http.Put(pattern, refuse);
+      if (std::string(m) == "DELETE") http.Delete(pattern, refuse);
+      if (std::string(m) == "PATCH") http.Patch(pattern, refuse);
+    }
+  }
   http.Get(R"(/|/[A-Za-z0-9._-]+)", [this](const httplib::Request& req, httplib::Response& res) {
     if (!HostAllowed(req)) return SetError(res, 403, "this gateway answers only loopback host names");
     Serve(req.path, res);
