@@ -42,7 +42,7 @@ std::string Progress::Duration(double seconds) {
 
 void Progress::Update(double fraction, const std::string& what) {
   if (style_ == Style::kOff) return;
-  std::lock_guard lock(mu_);
+  absl::MutexLock lock(&mu_);
   const auto now = std::chrono::steady_clock::now();
   fraction = std::clamp(fraction, 0.0, 1.0);
   if (!started_) {
@@ -84,14 +84,14 @@ void Progress::Say(const std::string& line) {
 }
 
 void Progress::Warn(const std::string& line) {
-  std::lock_guard lock(mu_);
+  absl::MutexLock lock(&mu_);
   ClearLocked();
   std::fprintf(out_, "%s\n", line.c_str());
   std::fflush(out_);
 }
 
 void Progress::Finish() {
-  std::lock_guard lock(mu_);
+  absl::MutexLock lock(&mu_);
   ClearLocked();
   std::fflush(out_);
 }

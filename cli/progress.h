@@ -7,10 +7,10 @@
 
 #include <chrono>
 #include <cstdio>
-#include <mutex>
 #include <string>
 
 #include "absl/base/thread_annotations.h"
+#include "absl/synchronization/mutex.h"
 
 namespace transtick {
 
@@ -56,7 +56,7 @@ class Progress {
   const Style style_;
   const std::chrono::milliseconds every_;
   std::FILE* const out_;
-  std::mutex mu_;
+  absl::Mutex mu_;
   bool started_ ABSL_GUARDED_BY(mu_) = false;     // an Update came
   bool line_open_ ABSL_GUARDED_BY(mu_) = false;  // a terminal line to clear
   const std::chrono::steady_clock::time_point created_ = std::chrono::steady_clock::now();

@@ -13,5 +13,5 @@ fi
 build=${TRANSTICK_TSA_BUILD_DIR:-build-clang}
 cmake -S . -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_COMPILER=clang++ \
   -DCMAKE_CXX_FLAGS="-Wthread-safety -Werror=thread-safety" >/dev/null
-ninja -C "$build" -j "$(nproc)" transtick_root transtick_worker transtick_display
+ninja -C "$build" -j "$(nproc)" transtick_root transtick_worker transtick_display transtick_web transtick_client
 echo "thread-safety: the annotated libraries build clean with clang -Wthread-safety"
