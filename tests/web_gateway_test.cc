@@ -386,6 +386,11 @@ TEST_F(WebGatewayTest, VolumesListsWhatCanBeOpenedAndNothingOutside) {
   fs::create_symlink("/etc", dir_ + "/outside");
   fs::create_symlink("p.nrrd", dir_ + "/link.nrrd");
   mkfifo((dir_ + "/fifo.nrrd").c_str(), 0600);
+  // Names a protobuf string cannot hold, or a terminal should not print.
+  std::ofstream(dir_ + "/bad\xff.nrrd") << "x";
+  std::ofstream(dir_ + "/over\xc0\xaflong.nrrd") << "x";
+  std::ofstream(dir_ + "/line\nbreak.nrrd") << "x";
+  std::ofstream(dir_ + "/caf\xc3\xa9.nrrd") << "x";  // café: listed
   auto res = http_->Get("/api/volumes");
   ASSERT_TRUE(res);
   ASSERT_EQ(res->status, 200) << res->body;
@@ -401,8 +406,8 @@ TEST_F(WebGatewayTest, VolumesListsWhatCanBeOpenedAndNothingOutside) {
       EXPECT_EQ(v.bytes(), 400u);
     }
   }
-  EXPECT_EQ(paths, (std::vector<std::string>{"ct/head.nii.gz", "ct/series1/", "link.nrrd",
-                                             "p.nrrd"}));
+  EXPECT_EQ(paths, (std::vector<std::string>{"caf\xc3\xa9.nrrd", "ct/head.nii.gz", "ct/series1/",
+                                             "link.nrrd", "p.nrrd"}));
   EXPECT_TRUE(reply.truncated());  // a/b/c/d/e is deeper than the walk goes
   EXPECT_GE(reply.presets_size(), 4);
   bool bone = false;

@@ -32,6 +32,33 @@ bool HasDicomMagic(const ConfinedDir& dir, const std::string& relative) {
   return n == static_cast<ssize_t>(sizeof(head)) && std::memcmp(head + 128, "DICM", 4) == 0;
 }
 
+// Whether `name` can go in a protobuf string and be shown as it is: valid
+// UTF-8 (shortest forms, no surrogates) without control characters. Other
+// names are not listed: a reply holding one could not be sent.
+bool Listable(const std::string& name) {
+  const auto* p = reinterpret_cast<const unsigned char*>(name.data());
+  const auto* end = p + name.size();
+  while (p < end) {
+    const unsigned char c = *p;
+    if (c < 0x20 || c == 0x7f) return false;
+    if (c < 0x80) {
+      ++p;
+      continue;
+    }
+    const int n = c >= 0xf0 ? 3 : c >= 0xe0 ? 2 : c >= 0xc2 ? 1 : -1;
+    if (n < 0 || c > 0xf4 || end - p <= n) return false;
+    uint32_t code = c & (0x3f >> n);
+    for (int k = 1; k <= n; ++k) {
+      if ((p[k] & 0xc0) != 0x80) return false;
+      code = (code << 6) | (p[k] & 0x3f);
+    }
+    const uint32_t least[] = {0, 0x80, 0x800, 0x10000};
+    if (code < least[n] || code > 0x10ffff || (code >= 0xd800 && code <= 0xdfff)) return false;
+    p += n + 1;
+  }
+  return true;
+}
+
 }  // namespace
 
 absl::StatusOr<v1::VolumesReply> ListVolumes(const ConfinedDir& dir,
@@ -51,7 +78,7 @@ absl::StatusOr<v1::VolumesReply> ListVolumes(const ConfinedDir& dir,
     bool dicom = false;
     int probed = 0;
     for (const std::string& name : *names) {
-      if (name.empty() || name.front() == '.') continue;
+      if (name.empty() || name.front() == '.' || !Listable(name)) continue;
       if (++examined > bounds.examined) {
         truncated = true;
         break;
