@@ -84,6 +84,11 @@ class ClientTest(unittest.TestCase):
         with self.assertRaises(json_format.ParseError):
             self.client.submit({"datasets": [], "no_such_field": 1})
 
+    def test_volumes_lists_the_data_directory_and_the_presets(self):
+        listing = self.client.volumes()
+        self.assertIn("box.nrrd", [v["path"] for v in listing["volumes"]])
+        self.assertIn("ct-bone", [p["name"] for p in listing["presets"]])
+
     def test_unknown_jobs_and_cancel(self):
         with self.assertRaises(grpc.RpcError) as e:
             list(self.client.frames("job-999999"))

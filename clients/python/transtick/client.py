@@ -270,6 +270,11 @@ class Client:
         reply = self._stub.Status(cluster_pb2.StatusRequest(), timeout=self._timeout, metadata=self._metadata)
         return json_format.MessageToDict(reply, preserving_proto_field_name=True)
 
+    def volumes(self) -> dict:
+        """The volumes in the root's data directory and the presets (VolumesReply as JSON)."""
+        reply = self._stub.Volumes(cluster_pb2.VolumesRequest(), timeout=self._timeout, metadata=self._metadata)
+        return json_format.MessageToDict(reply, preserving_proto_field_name=True)
+
     def cancel(self, job_id: str) -> bool:
         """Cancels a job; False if it had already ended."""
         reply = self._stub.Cancel(cluster_pb2.JobRef(job_id=job_id), timeout=self._timeout, metadata=self._metadata)
