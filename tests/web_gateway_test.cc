@@ -285,6 +285,10 @@ TEST_F(WebGatewayTest, HostileRequestsGetClearErrorsAndTheGatewayServesOn) {
   ExpectError(http_->Get(absl::StrCat("/api/sessions/", std::string(32, 'a'), "/events")), 404,
               "no such session");
   ExpectError(http_->Get("/api/nothing"), 404, "no such API path");
+  ExpectError(http_->Put("/api/sessions", "{}", json), 405, "not one of this path's methods (POST)");
+  ExpectError(http_->Get("/api/sessions"), 405, "(POST)");
+  ExpectError(http_->Delete("/api/status"), 405, "(GET)");
+  ExpectError(http_->Get(path), 405, "(POST, DELETE)");
   // A camera the root refuses is an error event; the session goes on.
   uint32_t bad = Update(id, R"({"view": {"width": 40, "height": 32, "zoom": -1}})");
   uint32_t after = 0;
