@@ -5,11 +5,13 @@
 #define TRANSTICK_TESTS_SESSION_FIXTURE_H_
 
 #include <fstream>
+#include <memory>
 #include <string>
 
 #include "cluster.pb.h"
 #include "convert.h"
 #include "gtest/gtest.h"
+#include "local_cluster.h"
 #include "testing.h"
 #include "transtick/camera.h"
 #include "transtick/scene.h"
@@ -46,6 +48,18 @@ inline void WritePhantom(const std::string& dir) {
   f << "NRRD0004\ntype: float\ndimension: 3\nsizes: 36 32 40\nendian: little\nencoding: raw\n"
        "spacings: 1 1 1.25\n\n";
   f.write(reinterpret_cast<const char*>(v.values.data()), v.values.size() * 4);
+}
+
+// WritePhantom(dir), and an embedded cluster of 2 workers serving it; null
+// (with a test failure) when it does not start.
+inline std::unique_ptr<LocalCluster> PhantomCluster(const std::string& dir) {
+  WritePhantom(dir);
+  LocalCluster::Options o;
+  o.workers = 2;
+  o.data_dir = dir;
+  auto c = LocalCluster::Start(o);
+  EXPECT_TRUE(c.ok()) << c.status();
+  return c.ok() ? *std::move(c) : nullptr;
 }
 
 // The in-process render of dir/p.nrrd with Materials(lo) from `view`.

@@ -31,13 +31,8 @@ class SessionTest : public ::testing::Test {
  protected:
   void SetUp() override {
     dir_ = testing::TempDir();
-    testing::WritePhantom(dir_);
-    LocalCluster::Options o;
-    o.workers = 2;
-    o.data_dir = dir_;
-    auto c = LocalCluster::Start(o);
-    ASSERT_TRUE(c.ok()) << c.status();
-    cluster_ = *std::move(c);
+    cluster_ = testing::PhantomCluster(dir_);
+    ASSERT_TRUE(cluster_);
   }
   v1::Dataset Dataset(const v1::View& first, float lo = 45) {
     v1::Dataset d;

@@ -88,13 +88,8 @@ class WebGatewayTest : public ::testing::Test {
  protected:
   void SetUp() override {
     dir_ = testing::TempDir();
-    testing::WritePhantom(dir_);
-    LocalCluster::Options o;
-    o.workers = 2;
-    o.data_dir = dir_;
-    auto c = LocalCluster::Start(o);
-    ASSERT_TRUE(c.ok()) << c.status();
-    cluster_ = *std::move(c);
+    cluster_ = testing::PhantomCluster(dir_);
+    ASSERT_TRUE(cluster_);
     StartGateway({});
   }
   void StartGateway(WebOptions o) {
