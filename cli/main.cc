@@ -111,7 +111,8 @@ const CommandDoc kRenderDoc = {
                    "paper's voxel faces (overrides the materials file's \"surface\")"},
                   {"azimuth", "DEG", "orbit: rotation about the world's Y axis (0 looks along -Z)"},
                   {"elevation", "DEG", "orbit: tilt toward +Y"},
-                  {"zoom", "F", "orbit: 1 frames the whole volume (default 1)"},
+                  {"zoom", "F", "magnification: in an orbit 1 frames the whole volume; with --eye\n"
+                               "it narrows the field of view by F (default 1)"},
                   {"eye", "X,Y,Z", "explicit view, with --target: world units (patient LPS), volume\n"
                                    "centred at 0"},
                   {"target", "X,Y,Z", "the point looked at"},
@@ -578,10 +579,12 @@ absl::Status CheckRenderFlags(const Flags& f) {
                 "surfaces mode takes --materials, dvr mode --transfer"),
       Exclusive(f, "preset", {"materials", "transfer", "surface"},
                 "--preset stands for the classification"),
-      Exclusive(f, "eye", {"azimuth", "elevation", "zoom"},
-                "a view is explicit (--eye, --target) or an orbit (--azimuth, --elevation, --zoom)"),
-      Exclusive(f, "target", {"azimuth", "elevation", "zoom"},
-                "a view is explicit (--eye, --target) or an orbit (--azimuth, --elevation, --zoom)"),
+      // --zoom goes with either: it narrows the field of view of an explicit
+      // view as it does an orbit's.
+      Exclusive(f, "eye", {"azimuth", "elevation"},
+                "a view is explicit (--eye, --target) or an orbit (--azimuth, --elevation)"),
+      Exclusive(f, "target", {"azimuth", "elevation"},
+                "a view is explicit (--eye, --target) or an orbit (--azimuth, --elevation)"),
       Exclusive(f, "root", {"local", "rings", "threads"},
                 "--root renders on a running cluster, whose workers and rings are its own"),
   };

@@ -52,6 +52,13 @@ expect 0 "64x64 surfaces" -- render --local 0 --volume "$dir/cube.nrrd" --materi
 grep -q '"primary"' "$dir/s0.json" && grep -q '"encoded_bytes"' "$dir/s0.json" ||
   { echo "FAIL: stats lack fields"; fails=$((fails + 1)); }
 cmp "$dir/a.png" "$dir/a0.png" || { echo "FAIL: cluster and in-process images differ"; fails=$((fails + 1)); }
+# An explicit view takes --zoom too (the demo's view): a narrower field, a
+# different image.
+expect 0 "32x32 surfaces" -- render --local 0 --volume "$dir/cube.nrrd" --materials "$dir/m.json" \
+  --size 32x32 --eye=-100,-40,-30 --target 0,0,0 --up 0,-1,0 --out "$dir/e1.png"
+expect 0 "32x32 surfaces" -- render --local 0 --volume "$dir/cube.nrrd" --materials "$dir/m.json" \
+  --size 32x32 --eye=-100,-40,-30 --target 0,0,0 --up 0,-1,0 --zoom 1.6 --out "$dir/e16.png"
+cmp -s "$dir/e1.png" "$dir/e16.png" && { echo "FAIL: --zoom with --eye changed nothing"; fails=$((fails + 1)); }
 expect 0 "dvr" -- render --volume "$dir/cube.nrrd" --transfer "$dir/t.json" --size 32x32 \
   --out "$dir/b.exr"
 [[ -s $dir/b.exr ]] || { echo "FAIL: no EXR written"; fails=$((fails + 1)); }
