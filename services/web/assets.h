@@ -10,7 +10,6 @@ namespace transtick {
 
 struct WebAsset {
   std::string_view path;          // "/index.html"
-  std::string_view content_type;  // "text/html; charset=utf-8"
   std::string_view bytes;
 };
 

@@ -392,9 +392,8 @@ bool WebGateway::Impl::HostAllowed(const httplib::Request& req) const {
   // With tokens, the Host does not matter; without, a page of another site
   // whose name was re-bound to this address must not reach the API.
   if (auth_ || CurrentSecurity().insecure) return true;
-  const std::string host = HostOf(req.get_header_value("Host"));
-  return host == "localhost" || absl::StartsWith(host, "127.") || host == "::1" ||
-         host == HostOf(options_.listen);
+  const std::string host = absl::AsciiStrToLower(req.get_header_value("Host"));
+  return IsLoopback(host) || HostOf(host) == HostOf(options_.listen);
 }
 
 WebGateway::Impl::Handler WebGateway::Impl::Api(
@@ -424,35 +423,42 @@ WebGateway::Impl::Handler WebGateway::Impl::Api(
 
 void WebGateway::Impl::Serve(const std::string& path, httplib::Response& res) const {
   const std::string name = path == "/" ? "/index.html" : path;
+  std::string bytes;
+  bool found = false;
   if (!options_.static_dir.empty()) {
     // Only a plain file name beneath the directory.
     const std::string file = name.substr(1);
-    const bool plain = !file.empty() && file.find('/') == std::string::npos && file[0] != '.';
-    std::ifstream in(options_.static_dir + "/" + file, std::ios::binary);
-    if (plain && in) {
+    if (!file.empty() && file.find('/') == std::string::npos && file[0] != '.') {
+      std::ifstream in(options_.static_dir + "/" + file, std::ios::binary);
       std::stringstream text;
       text << in.rdbuf();
-      std::string type = "application/octet-stream";
-      if (absl::EndsWith(file, ".html")) type = "text/html; charset=utf-8";
-      if (absl::EndsWith(file, ".js") || absl::EndsWith(file, ".mjs")) {
-        type = "text/javascript; charset=utf-8";
-      }
-      if (absl::EndsWith(file, ".css")) type = "text/css; charset=utf-8";
-      if (absl::EndsWith(file, ".png")) type = "image/png";
-      if (absl::EndsWith(file, ".svg")) type = "image/svg+xml";
-      res.set_content(text.str(), type);
-      return;
+      found = static_cast<bool>(in);
+      bytes = text.str();
     }
   } else {
     for (const WebAsset& a : WebAssets()) {
       if (a.path == name) {
-        res.set_content(std::string(a.bytes), std::string(a.content_type));
-        return;
+        bytes = std::string(a.bytes);
+        found = true;
       }
     }
   }
-  res.status = 404;
-  res.set_content("not found\n", "text/plain");
+  if (!found) {
+    res.status = 404;
+    res.set_content("not found\n", "text/plain");
+    return;
+  }
+  // The media type by the extension.
+  std::string type = "application/octet-stream";
+  for (const auto& [ext, t] : {std::pair<const char*, const char*>{".html", "text/html; charset=utf-8"},
+                               {".js", "text/javascript; charset=utf-8"},
+                               {".mjs", "text/javascript; charset=utf-8"},
+                               {".css", "text/css; charset=utf-8"},
+                               {".png", "image/png"},
+                               {".svg", "image/svg+xml"}}) {
+    if (absl::EndsWith(name, ext)) type = t;
+  }
+  res.set_content(std::move(bytes), type);
 }
 
 void WebGateway::Impl::OpenSession(const httplib::Request& req, httplib::Response& res,
