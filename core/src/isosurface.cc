@@ -39,32 +39,36 @@ int SlopeRoots(const RayCubic& g, double lo, double hi, double out[2]) {
   return kept;
 }
 
-// The root of g in [lo, hi], where g(lo) and g(hi) differ in sign: the
-// Illinois variant of regula falsi, falling back to bisection when it
-// stalls, for at most 64 steps (bisection alone halves 2^-64 of the
-// interval's length).
+// The root of g in [lo, hi], where g(lo) and g(hi) differ in sign and g
+// is monotonic: Newton's method from the secant point, kept inside the
+// bracket (a step that would leave it bisects instead), for at most 64
+// steps. It ends when a Newton step moves t by at most 1e-12 of the
+// piece's length, so that the error left is of the order of that step's
+// square, or when bisection has shrunk the bracket as far.
 double Refine(const RayCubic& g, double lo, double glo, double hi, double ghi) {
-  const double tolerance = (hi - lo) * 1e-10;
-  int side = 0;
-  for (int step = 0; step < 64 && hi - lo > tolerance; ++step) {
-    double t = lo - glo * (hi - lo) / (ghi - glo);
-    // A secant point outside, or too near an end, is replaced by the middle.
-    if (!(t > lo && t < hi)) t = 0.5 * (lo + hi);
+  const double tolerance = (hi - lo) * 1e-12;
+  double t = lo - glo * (hi - lo) / (ghi - glo);
+  if (!(t > lo && t < hi)) t = 0.5 * (lo + hi);
+  for (int step = 0; step < 64; ++step) {
     const double gt = g(t);
     if (gt == 0) return t;
     if ((gt < 0) == (glo < 0)) {
       lo = t;
       glo = gt;
-      if (side == -1) ghi *= 0.5;  // Illinois: the end that stays is halved
-      side = -1;
     } else {
       hi = t;
-      ghi = gt;
-      if (side == 1) glo *= 0.5;
-      side = 1;
     }
+    double next = t - gt / g.Slope(t);
+    if (next > lo && next < hi) {
+      if (std::abs(next - t) <= tolerance) return next;
+    } else {
+      // Newton left the bracket (or the slope vanished): bisect.
+      next = 0.5 * (lo + hi);
+      if (hi - lo <= 2 * tolerance) return next;
+    }
+    t = next;
   }
-  return glo == 0 ? lo : (ghi == 0 ? hi : lo - glo * (hi - lo) / (ghi - glo));
+  return t;
 }
 
 }  // namespace
@@ -179,9 +183,14 @@ bool CrossingWalk::EnterCell() {
     // holds no root of its own; the walk goes on through it.
     if (t_in < t_out && lo < hi) {
       scene_->Corners(base_[0], base_[1], base_[2], corners_.data());
-      const auto [mn, mx] = std::minmax_element(corners_.begin(), corners_.end());
-      lo_value_ = *mn;
-      hi_value_ = *mx;
+      // Branch-free (minss, maxss): which corner is least is random.
+      float mn = corners_[0], mx = corners_[0];
+      for (int k = 1; k < 8; ++k) {
+        mn = corners_[k] < mn ? corners_[k] : mn;
+        mx = corners_[k] > mx ? corners_[k] : mx;
+      }
+      lo_value_ = mn;
+      hi_value_ = mx;
       hi_ = hi;
       loaded_ = true;
       solved_ = false;

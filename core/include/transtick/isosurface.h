@@ -6,7 +6,7 @@
 // ray p(t) = o + t d the interpolant is a cubic in t. Its extrema split
 // [t_begin, t_end] into pieces on which it is monotonic; the first piece
 // whose ends differ in sign around the threshold holds the first root,
-// which a bounded number of safeguarded secant steps then pin down. No
+// which a bounded number of safeguarded Newton steps then pin down. No
 // fixed step: a thin feature between two samples of the ray is not missed.
 //
 // A pure function of its arguments in double precision, with a fixed
@@ -56,8 +56,9 @@ struct SideChange {
 // Every change of side of g in [0, span], in increasing t; returns how many
 // (at most three). The cubic's extrema split [0, span] into monotonic
 // pieces; a piece whose ends lie on different sides holds one change,
-// which Illinois steps refine (bisection when they stall, at most 64
-// steps, to 1e-10 of the piece). No fixed step: a thin feature between any
+// which Newton steps from the secant point refine (bisection when a step
+// would leave the piece; at most 64 steps, until a step moves t by at most
+// 1e-12 of the piece). No fixed step: a thin feature between any
 // two samples is found. A pure function of its arguments with a fixed
 // sequence of operations.
 int SideChanges(const RayCubic& g, double span, SideChange out[3]);
