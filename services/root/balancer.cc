@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
@@ -153,6 +154,23 @@ class TestRays : public Balancer {
   const int grid_;
 };
 
+// The largest share of a ring's frame its slowest worker spends beyond the
+// mean, 1 - mean / max of its workers' tracer CPU: what perfect cuts
+// would save of the frame.
+double MaxImbalanceShare(const FrameResult& frame, const Layout& layout) {
+  double share = 0;
+  for (const auto& ring : RingCosts(frame, layout.RingSizes())) {
+    if (ring.empty()) continue;
+    double sum = 0, max = 0;
+    for (double c : ring) sum += c, max = std::max(max, c);
+    if (max > 0) share = std::max(share, 1 - sum / ring.size() / max);
+  }
+  return share;
+}
+
+// A re-cut must pay for itself within this many frames.
+constexpr int kPaybackFrames = 3;
+
 class PreviousFrame : public Balancer {
  public:
   explicit PreviousFrame(BalanceRule rule) : rule_(rule) {}
@@ -166,9 +184,25 @@ class PreviousFrame : public Balancer {
   }
   void Learn(const FrameResult& frame, const Layout& layout, BalanceMemory& memory,
              BalanceReport* report) override {
-    // This frame's costs cut the slabs of the next one.
-    memory.next_cuts = Recut(layout, frame, rule_);
+    // What this frame's cut moves cost: the price of the next move.
+    if (layout.planes_moved > 0) memory.recut_ms = layout.load_ms;
+    // This frame's costs cut the slabs of the next one, when that pays: the
+    // frame would have ended when its slowest worker's share of the work
+    // was the mean share, and so should the next, much like it, if re-cut.
+    // Re-cutting moves planes and rebuilds the slabs of the workers whose
+    // cuts move (measured on cthead, 2 workers: about 200 ms, more than a
+    // whole frame, for a move of one or two planes), so the slabs are
+    // re-cut only when the time the next kPaybackFrames frames would gain
+    // exceeds what the last move took. Until a move has been measured, the
+    // first re-cut is made.
+    const double gain_ms = frame.frame_ms * MaxImbalanceShare(frame, layout);
+    const bool pays = memory.recut_ms < 0 || gain_ms * kPaybackFrames > memory.recut_ms;
+    memory.next_cuts = pays ? Recut(layout, frame, rule_) : layout.Cuts();
     report->cuts_after = memory.next_cuts;
+    if (!pays) {
+      spdlog::debug("{} balance previous-frame: cuts kept (gain {:.1f} ms a frame, a re-cut took {:.0f} ms)",
+                    report->job_id, gain_ms, memory.recut_ms);
+    }
   }
 
  private:

@@ -32,6 +32,10 @@ struct BalanceMemory {
   std::vector<std::vector<int>> next_cuts;
   // "test-rays" cuts by view (ViewKey), reused without a new prerender.
   std::map<std::string, std::vector<std::vector<int>>> view_cuts;
+  // What moving cuts between frames took last ("previous-frame": the
+  // slab transfers of a layout whose workers fetched planes), in ms; < 0
+  // until measured.
+  double recut_ms = -1;
 };
 
 // A job converted from the API once, when it is accepted (Datasets::Plan),

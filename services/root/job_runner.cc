@@ -171,7 +171,8 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
     Layout& layout = out.layout;
     // Cuts computed for other ring members mean nothing to these.
     if (const std::string members = layout.Members(); members != data.balance.members) {
-      data.balance = BalanceMemory{members, {}, {}};
+      data.balance = BalanceMemory{};
+      data.balance.members = members;
     }
     out.report.job_id = task.who;
     const auto balance_start = Clock::now();
