@@ -2,9 +2,10 @@
 # Memory over many jobs: a root, a display and two workers as separate
 # processes serve N jobs (default 200) submitted one after another, each
 # three views of a real head; prints every daemon's RSS after the first job
-# (warm) and after the last, and the growth, and the size of the root's state
-# directory. The root keeps no image after
-# it is delivered, so its RSS should stay flat.
+# (warm), right after the last, and idle (3 s later, when the daemons have
+# handed their free heap back: services/common/heap.h), the growth from the
+# first to idle, and the size of the root's state directory. The root keeps
+# no image after it is delivered, so its RSS should stay flat.
 # Usage: bench/soak.sh [BUILD_DIR] [JOBS] [SIZE]
 set -euo pipefail
 src=$(cd "$(dirname "$0")/.." && pwd)
@@ -45,7 +46,8 @@ submit() {
     { cat "$dir/submit.log" >&2; tail -20 "$dir/root.log" >&2; return 1; }
 }
 submit
-declare -A before
+sleep 3
+declare -A before busy
 for p in $rpid $dpid "${wpids[@]}"; do before[$p]=$(rss "$p"); done
 start=$(date +%s.%N)
 for i in $(seq 2 "$jobs"); do
@@ -53,12 +55,15 @@ for i in $(seq 2 "$jobs"); do
 done
 end=$(date +%s.%N)
 printf 'soak: %d jobs of 3 %sx%s frames in %.1f s\n' "$jobs" "$size" "$size" "$(echo "$end - $start" | bc)"
-printf '%-10s %12s %12s %12s\n' daemon "RSS after 1" "after $jobs" growth
+for p in $rpid $dpid "${wpids[@]}"; do busy[$p]=$(rss "$p"); done
+sleep 3
+printf '%-10s %12s %12s %12s %12s\n' daemon "RSS after 1" "after $jobs" idle growth
+mb() { printf '%9.1f MB' "$(echo "$1 / 1024" | bc -l)"; }
 show() {
   local name=$1 pid=$2 after
   after=$(rss "$pid")
-  printf '%-10s %9.1f MB %9.1f MB %+9.1f MB\n' "$name" "$(echo "${before[$pid]} / 1024" | bc -l)" \
-    "$(echo "$after / 1024" | bc -l)" "$(echo "($after - ${before[$pid]}) / 1024" | bc -l)"
+  printf '%-10s %s %s %s %+9.1f MB\n' "$name" "$(mb "${before[$pid]}")" "$(mb "${busy[$pid]}")" \
+    "$(mb "$after")" "$(echo "($after - ${before[$pid]}) / 1024" | bc -l)"
 }
 show root "$rpid"
 show display "$dpid"

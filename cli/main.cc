@@ -26,6 +26,7 @@
 #include "cluster.grpc.pb.h"
 #include "convert.h"
 #include "daemon.h"
+#include "heap.h"
 #include "gateway.h"
 #include "progress.h"
 #include "flags.h"
@@ -1096,6 +1097,8 @@ int Health(int argc, char** argv) {
 }  // namespace transtick
 
 int main(int argc, char** argv) {
+  // The embedded cluster's daemons allocate as the real ones do.
+  transtick::TuneHeap();
   // The embedded cluster logs only warnings unless asked for more.
   spdlog::set_level(spdlog::level::warn);
   if (const char* level = std::getenv("TRANSTICK_LOG_LEVEL")) {

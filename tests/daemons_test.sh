@@ -7,8 +7,8 @@
 # a worker killed in the middle of a job does not stall it, nor does a worker
 # paused with SIGSTOP, a restarted root gets its workers back by itself and
 # resumes its jobs from its state directory, a
-# job survives the display's restart, and every daemon stops cleanly on
-# SIGTERM.
+# job survives the display's restart, no two daemons share a port, and every
+# daemon stops cleanly on SIGTERM.
 set -u
 build=$1
 src=$2
@@ -64,6 +64,16 @@ for _ in $(seq 100); do "$T" health --addr 127.0.0.1:$dport >/dev/null 2>&1 && b
 "$T" health --addr 127.0.0.1:$rport,127.0.0.1:$dport >"$dir/health.log" 2>&1 &&
   grep -qx "127.0.0.1:$rport: SERVING" "$dir/health.log" &&
   grep -qx "127.0.0.1:$dport: SERVING" "$dir/health.log" || fail "health: $(cat "$dir/health.log")"
+
+# A port is one daemon's: a second daemon on a taken port fails to start,
+# and the workers listening on port 0 were given ports no other daemon holds.
+timeout 10 "$build/services/display/transtick-display" --listen 127.0.0.1:$rport \
+  --metrics off >"$dir/dup.log" 2>&1 && fail "a display started on the root's port"
+grep -q "cannot listen on 127.0.0.1:$rport" "$dir/dup.log" ||
+  fail "second daemon on a taken port: $(cat "$dir/dup.log")"
+"$T" status --root 127.0.0.1:$rport | sed -n 's/.* at 127.0.0.1:\([0-9]*\),.*/\1/p' >"$dir/ports"
+[[ $( (cat "$dir/ports"; echo $rport; echo $dport) | sort -u | wc -l) == 5 ]] ||
+  fail "daemons share ports: workers on $(tr '\n' ' ' <"$dir/ports"), root $rport, display $dport"
 
 "$T" submit "$dir/job.json" --root 127.0.0.1:$rport --out-dir "$dir/out" >"$dir/submit.log" 2>&1 ||
   fail "submit: $(cat "$dir/submit.log")"

@@ -3,7 +3,6 @@
 #include <grpcpp/ext/channelz_service_plugin.h>
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
-#include <malloc.h>
 #include <signal.h>
 #include <spdlog/pattern_formatter.h>
 #include <spdlog/spdlog.h>
@@ -29,6 +28,11 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const std::string& address
   grpc::ServerBuilder builder;
   auto server = std::unique_ptr<Server>(new Server());
   builder.AddListeningPort(address, *creds, &server->port_);
+  // No SO_REUSEPORT: with it a second daemon on a taken port shares it
+  // silently (its connections split between the two), and a port-0 listener
+  // may be given a port another daemon holds (a worker was seen taking the
+  // root's).
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.SetMaxReceiveMessageSize(kMaxMessageBytes);
   builder.SetMaxSendMessageSize(kMaxMessageBytes);
   // A client whose host vanished is noticed (its streams fail), and the
@@ -148,8 +152,6 @@ absl::StatusOr<std::chrono::milliseconds> SecondsSetting(const Flags& flags,
   if (!v.ok()) return v.status();
   return std::chrono::milliseconds(static_cast<int64_t>(*v * 1e3));
 }
-
-void ReturnLargeBlocksToTheSystem() { mallopt(M_MMAP_THRESHOLD, 1 << 20); }
 
 namespace {
 

@@ -77,13 +77,6 @@ absl::Status UseDaemonSecurity(const Flags& flags);
 // Sets up spdlog's default logger: "[time] [level] [name] message".
 void InitLogging(const std::string& name);
 
-// Makes every allocation of 1 MB or more its own mapping, returned to the
-// system when freed. glibc otherwise raises that threshold after the first
-// such free, and slabs, scenes and ray batches freed frame after frame then
-// fragment the heap: a worker's RSS grew 45-100 MB over 20 jobs with the
-// default and 4-6 MB over 30 with this (bench/soak.sh). Call first in main.
-void ReturnLargeBlocksToTheSystem();
-
 }  // namespace transtick
 
 #endif  // TRANSTICK_SERVICES_COMMON_DAEMON_H_

@@ -4,12 +4,13 @@
 #include <iostream>
 
 #include "daemon.h"
+#include "heap.h"
 #include "root_node.h"
 
 int main(int argc, char** argv) {
   using namespace transtick;
   BlockTerminationSignals();
-  ReturnLargeBlocksToTheSystem();
+  TuneHeap();
   InitLogging("root");
   auto flags = Flags::Parse(
       argc, argv, 1,

@@ -5,12 +5,14 @@
 #include <iostream>
 
 #include "daemon.h"
+#include "heap.h"
 #include "gateway.h"
 #include "security.h"
 
 int main(int argc, char** argv) {
   using namespace transtick;
   BlockTerminationSignals();
+  TuneHeap();
   InitLogging("web");
   auto flags = Flags::Parse(argc, argv, 1,
                             {"listen", "root", "https-cert", "https-key", "max-sessions", "idle-s",

@@ -83,6 +83,42 @@ size_t Inbox::high_water() const {
   return high_water_;
 }
 
+BufferPool& BufferPool::Shared() {
+  static BufferPool* pool = new BufferPool(size_t{16} << 20);
+  return *pool;
+}
+
+std::string BufferPool::Take(size_t capacity) {
+  {
+    absl::MutexLock lock(&mu_);
+    for (size_t i = 0; i < free_.size(); ++i) {
+      if (free_[i].capacity() < capacity) continue;
+      std::string buffer = std::move(free_[i]);
+      free_[i] = std::move(free_.back());
+      free_.pop_back();
+      bytes_ -= buffer.capacity();
+      return buffer;
+    }
+  }
+  std::string buffer;
+  buffer.reserve(capacity);
+  return buffer;
+}
+
+void BufferPool::Give(std::string buffer) {
+  if (buffer.capacity() < (64 << 10)) return;
+  buffer.clear();
+  absl::MutexLock lock(&mu_);
+  if (bytes_ + buffer.capacity() > max_bytes_) return;
+  bytes_ += buffer.capacity();
+  free_.push_back(std::move(buffer));
+}
+
+size_t BufferPool::held_bytes() const {
+  absl::MutexLock lock(&mu_);
+  return bytes_;
+}
+
 void Outbox::Attach(StartWrite write, std::function<void()> done, bool busy) {
   mu_.Lock();
   write_ = std::move(write);
@@ -91,7 +127,8 @@ void Outbox::Attach(StartWrite write, std::function<void()> done, bool busy) {
   Pump();
 }
 
-void Outbox::WriteDone(bool ok) {
+void Outbox::WriteDone(bool ok, std::string spent) {
+  BufferPool::Shared().Give(std::move(spent));
   mu_.Lock();
   in_flight_ = false;
   if (!ok && !failed_) {
@@ -110,7 +147,14 @@ void Outbox::Append(const std::string& records) {
     mu_.Unlock();
     return;
   }
-  if (pending_.empty()) first_pending_ = Clock::now();
+  if (pending_.empty()) {
+    first_pending_ = Clock::now();
+    // A buffer for a whole batch, so appends do not grow it.
+    const size_t batch = batch_records_ * record_bytes_;
+    if (pending_.capacity() < batch) {
+      pending_ = BufferPool::Shared().Take(std::max(records.size(), batch + (16 << 10)));
+    }
+  }
   pending_ += records;
   Pump();
 }
@@ -151,6 +195,7 @@ void Outbox::Pump() {
       // The usual case: everything pending is one batch, handed over whole.
       batch.swap(pending_);
     } else {
+      batch = BufferPool::Shared().Take(limit);
       batch.assign(pending_, 0, limit);
       pending_.erase(0, limit);
     }
@@ -258,7 +303,7 @@ class Frame::RightStream : public grpc::ClientBidiReactor<v1::RayBatch, v1::RayB
 
   void OnWriteDone(bool ok) override {
     if (opened_) Opened(ok);  // the first write is the only one before opened_ is cleared
-    frame_->right_->outbox.WriteDone(ok);
+    frame_->right_->outbox.WriteDone(ok, std::move(*out_.mutable_rays()));
   }
   void OnReadDone(bool ok) override {
     if (!ok) return;  // the neighbour closed its side
@@ -314,7 +359,9 @@ class Frame::DisplayStream : public grpc::ClientWriteReactor<v1::DepositBatch>,
     StartCall();
   }
 
-  void OnWriteDone(bool ok) override { frame_->deposits_.WriteDone(ok); }
+  void OnWriteDone(bool ok) override {
+    frame_->deposits_.WriteDone(ok, std::move(*out_.mutable_deposits()));
+  }
   void OnDone(const grpc::Status& s) override { Done(s, "deposit", frame_->spec_.display()); }
 
  private:
@@ -374,7 +421,9 @@ class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBa
     frame_->ReceiveBatch(in_, *frame_->left_);
     StartRead(&in_);
   }
-  void OnWriteDone(bool ok) override { frame_->left_->outbox.WriteDone(ok); }
+  void OnWriteDone(bool ok) override {
+    frame_->left_->outbox.WriteDone(ok, std::move(*out_.mutable_rays()));
+  }
   void OnDone() override {
     if (frame_) frame_->DetachLeft();
     delete this;

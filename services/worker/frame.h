@@ -51,6 +51,32 @@ class Inbox {
   bool woken_ ABSL_GUARDED_BY(mu_) = false;
 };
 
+// Byte buffers for batches, kept once written for the next batches and
+// frames: a batch of 2048 rays is 213 KB and a deposit batch up to 1.3 MB,
+// and a fresh buffer for each grew by doubling, copied and faulted its
+// pages in anew, frame after frame (bench/turntable.sh). Holds at most
+// `max_bytes` of capacity. Thread-safe.
+class BufferPool {
+ public:
+  explicit BufferPool(size_t max_bytes) : max_bytes_(max_bytes) {}
+  // The process's pool, of 16 MB: a frame has two buffers or so for each
+  // of its three streams in use at once.
+  static BufferPool& Shared();
+
+  // An empty buffer of at least `capacity`: a kept one when one is big
+  // enough, else a new one.
+  std::string Take(size_t capacity);
+  // Keeps `buffer` (emptied) when it is at least 64 KB and fits.
+  void Give(std::string buffer);
+  size_t held_bytes() const;
+
+ private:
+  const size_t max_bytes_;
+  mutable absl::Mutex mu_;
+  std::vector<std::string> free_ ABSL_GUARDED_BY(mu_);
+  size_t bytes_ ABSL_GUARDED_BY(mu_) = 0;
+};
+
 // Encoded records waiting to go out on one stream, with at most one write
 // in flight. Producers append and never block; a batch goes out when the
 // stream is free and one is ready: `batch_records` pending, or the oldest
@@ -72,7 +98,8 @@ class Outbox {
   void Attach(StartWrite write, std::function<void()> done, bool busy);
   // The stream's write completed; `ok` false means the stream is broken:
   // what is pending and all later records are dropped (and counted).
-  void WriteDone(bool ok);
+  // `spent` is the written batch's buffer, back for reuse.
+  void WriteDone(bool ok, std::string spent = {});
 
   void Append(const std::string& records);
   // Sends what is pending as soon as the stream is free, without waiting

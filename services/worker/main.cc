@@ -5,12 +5,13 @@
 #include <iostream>
 
 #include "daemon.h"
+#include "heap.h"
 #include "worker_node.h"
 
 int main(int argc, char** argv) {
   using namespace transtick;
   BlockTerminationSignals();
-  ReturnLargeBlocksToTheSystem();
+  TuneHeap();
   InitLogging("worker");
   auto flags = Flags::Parse(argc, argv, 1,
                             WithSecurityFlags({"listen", "root", "advertise", "threads",

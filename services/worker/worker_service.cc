@@ -9,6 +9,7 @@
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "clock.h"
 #include "convert.h"
 #include "daemon.h"
 #include "refused.h"
@@ -357,6 +358,7 @@ grpc::Status WorkerService::Reslab(grpc::ServerContext* ctx, const v1::ReslabReq
   if (req->new_key().empty() || y0 < 0 || y0 >= y1 || y1 > dims[1]) {
     return Invalid(absl::StrCat("Reslab: bad slab [", y0, ", ", y1, ") or empty key"));
   }
+  const auto started = Clock::now();
   // What this worker has already.
   const int sb = old->ScalarBegin(y0), se = old->ScalarEnd(y1);
   const int own_sb = old->scalar_y_begin(), own_se = old->scalar_y_end();
@@ -398,6 +400,7 @@ grpc::Status WorkerService::Reslab(grpc::ServerContext* ctx, const v1::ReslabReq
   std::vector<std::thread> threads;
   for (Fetch& f : fetches) threads.emplace_back([&f, &dims] { RunFetch(f, dims); });
   for (auto& t : threads) t.join();
+  const double fetch_ms = MsSince(started);
   for (Fetch& f : fetches) {
     if (!f.status.ok()) return ToGrpc(f.status);
     for (auto& b : f.blocks) blocks.push_back(std::move(b));
@@ -406,8 +409,11 @@ grpc::Status WorkerService::Reslab(grpc::ServerContext* ctx, const v1::ReslabReq
   auto scene = old->Reslab(y0, y1, blocks, planes);
   if (!scene.ok()) return ToGrpc(scene.status());
   reply->set_memory_bytes(scene->MemoryBytes());
-  spdlog::info("re-slabbed {} [{}, {}) -> [{}, {}) with planes from {} neighbour fetch(es)",
-               req->new_key(), old->y_begin(), old->y_end(), y0, y1, fetches.size());
+  spdlog::info(
+      "re-slabbed {} [{}, {}) -> [{}, {}) with planes from {} neighbour fetch(es): {:.1f} ms, "
+      "{:.1f} of them gathering planes",
+      req->new_key(), old->y_begin(), old->y_end(), y0, y1, fetches.size(), MsSince(started),
+      fetch_ms);
   absl::MutexLock lock(&mu_);
   datasets_[req->new_key()] = std::make_shared<const Scene>(*std::move(scene));
   return grpc::Status::OK;
