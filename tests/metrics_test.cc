@@ -246,6 +246,11 @@ TEST(ClusterMetricsTest, CountersAgreeWithTheFramesAndWithEachOther) {
   EXPECT_EQ(display["transtick_display_frames_total{result=\"complete\"}"], 2);
   EXPECT_EQ(display["transtick_display_frames_open"], 0);
   EXPECT_GE(display["transtick_display_deposits_total"], 2.0 * 48 * 40);
+  // One assembly time per complete frame, each within the root's frame time.
+  EXPECT_EQ(display["transtick_display_frame_assembly_seconds_count"], 2);
+  EXPECT_GT(display["transtick_display_frame_assembly_seconds_sum"], 0);
+  EXPECT_LE(display["transtick_display_frame_assembly_seconds_sum"],
+            root["transtick_root_frame_seconds_sum"]);
 
   // Reflection lists each daemon's own API and the health service.
   const std::string listed = ReflectedServices((*cluster)->root_address());

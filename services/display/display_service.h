@@ -76,11 +76,13 @@ class DisplayService final
           width(f->width()),
           height(f->height()),
           bytes(Framebuffer::MemoryBytes(width, height)),
+          begun(Clock::now()),
           fb(std::move(f)) {}
     // Constant after construction.
     const uint64_t id;
     const int width, height;
-    const uint64_t bytes;  // of the framebuffer
+    const uint64_t bytes;           // of the framebuffer
+    const Clock::time_point begun;  // BeginFrame
 
     // Taken after the service's mu_ when both are held.
     absl::Mutex mu;

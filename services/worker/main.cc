@@ -15,16 +15,17 @@ int main(int argc, char** argv) {
   InitLogging("worker");
   auto flags = Flags::Parse(argc, argv, 1,
                             WithSecurityFlags({"listen", "root", "advertise", "threads",
-                                               "max-frames", "frame-idle-s",
-                                               "running-frame-idle-s", "metrics"}),
+                                               "batch-rays", "linger-us", "max-frames",
+                                               "frame-idle-s", "running-frame-idle-s", "metrics"}),
                             WithSecuritySwitches({"help"}));
   if (!flags.ok() || flags->Has("help")) {
     if (!flags.ok()) std::cerr << "transtick-worker: " << flags.status().message() << "\n";
     std::cerr << "usage: transtick-worker --root HOST:PORT [--listen ADDR] [--advertise ADDR] "
-                 "[--threads N] [--max-frames N] [--frame-idle-s S] [--running-frame-idle-s S]\n"
+                 "[--threads N] [--batch-rays N] [--linger-us US] [--max-frames N] "
+                 "[--frame-idle-s S] [--running-frame-idle-s S]\n"
                  "(environment: TRANSTICK_ROOT, TRANSTICK_LISTEN, TRANSTICK_ADVERTISE, "
-                 "TRANSTICK_THREADS, TRANSTICK_MAX_FRAMES, TRANSTICK_FRAME_IDLE_S, "
-                 "TRANSTICK_RUNNING_FRAME_IDLE_S)\n"
+                 "TRANSTICK_THREADS, TRANSTICK_BATCH_RAYS, TRANSTICK_LINGER_US, "
+                 "TRANSTICK_MAX_FRAMES, TRANSTICK_FRAME_IDLE_S, TRANSTICK_RUNNING_FRAME_IDLE_S)\n"
                  "TLS: " << kSecurityUsage << " (or TRANSTICK_TLS_CA, TRANSTICK_TLS_CERT, "
                  "TRANSTICK_TLS_KEY); without them it serves plaintext on loopback only "
                  "(docs/security.md)\n"
@@ -42,6 +43,13 @@ int main(int argc, char** argv) {
   o.advertise = Setting(*flags, "advertise", "TRANSTICK_ADVERTISE", "");
   const FrameLimits defaults;
   auto threads = IntSetting(*flags, "threads", "TRANSTICK_THREADS", 0, 0);
+  // Ray batches to the neighbours (frame.h): at most 65536 rays (6.9 MB) a
+  // message, well under the 64 MB message limit, and a linger of at most 1 s.
+  const FrameOptions frame_defaults;
+  auto batch_rays = IntSetting(*flags, "batch-rays", "TRANSTICK_BATCH_RAYS",
+                               static_cast<int64_t>(frame_defaults.batch_rays), 1);
+  auto linger_us = IntSetting(*flags, "linger-us", "TRANSTICK_LINGER_US",
+                              frame_defaults.linger.count(), 0);
   auto max_frames = IntSetting(*flags, "max-frames", "TRANSTICK_MAX_FRAMES",
                                static_cast<int64_t>(defaults.max_frames), 1);
   auto prepared_idle =
@@ -49,13 +57,21 @@ int main(int argc, char** argv) {
   auto running_idle = SecondsSetting(*flags, "running-frame-idle-s",
                                      "TRANSTICK_RUNNING_FRAME_IDLE_S", defaults.running_idle);
   for (const absl::Status& s :
-       {threads.status(), max_frames.status(), prepared_idle.status(), running_idle.status()}) {
+       {threads.status(), batch_rays.status(), linger_us.status(), max_frames.status(),
+        prepared_idle.status(), running_idle.status()}) {
     if (!s.ok()) {
       std::cerr << "transtick-worker: " << s.message() << "\n";
       return 2;
     }
   }
   o.threads = static_cast<int>(std::min<int64_t>(*threads, 4096));
+  if (*batch_rays > 65536 || *linger_us > 1'000'000) {
+    std::cerr << "transtick-worker: --batch-rays is at most 65536 and --linger-us at most "
+                 "1000000\n";
+    return 2;
+  }
+  o.batch_rays = static_cast<size_t>(*batch_rays);
+  o.linger = std::chrono::microseconds(*linger_us);
   o.frames.max_frames = static_cast<size_t>(*max_frames);
   o.frames.prepared_idle = *prepared_idle;
   o.frames.running_idle = *running_idle;

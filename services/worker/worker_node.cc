@@ -34,6 +34,8 @@ absl::StatusOr<std::unique_ptr<WorkerNode>> WorkerNode::Start(const WorkerNodeOp
   WorkerOptions wo;
   wo.id = node->id_;
   wo.threads = node->threads_;
+  wo.batch_rays = options.batch_rays;
+  wo.linger = options.linger;
   wo.frames = options.frames;
   node->service_ = std::make_unique<WorkerService>(std::move(wo));
   auto server = Server::Start(options.listen, Role::kWorker, {node->service_.get()});

@@ -25,6 +25,9 @@ struct WorkerNodeOptions {
   std::string root;       // host:port of the root
   std::string advertise;  // empty: this host's name and the bound port
   int threads = 0;        // 0: one per core
+  // Ray batches to the neighbours (WorkerOptions).
+  size_t batch_rays = FrameOptions().batch_rays;
+  std::chrono::microseconds linger = FrameOptions().linger;
   std::chrono::milliseconds heartbeat{1000};
   MetricsEndpoint metrics;  // where /metrics is served (StartMetrics)
   FrameLimits frames;

@@ -473,6 +473,8 @@ grpc::Status WorkerService::Prepare(const v1::FrameSpec& spec) {
   }
   FrameOptions fo;
   fo.threads = options_.threads;
+  fo.batch_rays = options_.batch_rays;
+  fo.linger = options_.linger;
   auto added = frames_.Add(std::make_shared<Frame>(spec, std::move(scene), *std::move(camera),
                                                    request->settings, fo));
   if (!added.ok()) return ToGrpc(added.status());

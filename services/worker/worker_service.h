@@ -21,6 +21,10 @@ struct WorkerOptions {
   std::string id;       // unique per process
   std::string address;  // as registered with the root (set_address changes it)
   int threads = 1;
+  // Ray batches to the neighbours: rays per message and how long a partial
+  // batch may wait (FrameOptions; --batch-rays, --linger-us).
+  size_t batch_rays = FrameOptions().batch_rays;
+  std::chrono::microseconds linger = FrameOptions().linger;
   uint64_t max_slab_bytes = uint64_t{8} << 30;
   FrameLimits frames;  // how many frames, and how long idle ones are kept
 };
