@@ -31,7 +31,8 @@ namespace {
 
 // Rewrites, in the JSON `tree` of a `type` message, every enum field whose
 // value is a string to the enum's spelling: upper case, '_' for '-'
-// ("test-rays" -> "TEST_RAYS").
+// ("test-rays" -> "TEST_RAYS"), and a whole number given to a string field
+// to its digits (`"rings": 3` -> "3").
 void SpellEnums(google::protobuf::Value& tree, const google::protobuf::Descriptor& type) {
   if (!tree.has_struct_value()) return;
   for (auto& [key, value] : *tree.mutable_struct_value()->mutable_fields()) {
@@ -45,6 +46,10 @@ void SpellEnums(google::protobuf::Value& tree, const google::protobuf::Descripto
         std::string name = v.string_value();
         for (char& c : name) c = c == '-' ? '_' : static_cast<char>(std::toupper(c));
         v.set_string_value(name);
+      } else if (f->type() == google::protobuf::FieldDescriptor::TYPE_STRING &&
+                 v.has_number_value() && std::abs(v.number_value()) < 1e15 &&
+                 v.number_value() == std::floor(v.number_value())) {
+        v.set_string_value(absl::StrCat(static_cast<int64_t>(v.number_value())));
       } else if (f->type() == google::protobuf::FieldDescriptor::TYPE_MESSAGE) {
         SpellEnums(v, *f->message_type());
       }

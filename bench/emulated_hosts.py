@@ -104,6 +104,12 @@ def point(pdir, w, r, lat, gbit, frames, identical, rnd, rows_path):
         "hops_per_ray": forwarded / distinct if distinct else 0.0,
         "rays_sent": count("rays_sent"), "ray_bytes_sent": count("bytes_sent"),
         "assembly_ms_mean": assembly_ms, "tail_ms": statistics.mean(frame_ms) - assembly_ms,
+        # For the cluster model (bench/cluster_model): a frame's summed
+        # tracer CPU, slowest over mean active time, and pixels.
+        "tracer_cpu_ms": statistics.median(sum(wk.get("cpu_ms", 0) for wk in s["workers"])
+                                           for s in stats),
+        "active_imbalance": statistics.median(s.get("active_imbalance", 0) for s in stats),
+        "pixels": stats[0]["width"] * stats[0]["height"],
         "links": links,
     }
     with open(rows_path, "a") as f:
@@ -145,7 +151,8 @@ def summary(rows_path, json_path):
         m["rounds"] = len(ps)
         del m["round"]
         for field in ("frame_ms_median", "frame_ms_min", "frame_ms_mean", "frames_per_s",
-                      "idle_share", "assembly_ms_mean", "tail_ms"):
+                      "idle_share", "assembly_ms_mean", "tail_ms", "tracer_cpu_ms",
+                      "active_imbalance"):
             m[field] = statistics.median(p[field] for p in ps)
         m["frames_identical"] = min(p["frames_identical"] for p in ps)
         # Balancing is off: the same cuts and the same rays every round.

@@ -25,6 +25,7 @@
 #include "clock.h"
 #include "cluster.grpc.pb.h"
 #include "convert.h"
+#include "cluster_model.h"
 #include "daemon.h"
 #include "heap.h"
 #include "gateway.h"
@@ -130,7 +131,7 @@ const CommandDoc kRenderDoc = {
                   {"local", "N",
                    "workers of the embedded cluster (default: one per core); 0 renders\n"
                    "in this process without gRPC"},
-                  {"rings", "R", "rings of the embedded cluster (default 1)"},
+                  {"rings", "R", "rings of the embedded cluster, or auto (default 1)"},
                   {"balance", "off|test-rays|previous-frame",
                    "static load balancing of the slabs on a cluster (default off)"},
                   {"balance-grid", "N", "test rays per side of the image for test-rays (default 32)"},
@@ -217,7 +218,7 @@ const CommandDoc kViewDoc = {
      {"volume", "FILE", "the volume the page opens first (in the data directory)"},
      {"preset", "NAME", "its classification (transtick presets lists them)"},
      {"local", "N", "workers of the embedded cluster (default: one per core)"},
-     {"rings", "R", "rings of the embedded cluster (default 1)"},
+     {"rings", "R", "rings of the embedded cluster, or auto (default 1)"},
      {"threads", "N", "tracing threads of each embedded worker (default: one per core)"},
      {"root", "HOST:PORT", "serve the viewer for this running cluster instead"},
      {"listen", "HOST:PORT", "where the page is served (default 127.0.0.1:8080; port 0 picks one)"},
@@ -685,13 +686,11 @@ int Render(int argc, char** argv) {
   if (!flags->Has("volume")) return fail(absl::InvalidArgumentError("--volume FILE is required"));
   const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   auto local = flags->GetInt("local", cores);
-  auto rings = flags->GetInt("rings", 1);
+  auto rings = ParseRings(flags->Has("rings") ? flags->Get("rings") : "1");
   if (!local.ok()) return fail(local.status());
   if (!rings.ok()) return fail(rings.status());
   if (*local < 0 || *local > 64)
     return fail(absl::InvalidArgumentError("--local must be in [0, 64]"));
-  if (*rings < 1 || *rings > 64)
-    return fail(absl::InvalidArgumentError("--rings must be in [1, 64]"));
 
   v1::Dataset dataset;
   Classification classification;
@@ -882,7 +881,11 @@ int StatusCommand(int argc, char** argv) {
   v1::StatusReply reply;
   grpc::Status s = stub->Status(&ctx, v1::StatusRequest(), &reply);
   if (!s.ok()) return Fail("status", FromGrpc(s));
-  std::printf("%d workers, %d ring(s)\n", reply.workers_size(), reply.rings());
+  if (reply.rings() == kAutoRings) {
+    std::printf("%d workers, rings auto\n", reply.workers_size());
+  } else {
+    std::printf("%d workers, %d ring(s)\n", reply.workers_size(), reply.rings());
+  }
   for (const auto& w : reply.workers()) {
     std::printf("  worker %s at %s, %d threads", w.id().c_str(), w.address().c_str(), w.threads());
     if (w.ring() >= 0) {
@@ -991,9 +994,10 @@ int View(int argc, char** argv) {
     const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
     LocalCluster::Options co;
     auto local = flags->GetInt("local", cores);
-    auto rings = flags->GetInt("rings", 1);
+    auto rings = ParseRings(flags->Has("rings") ? flags->Get("rings") : "1");
     auto threads = flags->GetInt("threads", cores);
-    for (const auto* v : {&local, &rings, &threads}) {
+    if (!rings.ok()) return fail(rings.status());
+    for (const auto* v : {&local, &threads}) {
       if (!v->ok()) return fail(v->status());
     }
     if (*local < 1 || *local > 64) {

@@ -7,7 +7,8 @@
 # a worker killed in the middle of a job does not stall it, nor does a worker
 # paused with SIGSTOP, a restarted root gets its workers back by itself and
 # resumes its jobs from its state directory, a
-# job survives the display's restart, no two daemons share a port, and every
+# job survives the display's restart, no two daemons share a port, a job
+# chooses its rings (auto, a number, a refused setting), and every
 # daemon stops cleanly on SIGTERM.
 set -u
 build=$1
@@ -100,6 +101,22 @@ cmp -s "$dir/out2/a.png" "$dir/ref.png" || fail "image saved by watch differs: $
 printf '{"datasets":[{"volume":' >"$dir/bad.json"
 "$T" submit "$dir/bad.json" --root 127.0.0.1:$rport >"$dir/bad.log" 2>&1
 [[ $? == 2 ]] && grep -q "bad.json" "$dir/bad.log" || fail "malformed job file: $(cat "$dir/bad.log")"
+
+# Rings chosen per job: "auto" (the cluster model; the root logs why), a
+# number, and a refused setting naming the field. The image is the same bits.
+for rings in '"auto"' 3; do
+  sed "s/\"name\":\"t\",/\"name\":\"t\",\"rings\":$rings,/" "$dir/job.json" >"$dir/rings.json"
+  rm -f "$dir/out/a.png"
+  "$T" submit "$dir/rings.json" --root 127.0.0.1:$rport --out-dir "$dir/out" >"$dir/rings.log" 2>&1 ||
+    fail "submit with rings $rings: $(cat "$dir/rings.log")"
+  cmp -s "$dir/out/a.png" "$dir/ref.png" || fail "image with rings $rings differs"
+done
+grep -q "rings auto: .* ring(s) of 3 workers" "$dir/root.log" || fail "no rings auto line in the root's log"
+sed 's/"name":"t",/"name":"t","rings":"many",/' "$dir/job.json" >"$dir/rings.json"
+"$T" submit "$dir/rings.json" --root 127.0.0.1:$rport >"$dir/rings.log" 2>&1 &&
+  fail "a job with rings \"many\" was accepted"
+grep -q "rings: 'many' is neither auto nor a number" "$dir/rings.log" ||
+  fail "rings \"many\": $(cat "$dir/rings.log")"
 
 # A worker dies: the root drops it and the next job renders on the others.
 kill -9 "${wpids[1]}"

@@ -24,8 +24,8 @@ TEST(IdleTrim, TrimsOncePerIdleSpellAfterBusyOnes) {
   nanoseconds cpu(0);
   // The start counts as busy: the first quiet second trims.
   EXPECT_TRUE(idle.Poll(cpu, second));
-  EXPECT_FALSE(idle.Poll(cpu += milliseconds(2), second));  // still idle
-  EXPECT_FALSE(idle.Poll(cpu += milliseconds(9), second));  // 0.9%: idle
+  EXPECT_FALSE(idle.Poll(cpu += milliseconds(2), second));   // still idle
+  EXPECT_FALSE(idle.Poll(cpu += milliseconds(9), second));   // 0.9%: idle
   EXPECT_FALSE(idle.Poll(cpu += milliseconds(10), second));  // 1%: busy
   EXPECT_TRUE(idle.Poll(cpu += milliseconds(3), second));
   EXPECT_FALSE(idle.Poll(cpu, second));

@@ -55,6 +55,13 @@ absl::StatusOr<JobPlan> Datasets::Plan(const v1::Job& job) const {
   } else {
     plan.rule = *r;
   }
+  if (!job.rings().empty()) {
+    auto rings = ParseRings(job.rings());
+    if (!rings.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat("job: ", rings.status().message()));
+    }
+    plan.rings = *rings;
+  }
   int views = 0;
   auto dir = ConfinedDir::Open(data_dir_);
   if (!dir.ok()) return absl::UnavailableError("the root's data directory cannot be opened");

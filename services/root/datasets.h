@@ -15,6 +15,7 @@
 #include "absl/status/statusor.h"
 #include "absl/synchronization/mutex.h"
 #include "cluster.pb.h"
+#include "cluster_model.h"
 #include "transtick/classification.h"
 #include "transtick/partition.h"
 #include "transtick/render.h"
@@ -51,6 +52,7 @@ struct DatasetPlan {
 struct JobPlan {
   std::vector<DatasetPlan> datasets;
   BalanceRule rule = BalanceRule::kCost;
+  std::optional<int> rings;  // the job's own (kAutoRings: auto); none: the root's
 };
 
 // A dataset ready to be cut into slabs.
@@ -64,6 +66,10 @@ struct LoadedDataset {
   Direction direction = kIdentityDirection;
   double load_ms = 0;
   BalanceMemory balance;
+  // What the last frame on the cluster cost, for the model (--rings auto),
+  // and its pixels; 0 pixels: none measured yet.
+  FrameCosts costs;
+  double costs_pixels = 0;
   // Materials or a transfer function that show nothing of the volume.
   std::vector<std::string> warnings;
   // The volume's smallest and largest finite value, and kHistogramBins

@@ -4,6 +4,8 @@
 
 #include <chrono>
 #include <functional>
+#include <limits>
+#include <map>
 #include <optional>
 #include <thread>
 
@@ -93,6 +95,7 @@ void JobRunner::Loop() {
 absl::Status JobRunner::RunJob(Job& job) {
   std::shared_ptr<LoadedDataset> data;
   int loaded = -1;
+  FrameTask::Chosen chosen;  // the automatic rings of the dataset's frames
   while (std::optional<int> frame = job.NextFrame()) {
     if (job.cancelled()) return absl::CancelledError("cancelled");
     const FrameKey key = job.key(*frame);
@@ -101,6 +104,7 @@ absl::Status JobRunner::RunJob(Job& job) {
       if (!d.ok()) return d.status();
       data = *std::move(d);
       loaded = key.dataset;
+      chosen = {};
       if (!data->warnings.empty()) {
         v1::JobEvent e;
         e.set_dataset(key.dataset);
@@ -108,7 +112,7 @@ absl::Status JobRunner::RunJob(Job& job) {
         job.Publish(std::move(e));
       }
     }
-    if (auto s = RunView(job, *frame, *data); !s.ok()) return s;
+    if (auto s = RunView(job, *frame, *data, chosen); !s.ok()) return s;
     job.FrameRendered(*frame);
   }
   return absl::OkStatus();
@@ -133,6 +137,65 @@ bool FrameTurns::Acquire(bool interactive, const std::function<bool()>& cancelle
 void FrameTurns::Release() {
   absl::MutexLock lock(&mu_);
   busy_ = false;
+}
+
+namespace {
+
+double PixelsOf(const FrameTask& task) {
+  return static_cast<double>(task.request->camera.width) * task.request->camera.height;
+}
+
+// What a frame of the task costs: as the dataset's last frame did, for this
+// frame's pixels, else as assumed.
+FrameCosts CostsFor(const FrameTask& task) {
+  const LoadedDataset& data = *task.data;
+  return data.costs_pixels > 0 ? ScaledCosts(data.costs, data.costs_pixels, PixelsOf(task))
+                               : DefaultFrameCosts(PixelsOf(task));
+}
+
+}  // namespace
+
+int JobRunner::RingsFor(FrameTask& task, const std::vector<std::shared_ptr<WorkerEntry>>& workers) {
+  const int setting = task.rings < 0 ? options_.rings : task.rings;
+  if (setting != kAutoRings) return setting;
+  std::string members;
+  for (const auto& w : workers) absl::StrAppend(&members, w->id, ",");
+  FrameTask::Chosen fallback;
+  FrameTask::Chosen& chosen = task.chosen ? *task.chosen : fallback;
+  if (chosen.members == members) return chosen.rings;
+  const LoadedDataset& data = *task.data;
+  const FrameCosts costs = CostsFor(task);
+  // Hosts by the workers' addresses; a worker offering its host's memory
+  // shares it with the others there.
+  std::map<std::string, int> on_host, host_threads;
+  int threads = 1 << 20;
+  for (const auto& w : workers) {
+    const std::string host = w->address.substr(0, w->address.rfind(':'));
+    ++on_host[host];
+    host_threads[host] = std::max(host_threads[host], w->threads);
+    threads = std::min(threads, w->threads);
+  }
+  double memory = std::numeric_limits<double>::infinity();
+  for (const auto& w : workers) {
+    if (w->memory_bytes == 0) continue;
+    const std::string host = w->address.substr(0, w->address.rfind(':'));
+    memory = std::min(memory, double(w->memory_bytes) / (w->memory_shared ? on_host[host] : 1));
+  }
+  ClusterShape shape;
+  shape.workers = static_cast<int>(workers.size());
+  shape.hosts = static_cast<int>(on_host.size());
+  shape.threads = threads;
+  shape.cores_per_host = 1;
+  for (const auto& [host, t] : host_threads) {
+    shape.cores_per_host = std::max(shape.cores_per_host, double(t));
+  }
+  shape.network = options_.network;
+  const VolumeSize volume{double(data.scene.MemoryBytes()), data.scene.dims()[1]};
+  const RingChoice choice = ChooseRings(costs, volume, shape, task.frames, memory);
+  spdlog::info("{}: rings auto: {} ({} costs)", task.who, choice.why,
+               data.costs_pixels > 0 ? "measured" : "assumed");
+  chosen = {members, choice.rings};
+  return choice.rings;
 }
 
 absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
@@ -167,7 +230,7 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
       continue;
     }
     RenderedFrame out;
-    out.layout = Slabs::FormRings(*workers, options_.rings, planes);
+    out.layout = Slabs::FormRings(*workers, RingsFor(task, *workers), planes);
     Layout& layout = out.layout;
     // Cuts computed for other ring members mean nothing to these.
     if (const std::string members = layout.Members(); members != data.balance.members) {
@@ -203,13 +266,16 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
       continue;
     }
     task.balancer->Learn(*result, layout, data.balance, &out.report);
+    data.costs = FrameCostsFrom(result->workers, CostsFor(task));
+    data.costs_pixels = PixelsOf(task);
     out.result = *std::move(result);
     return out;
   }
   return status;
 }
 
-absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data) {
+absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data,
+                                FrameTask::Chosen& chosen) {
   const int d = job.key(frame).dataset, v = job.key(frame).view;
   // The view goes to the workers as the client wrote it; the root's own
   // checks use the plan made when the job was accepted.
@@ -235,6 +301,9 @@ absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data) {
   task.request = &request;
   task.balancer = balancer.get();
   task.data = &data;
+  task.rings = job.plan().rings.value_or(options_.rings);
+  task.frames = job.spec().datasets(d).views_size();
+  task.chosen = &chosen;
   task.cancelled = [&] { return job.cancelled() || queue_.stopping(); };
   task.on_attempt = [&] { held.reset(); };
   task.on_chunk = [&](v1::ImageChunk chunk) -> absl::Status {

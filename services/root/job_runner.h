@@ -13,6 +13,7 @@
 
 #include "absl/synchronization/mutex.h"
 #include "balancer.h"
+#include "cluster_model.h"
 #include "datasets.h"
 #include "frame_driver.h"
 #include "job_queue.h"
@@ -25,7 +26,8 @@ namespace transtick {
 struct RunnerOptions {
   std::string data_dir = "/data";
   std::string display = "127.0.0.1:7002";
-  int rings = 1;
+  int rings = 1;            // kAutoRings: the cluster model's choice
+  Network network;          // between hosts, for the model
   uint64_t max_volume_bytes = uint64_t{8} << 30;
   double frame_timeout_s = 600;
   double worker_wait_s = 120;  // how long a job waits for a first worker
@@ -60,6 +62,16 @@ struct FrameTask {
   FrameDriver::ChunkFn on_chunk;
   std::function<void()> on_attempt;  // before each attempt (chunks of a failed one are void)
   bool interactive = false;
+  // Rings (kAutoRings: chosen by the model for `frames` frames, once per
+  // set of workers, and kept in `chosen` across the task's frames;
+  // negative: the root's --rings).
+  int rings = -1;
+  int frames = 1;
+  struct Chosen {
+    std::string members;  // the workers it was chosen for
+    int rings = 1;
+  };
+  Chosen* chosen = nullptr;
 };
 
 struct RenderedFrame {
@@ -106,7 +118,10 @@ class JobRunner {
   absl::Status RunJob(Job& job);
   // Renders the job's frame (on attempt after attempt while workers or the
   // display fail) and publishes its image.
-  absl::Status RunView(Job& job, int frame, LoadedDataset& data);
+  absl::Status RunView(Job& job, int frame, LoadedDataset& data, FrameTask::Chosen& chosen);
+
+  // The task's rings for these workers (the model's choice for kAutoRings).
+  int RingsFor(FrameTask& task, const std::vector<std::shared_ptr<WorkerEntry>>& workers);
 
   const RunnerOptions options_;
   FrameTurns turns_;

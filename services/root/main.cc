@@ -3,6 +3,7 @@
 
 #include <iostream>
 
+#include "cluster_model.h"
 #include "daemon.h"
 #include "heap.h"
 #include "root_node.h"
@@ -14,17 +15,20 @@ int main(int argc, char** argv) {
   InitLogging("root");
   auto flags = Flags::Parse(
       argc, argv, 1,
-      WithSecurityFlags({"listen", "data-dir", "state-dir", "display", "rings", "max-volume-mb",
+      WithSecurityFlags({"listen", "data-dir", "state-dir", "display", "rings", "link-latency-ms",
+                         "link-gbits", "max-volume-mb",
                          "frame-timeout", "max-queued-jobs", "max-jobs-per-client",
                          "max-job-megapixels", "metrics"}),
       WithSecuritySwitches({"help"}));
   if (!flags.ok() || flags->Has("help")) {
     if (!flags.ok()) std::cerr << "transtick-root: " << flags.status().message() << "\n";
     std::cerr << "usage: transtick-root [--listen ADDR] [--data-dir DIR] [--state-dir DIR] "
-                 "[--display ADDR] [--rings R] [--max-volume-mb N] [--frame-timeout S] "
+                 "[--display ADDR] [--rings R|auto] [--link-latency-ms MS] [--link-gbits G] "
+                 "[--max-volume-mb N] [--frame-timeout S] "
                  "[--max-queued-jobs N] [--max-jobs-per-client N] [--max-job-megapixels N]\n"
                  "(environment: TRANSTICK_LISTEN, TRANSTICK_DATA_DIR, TRANSTICK_STATE_DIR, "
-                 "TRANSTICK_DISPLAY, TRANSTICK_RINGS, TRANSTICK_MAX_VOLUME_MB, "
+                 "TRANSTICK_DISPLAY, TRANSTICK_RINGS, TRANSTICK_LINK_LATENCY_MS, TRANSTICK_LINK_GBITS, "
+                 "TRANSTICK_MAX_VOLUME_MB, "
                  "TRANSTICK_FRAME_TIMEOUT, TRANSTICK_MAX_QUEUED_JOBS, "
                  "TRANSTICK_MAX_JOBS_PER_CLIENT, TRANSTICK_MAX_JOB_MEGAPIXELS)\n"
                  "TLS: " << kSecurityUsage << " [--tokens FILE] (or TRANSTICK_TLS_CA, TRANSTICK_TLS_CERT, "
@@ -45,7 +49,9 @@ int main(int argc, char** argv) {
   o.state_dir = Setting(*flags, "state-dir", "TRANSTICK_STATE_DIR", "");
   o.display = Setting(*flags, "display", "TRANSTICK_DISPLAY", "127.0.0.1:7002");
   try {
-    o.rings = std::stoi(Setting(*flags, "rings", "TRANSTICK_RINGS", "1"));
+    o.network.latency_ms =
+        std::stod(Setting(*flags, "link-latency-ms", "TRANSTICK_LINK_LATENCY_MS", "0.05"));
+    o.network.gbits = std::stod(Setting(*flags, "link-gbits", "TRANSTICK_LINK_GBITS", "10"));
     o.max_volume_bytes =
         std::stoull(Setting(*flags, "max-volume-mb", "TRANSTICK_MAX_VOLUME_MB", "8192")) << 20;
     o.frame_timeout_s =
@@ -57,7 +63,7 @@ int main(int argc, char** argv) {
                            *flags, "max-job-megapixels", "TRANSTICK_MAX_JOB_MEGAPIXELS", "2048")))
                        << 20;
   } catch (...) {
-    std::cerr << "transtick-root: --rings, --max-volume-mb, --frame-timeout and the --max-* "
+    std::cerr << "transtick-root: --max-volume-mb, --frame-timeout, --link-* and the --max-* "
                  "limits take numbers\n";
     return 2;
   }
@@ -65,8 +71,16 @@ int main(int argc, char** argv) {
     std::cerr << "transtick-root: the --max-* limits must be positive\n";
     return 2;
   }
-  if (o.rings < 1 || o.rings > 64) {
-    std::cerr << "transtick-root: --rings must be in [1, 64]\n";
+  if (auto rings = ParseRings(Setting(*flags, "rings", "TRANSTICK_RINGS", "1")); !rings.ok()) {
+    std::cerr << "transtick-root: --" << rings.status().message() << "\n";
+    return 2;
+  } else {
+    o.rings = *rings;
+  }
+  if (!(o.network.latency_ms >= 0 && o.network.latency_ms < 1e4 && o.network.gbits > 0 &&
+        o.network.gbits < 1e5)) {
+    std::cerr << "transtick-root: --link-latency-ms must be in [0, 10000) and --link-gbits in "
+                 "(0, 100000)\n";
     return 2;
   }
   auto metrics = MetricsAddress(*flags, listen);

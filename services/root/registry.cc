@@ -46,6 +46,8 @@ absl::Status Registry::Register(const v1::RegisterRequest& req) {
   w->id = req.id();
   w->address = req.address();
   w->threads = std::max(1, req.threads());
+  w->memory_bytes = req.memory_bytes();
+  w->memory_shared = req.memory_shared();
   w->order = next_order_++;
   w->stub = v1::Worker::NewStub(MakeChannel(w->address, Role::kWorker));
   workers_[w->id] = w;

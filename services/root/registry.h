@@ -24,6 +24,8 @@ namespace transtick {
 struct WorkerEntry {
   std::string id, address;
   int threads = 1;
+  uint64_t memory_bytes = 0;  // 0: unknown
+  bool memory_shared = false;  // memory_bytes is its host's, shared
   uint64_t order = 0;  // registration order: rings are formed in it
   std::unique_ptr<v1::Worker::Stub> stub;
 };

@@ -193,6 +193,9 @@ grpc::Status Sessions::Serve(grpc::ServerContext* ctx,
   };
   grpc::Status status = grpc::Status::OK;
   bool write_failed = false;
+  // The root's rings; chosen once for the session's workers when automatic,
+  // as for a long job: a session renders frame after frame.
+  FrameTask::Chosen chosen;
   // Renders `view` and sends its chunks; the last chunk with the stats.
   // What a camera must pass to render: the job's checks, and its render
   // settings against the scene.
@@ -223,6 +226,8 @@ grpc::Status Sessions::Serve(grpc::ServerContext* ctx,
     task.balancer = balancer.get();
     task.data = data->get();
     task.interactive = true;
+    task.frames = 1000;
+    task.chosen = &chosen;
     task.cancelled = stopped;
     task.on_attempt = [&] { held.reset(); };
     task.on_chunk = [&](v1::ImageChunk chunk) -> absl::Status {

@@ -15,17 +15,19 @@ int main(int argc, char** argv) {
   InitLogging("worker");
   auto flags = Flags::Parse(argc, argv, 1,
                             WithSecurityFlags({"listen", "root", "advertise", "threads",
-                                               "batch-rays", "linger-us", "max-frames",
-                                               "frame-idle-s", "running-frame-idle-s", "metrics"}),
+                                               "memory-mb", "batch-rays", "linger-us",
+                                               "max-frames", "frame-idle-s",
+                                               "running-frame-idle-s", "metrics"}),
                             WithSecuritySwitches({"help"}));
   if (!flags.ok() || flags->Has("help")) {
     if (!flags.ok()) std::cerr << "transtick-worker: " << flags.status().message() << "\n";
     std::cerr << "usage: transtick-worker --root HOST:PORT [--listen ADDR] [--advertise ADDR] "
-                 "[--threads N] [--batch-rays N] [--linger-us US] [--max-frames N] "
-                 "[--frame-idle-s S] [--running-frame-idle-s S]\n"
+                 "[--threads N] [--memory-mb N] [--batch-rays N] [--linger-us US] "
+                 "[--max-frames N] [--frame-idle-s S] [--running-frame-idle-s S]\n"
                  "(environment: TRANSTICK_ROOT, TRANSTICK_LISTEN, TRANSTICK_ADVERTISE, "
-                 "TRANSTICK_THREADS, TRANSTICK_BATCH_RAYS, TRANSTICK_LINGER_US, "
-                 "TRANSTICK_MAX_FRAMES, TRANSTICK_FRAME_IDLE_S, TRANSTICK_RUNNING_FRAME_IDLE_S)\n"
+                 "TRANSTICK_THREADS, TRANSTICK_MEMORY_MB, TRANSTICK_BATCH_RAYS, "
+                 "TRANSTICK_LINGER_US, TRANSTICK_MAX_FRAMES, TRANSTICK_FRAME_IDLE_S, "
+                 "TRANSTICK_RUNNING_FRAME_IDLE_S)\n"
                  "TLS: " << kSecurityUsage << " (or TRANSTICK_TLS_CA, TRANSTICK_TLS_CERT, "
                  "TRANSTICK_TLS_KEY); without them it serves plaintext on loopback only "
                  "(docs/security.md)\n"
@@ -50,6 +52,7 @@ int main(int argc, char** argv) {
                                static_cast<int64_t>(frame_defaults.batch_rays), 1);
   auto linger_us = IntSetting(*flags, "linger-us", "TRANSTICK_LINGER_US",
                               frame_defaults.linger.count(), 0);
+  auto memory_mb = IntSetting(*flags, "memory-mb", "TRANSTICK_MEMORY_MB", 0, 0);
   auto max_frames = IntSetting(*flags, "max-frames", "TRANSTICK_MAX_FRAMES",
                                static_cast<int64_t>(defaults.max_frames), 1);
   auto prepared_idle =
@@ -57,8 +60,8 @@ int main(int argc, char** argv) {
   auto running_idle = SecondsSetting(*flags, "running-frame-idle-s",
                                      "TRANSTICK_RUNNING_FRAME_IDLE_S", defaults.running_idle);
   for (const absl::Status& s :
-       {threads.status(), batch_rays.status(), linger_us.status(), max_frames.status(),
-        prepared_idle.status(), running_idle.status()}) {
+       {threads.status(), memory_mb.status(), batch_rays.status(), linger_us.status(),
+        max_frames.status(), prepared_idle.status(), running_idle.status()}) {
     if (!s.ok()) {
       std::cerr << "transtick-worker: " << s.message() << "\n";
       return 2;
@@ -72,6 +75,7 @@ int main(int argc, char** argv) {
   }
   o.batch_rays = static_cast<size_t>(*batch_rays);
   o.linger = std::chrono::microseconds(*linger_us);
+  o.memory_bytes = static_cast<uint64_t>(std::min<int64_t>(*memory_mb, int64_t{1} << 30)) << 20;
   o.frames.max_frames = static_cast<size_t>(*max_frames);
   o.frames.prepared_idle = *prepared_idle;
   o.frames.running_idle = *running_idle;

@@ -3,7 +3,9 @@
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
+#include <fstream>
 #include <random>
+#include <string>
 #include <thread>
 
 #include "absl/strings/str_cat.h"
@@ -16,6 +18,29 @@ namespace {
 std::string RandomId() {
   std::random_device rd;
   return absl::StrFormat("w-%08x%08x", rd(), rd());
+}
+
+// The cgroup's memory limit (cgroup v2, a container's), 0 when it has none.
+uint64_t CgroupLimit() {
+  std::ifstream in("/sys/fs/cgroup/memory.max");
+  std::string value;
+  if (!(in >> value) || value == "max") return 0;
+  try {
+    return std::stoull(value);
+  } catch (const std::exception&) {
+    return 0;
+  }
+}
+
+// The host's memory (MemTotal), 0 when unknown.
+uint64_t HostMemory() {
+  std::ifstream in("/proc/meminfo");
+  for (std::string key; in >> key;) {
+    uint64_t kb = 0;
+    if (key == "MemTotal:" && in >> kb) return kb * 1024;
+    in.ignore(1 << 10, '\n');
+  }
+  return 0;
 }
 
 }  // namespace
@@ -31,6 +56,13 @@ absl::StatusOr<std::unique_ptr<WorkerNode>> WorkerNode::Start(const WorkerNodeOp
   node->threads_ = options.threads > 0
                        ? options.threads
                        : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  if (options.memory_bytes > 0) {
+    node->memory_ = {options.memory_bytes, false};
+  } else if (const uint64_t limit = CgroupLimit(); limit > 0) {
+    node->memory_ = {limit, false};
+  } else {
+    node->memory_ = {HostMemory(), true};
+  }
   WorkerOptions wo;
   wo.id = node->id_;
   wo.threads = node->threads_;
@@ -56,8 +88,10 @@ absl::StatusOr<std::unique_ptr<WorkerNode>> WorkerNode::Start(const WorkerNodeOp
   }
   node->service_->set_address(node->address_);
   node->registrar_ = std::thread([n = node.get()] { n->RegisterLoop(); });
-  spdlog::info("worker {} serving on {} ({} tracer threads, metrics on {}), registering with {}",
-               node->id_, node->address_, node->threads_,
+  spdlog::info(
+      "worker {} serving on {} ({} tracer threads, {:.0f} MB{}, metrics on {}), registering with {}",
+      node->id_, node->address_, node->threads_, node->memory_.bytes / 1048576.0,
+      node->memory_.shared ? " of the host's" : "",
                node->metrics_ ? std::to_string(node->metrics_->port()) : "no port", options.root);
   return node;
 }
@@ -79,6 +113,8 @@ void WorkerNode::RegisterLoop() {
     req.set_id(id_);
     req.set_address(address_);
     req.set_threads(threads_);
+    req.set_memory_bytes(memory_.bytes);
+    req.set_memory_shared(memory_.shared);
     v1::RegisterReply reply;
     grpc::Status s = stub->Register(&ctx, req, &reply);
     // ALREADY_EXISTS: the root knows this worker; the call renewed it.

@@ -28,6 +28,7 @@ struct WorkerNodeOptions {
   // Ray batches to the neighbours (WorkerOptions).
   size_t batch_rays = FrameOptions().batch_rays;
   std::chrono::microseconds linger = FrameOptions().linger;
+  uint64_t memory_bytes = 0;  // for slabs; 0: the container's limit, else the host's memory
   std::chrono::milliseconds heartbeat{1000};
   MetricsEndpoint metrics;  // where /metrics is served (StartMetrics)
   FrameLimits frames;
@@ -54,6 +55,10 @@ class WorkerNode {
   WorkerNodeOptions options_;
   std::string id_, address_;
   int threads_ = 1;
+  struct Memory {
+    uint64_t bytes = 0;
+    bool shared = false;  // the host's, not this worker's own
+  } memory_;
   std::unique_ptr<WorkerService> service_;
   std::unique_ptr<Server> server_;
   std::unique_ptr<MetricsServer> metrics_;

@@ -1,0 +1,185 @@
+// The cluster model (services/root/cluster_model.h): known answers on
+// simple shapes, the directions every figure must move in, and a ring
+// choice that never exceeds the workers' memory.
+
+#include "cluster_model.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace transtick {
+namespace {
+
+FrameCosts Simple() {
+  FrameCosts c;
+  c.tracer_cpu_ms = 100;
+  c.rays = 400000;
+  c.crossings_per_cut = 100000;
+  c.bytes_per_ray = 100;
+  c.forward_cpu_us = 1;
+  c.imbalance = 1;
+  c.fixed_ms = 10;
+  c.rounds = 3;
+  c.deposit_bytes = 0;
+  c.image_bytes = 0;
+  c.linger_ms = 1;
+  c.chain_rings = 2;
+  return c;
+}
+
+TEST(ClusterModel, OneWorkerIsItsTracingAndFixedCost) {
+  ClusterShape s;
+  s.threads = 2;
+  s.cores_per_host = 2;
+  const Prediction p = Predict(Simple(), {1 << 20, 100}, s);
+  EXPECT_DOUBLE_EQ(p.trace_ms, 50);
+  EXPECT_DOUBLE_EQ(p.chain_ms, 0);
+  EXPECT_DOUBLE_EQ(p.link_ms, 0);
+  EXPECT_DOUBLE_EQ(p.frame_ms, 60);
+  EXPECT_DOUBLE_EQ(p.hops_per_ray, 0);
+  EXPECT_DOUBLE_EQ(p.efficiency, 1);
+}
+
+TEST(ClusterModel, TwoHostsKnownAnswer) {
+  // Two workers on two hosts, one ring: each traces half, forwards 1e5
+  // crossings at 1 us; 1e7 bytes cross the one plane, half each way, over
+  // 1 Gbit/s: 40 ms; the chain is 2 hops of 0.5 ms latency + 1 ms linger.
+  ClusterShape s;
+  s.workers = 2;
+  s.hosts = 2;
+  s.threads = 1;
+  s.cores_per_host = 1;
+  s.network = {0.5, 1};
+  const Prediction p = Predict(Simple(), {2 << 20, 100}, s);
+  EXPECT_DOUBLE_EQ(p.trace_ms, 50 + 100);
+  EXPECT_DOUBLE_EQ(p.bytes_per_link, 1e7);
+  EXPECT_NEAR(p.link_ms, 40, 1e-9);
+  EXPECT_DOUBLE_EQ(p.chain_ms, 2 * 1.5);
+  EXPECT_DOUBLE_EQ(p.fixed_ms, 10 + 3 * 2 * 0.5);
+  EXPECT_DOUBLE_EQ(p.frame_ms, 150 + 3 + 13);
+  EXPECT_DOUBLE_EQ(p.hops_per_ray, 0.25);
+  // Slab of half the volume plus two ghost planes, twice, plus frame buffers.
+  EXPECT_DOUBLE_EQ(p.memory_per_worker, 2 * ((1 << 20) + 2 * (2 << 20) / 100.0) + 32 * (1 << 20));
+}
+
+TEST(ClusterModel, FiguresMoveTheRightWay) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (int i = 0; i < 3000; ++i) {
+    FrameCosts c = Simple();
+    c.tracer_cpu_ms = 1 + 1000 * u(rng);
+    c.crossings_per_cut = 1e6 * u(rng);
+    c.imbalance = 1 + u(rng);
+    ClusterShape s;
+    s.workers = 1 + rng() % 128;
+    s.rings = 1 + rng() % s.workers;
+    s.hosts = 1 + rng() % s.workers;
+    s.cores_per_host = 1 + rng() % 64;
+    s.threads = 1 + rng() % 8;
+    s.network = {0.01 + 10 * u(rng), 0.1 + 100 * u(rng)};
+    const VolumeSize v{1e6 + 1e10 * u(rng), 1 + int(rng() % 2000)};
+    const Prediction p = Predict(c, v, s);
+    ASSERT_GT(p.frame_ms, 0);
+    ASSERT_GE(p.frame_ms, p.trace_ms);
+    ASSERT_GE(p.frame_ms, p.link_ms);
+    ASSERT_GT(p.efficiency, 0);
+    ASSERT_LE(p.efficiency, 1 + 1e-12) << "superlinear without a reason";
+    ClusterShape slower = s;
+    slower.network.latency_ms *= 2;
+    ASSERT_GE(Predict(c, v, slower).frame_ms, p.frame_ms);
+    slower = s;
+    slower.network.gbits /= 2;
+    ASSERT_GE(Predict(c, v, slower).frame_ms, p.frame_ms);
+    if (s.rings < s.workers) {
+      ClusterShape more = s;
+      ++more.rings;
+      const Prediction q = Predict(c, v, more);
+      ASSERT_GE(q.memory_per_worker, p.memory_per_worker) << "more rings, smaller slabs";
+      ASSERT_GE(q.load_ms, p.load_ms);
+      ASSERT_LE(q.hops_per_ray, p.hops_per_ray);
+    }
+  }
+}
+
+TEST(ClusterModel, CostsFromAFrame) {
+  std::vector<v1::WorkerFrameStats> f(4);
+  for (int i = 0; i < 4; ++i) {
+    v1::WorkerFrameStats* w = &f[i];
+    w->set_ring(i / 2);
+    w->set_cpu_ms(10 + i);
+    w->set_active_ms(i == 3 ? 30 : 10);
+    w->set_rays_traced(1000);
+    w->set_rays_sent(500);
+    w->set_bytes_sent(500 * 104);
+  }
+  const FrameCosts c = FrameCostsFrom(f, FrameCosts{});
+  EXPECT_DOUBLE_EQ(c.tracer_cpu_ms, 46);
+  EXPECT_DOUBLE_EQ(c.rays, 4000);
+  // Two rings of two: one plane each, 1000 crossings each; the whole
+  // image's rays through one plane of a single ring would be 2000.
+  EXPECT_DOUBLE_EQ(c.crossings_per_cut, 2000);
+  EXPECT_DOUBLE_EQ(c.bytes_per_ray, 104);
+  EXPECT_DOUBLE_EQ(c.imbalance, 30 / 15.0);
+  // Nothing crossed: the fallback's crossings stay.
+  std::vector<v1::WorkerFrameStats> alone(1);
+  alone[0].set_cpu_ms(5);
+  FrameCosts fallback;
+  fallback.crossings_per_cut = 7;
+  EXPECT_DOUBLE_EQ(FrameCostsFrom(alone, fallback).crossings_per_cut, 7);
+}
+
+TEST(ChooseRings, NeverExceedsTheMemoryAndTakesTheFastestThatFits) {
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (int i = 0; i < 2000; ++i) {
+    FrameCosts c = Simple();
+    c.crossings_per_cut = 1e6 * u(rng);
+    ClusterShape s;
+    s.workers = 1 + rng() % 32;
+    s.hosts = 1 + rng() % s.workers;
+    s.network = {0.01 + 5 * u(rng), 1 + 10 * u(rng)};
+    const VolumeSize v{1e8 + 1e10 * u(rng), 100 + int(rng() % 1000)};
+    const double memory = 1e8 + 2e10 * u(rng);
+    const int frames = 1 + rng() % 100;
+    const RingChoice choice = ChooseRings(c, v, s, frames, memory);
+    ASSERT_GE(choice.rings, 1);
+    ASSERT_LE(choice.rings, s.workers);
+    ASSERT_FALSE(choice.why.empty());
+    s.rings = 1;
+    const bool any_fits = Predict(c, v, s).memory_per_worker <= memory;
+    if (!any_fits) {
+      ASSERT_EQ(choice.rings, 1);
+      ASSERT_NE(choice.why.find("no layout fits"), std::string::npos);
+      continue;
+    }
+    ASSERT_LE(choice.prediction.memory_per_worker, memory);
+    const double chosen = choice.prediction.load_ms + frames * choice.prediction.frame_ms;
+    for (int r = 1; r <= s.workers; ++r) {
+      s.rings = r;
+      const Prediction p = Predict(c, v, s);
+      if (p.memory_per_worker > memory) continue;
+      ASSERT_LE(chosen, (p.load_ms + frames * p.frame_ms) / 0.98 + 1e-9) << r;
+    }
+  }
+}
+
+TEST(ChooseRings, LongJobsTakeMoreRingsOneFrameOnASlowLinkFewer) {
+  // 8 workers on 8 hosts, a 2 GB volume, room for it whole on each.
+  FrameCosts c = Simple();
+  c.crossings_per_cut = 3e5;
+  ClusterShape s;
+  s.workers = 8;
+  s.hosts = 8;
+  s.network = {0.5, 1};
+  const VolumeSize v{2e9, 500};
+  const double memory = 8e9;
+  EXPECT_EQ(ChooseRings(c, v, s, 1, memory).rings, 1) << "a copy per ring costs 16 s a ring";
+  EXPECT_GT(ChooseRings(c, v, s, 100000, memory).rings, 1);
+  // Memory for a quarter of the volume: at most 2 rings.
+  const RingChoice tight = ChooseRings(c, v, s, 100000, 2 * (2e9 / 4 + 2 * 2e9 / 500) + 64e6);
+  EXPECT_LE(tight.rings, 2);
+}
+
+}  // namespace
+}  // namespace transtick
