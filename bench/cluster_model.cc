@@ -37,6 +37,7 @@ namespace {
 
 struct Point {
   int workers = 1, rings = 1;
+  bool automatic = false;  // the root's --rings auto chose `rings`
   double latency_ms = 0, gbit = 0;
   double frame_ms = 0;       // measured, median
   double tracer_cpu_ms = 0;  // per frame, summed over workers
@@ -65,6 +66,9 @@ std::vector<Point> Read(const std::string& path) {
     p.workers = static_cast<int>(Number(s, "workers"));
     p.rings = static_cast<int>(Number(s, "rings"));
     p.latency_ms = Number(s, "latency_ms");
+    if (auto it = s.fields().find("auto"); it != s.fields().end()) {
+      p.automatic = it->second.bool_value();
+    }
     p.gbit = Number(s, "gbit");
     p.frame_ms = Number(s, "frame_ms_median");
     p.tracer_cpu_ms = Number(s, "tracer_cpu_ms");
@@ -236,7 +240,12 @@ int Main(int argc, char** argv) {
       return 2;
     }
   }
-  const std::vector<Point> points = Read(argv[1]);
+  std::vector<Point> points, automatic;
+  for (const Point& p : Read(argv[1])) (p.automatic ? automatic : points).push_back(p);
+  if (points.empty()) {
+    std::fprintf(stderr, "cluster_model: no fixed-rings points to fit\n");
+    return 2;
+  }
   const FrameCosts base = SharedCosts(points);
   std::printf(
       "costs of a frame (%.0f pixels), medians over %zu points (each point is "
@@ -269,6 +278,21 @@ int Main(int argc, char** argv) {
   // The model's rings against the fastest measured, per workers and link.
   std::map<std::tuple<int, double, double>, std::vector<const Point*>> groups;
   for (const Point& p : points) groups[{p.workers, p.latency_ms, p.gbit}].push_back(&p);
+  // The root's own choice (--rings auto) against the fixed layouts.
+  for (const Point& a : automatic) {
+    const Point* fastest = nullptr;
+    for (const Point& p : points) {
+      if (p.workers != a.workers || p.latency_ms != a.latency_ms || p.gbit != a.gbit) continue;
+      if (!fastest || p.frame_ms < fastest->frame_ms) fastest = &p;
+    }
+    std::printf("--rings auto, %d workers, %g ms, %g Gbit/s: the root formed %d ring(s), %.1f ms",
+                a.workers, a.latency_ms, a.gbit, a.rings, a.frame_ms);
+    if (fastest) {
+      std::printf("; fastest fixed %d ring(s), %.1f ms (%+.1f%%)", fastest->rings,
+                  fastest->frame_ms, 100 * (a.frame_ms / fastest->frame_ms - 1));
+    }
+    std::printf("\n");
+  }
   std::printf("\nrings for a 1000-frame job, model against measured:\n");
   for (const auto& [key, ps] : groups) {
     if (ps.size() < 2) continue;

@@ -55,6 +55,9 @@ def relay_counts(pdir, prefix, host):
 
 def point(pdir, w, r, lat, gbit, frames, identical, rnd, rows_path):
     stats = json.load(open(f"{pdir}/turn.json"))
+    # R "auto": the root's cluster model chose; the rings it formed.
+    auto = r == "auto"
+    r = int(stats[0].get("rings", 1)) if auto else int(r)
     n = len(stats)
     frame_ms = [s["frame_ms"] for s in stats]
     workers = [wk for s in stats for wk in s["workers"]]
@@ -95,7 +98,7 @@ def point(pdir, w, r, lat, gbit, frames, identical, rnd, rows_path):
     distinct = traced - forwarded  # a ray forwarded is traced once more where it arrives
     idle = [1 - wk["active_ms"] / wk["elapsed_ms"] for wk in workers if wk.get("elapsed_ms", 0) > 0]
     row = {
-        "workers": w, "rings": r, "latency_ms": lat, "gbit": gbit, "round": rnd,
+        "workers": w, "rings": r, "auto": auto, "latency_ms": lat, "gbit": gbit, "round": rnd,
         "frames": n, "frames_identical": identical,
         "frame_ms_median": statistics.median(frame_ms), "frame_ms_min": min(frame_ms),
         "frame_ms_mean": statistics.mean(frame_ms), "frames_per_s": n / (end - start),
@@ -133,7 +136,8 @@ def format_row(p):
     rays = [l["rays"] / n for l in p["links"]]
     wire = [l["wire_bytes"] / n for l in p["links"]]
     gbit = f"{p['gbit']:g}" if p["gbit"] > 0 else "-"
-    return (f"{p['workers']:>2} {p['rings']:>2} {p['latency_ms']:>6g} {gbit:>5} "
+    rings = f"a{p['rings']}" if p.get("auto") else p["rings"]
+    return (f"{p['workers']:>2} {rings:>2} {p['latency_ms']:>6g} {gbit:>5} "
             f"{p['frame_ms_median']:>9.1f} {p['frames_per_s']:>6.2f} {100 * p['idle_share']:>5.1f} "
             f"{span(rays, 1):>22} {span(wire, 1e3):>18} {p['hops_per_ray']:>6.3f} "
             f"{p['assembly_ms_mean']:>9.1f} {p['tail_ms']:>7.1f}")
@@ -143,7 +147,8 @@ def summary(rows_path, json_path):
     rows = [json.loads(l) for l in open(rows_path)]
     points = {}
     for p in rows:
-        points.setdefault((p["workers"], p["rings"], p["latency_ms"], p["gbit"]), []).append(p)
+        key = (p["workers"], p["rings"], p.get("auto", False), p["latency_ms"], p["gbit"])
+        points.setdefault(key, []).append(p)
     status = 0
     out = []
     for key, ps in points.items():
@@ -176,7 +181,7 @@ def summary(rows_path, json_path):
 if __name__ == "__main__":
     a = sys.argv
     if len(a) == 11 and a[1] == "point":
-        sys.exit(point(a[2], int(a[3]), int(a[4]), float(a[5]), float(a[6]), int(a[7]), int(a[8]),
+        sys.exit(point(a[2], int(a[3]), a[4], float(a[5]), float(a[6]), int(a[7]), int(a[8]),
                        int(a[9]), a[10]))
     if len(a) == 2 and a[1] == "header":
         sys.exit(print(HEADER))

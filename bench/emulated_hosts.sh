@@ -19,7 +19,9 @@
 #   on 2 cores). --full: every point of latency 0.05/0.5/5 ms x 1/10 Gbit/s x
 #   2/4/8 workers x 1/2/4 rings (rings at most the workers), 48 points, 1
 #   round unless --rounds (about 9 minutes a round). --point replaces the set;
-#   give it several times; LAT_MS 0 is no delay and GBIT 0 no rate limit.
+#   give it several times; LAT_MS 0 is no delay and GBIT 0 no rate limit;
+#   R auto: the root's --rings auto, told the link (--link-latency-ms,
+#   --link-gbits), picks the rings; the row shows them as aR.
 #   Each round runs every point once, so a slow drift in the machine's load
 #   spreads over all points; the summary takes the median over rounds.
 #   Defaults: 10 frames of cthead.nrrd (from TRANSTICK_DATA_DIR, default
@@ -84,8 +86,8 @@ if ((${#points[@]} == 0)); then
   fi
 fi
 for p in "${points[@]}"; do
-  [[ $p =~ ^[0-9]+:[0-9]+:[0-9.]+:[0-9.]+$ ]] ||
-    { echo "emulated_hosts: --point $p is not W:R:LAT_MS:GBIT" >&2; exit 2; }
+  [[ $p =~ ^[0-9]+:([0-9]+|auto):[0-9.]+:[0-9.]+$ ]] ||
+    { echo "emulated_hosts: --point $p is not W:R:LAT_MS:GBIT (R a number or auto)" >&2; exit 2; }
 done
 
 # --- namespaces --------------------------------------------------------
@@ -215,6 +217,7 @@ run_point() {
   start_relay "$root_ns" 1 8000
   nsx "$root_ns" "$build/services/root/transtick-root" --listen 127.0.0.1:7000 \
     --data-dir "$(dirname "$volume")" --display "$(ip_of 2):8002" --rings "$r" \
+    --link-latency-ms "$lat" --link-gbits "$(python3 -c "print($gbit or 100)")" \
     --metrics 127.0.0.1:7100 >"$pdir/root.log" 2>&1 &
   pids+=($!)
   for ((i = 0; i < w; ++i)); do

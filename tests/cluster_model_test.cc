@@ -120,7 +120,16 @@ TEST(ClusterModel, CostsFromAFrame) {
   // image's rays through one plane of a single ring would be 2000.
   EXPECT_DOUBLE_EQ(c.crossings_per_cut, 2000);
   EXPECT_DOUBLE_EQ(c.bytes_per_ray, 104);
-  EXPECT_DOUBLE_EQ(c.imbalance, 30 / 15.0);
+  // Within ring 1: 30 against a mean of 20.
+  EXPECT_DOUBLE_EQ(c.imbalance, 1.5);
+  // A ring of one worker that takes twice as long as a ring of two: the
+  // layout's doing, not the slabs'.
+  std::vector<v1::WorkerFrameStats> uneven(3);
+  for (int i = 0; i < 3; ++i) {
+    uneven[i].set_ring(i < 2 ? 0 : 1);
+    uneven[i].set_active_ms(i < 2 ? 10 : 20);
+  }
+  EXPECT_DOUBLE_EQ(FrameCostsFrom(uneven, FrameCosts{}).imbalance, 1);
   // Nothing crossed: the fallback's crossings stay.
   std::vector<v1::WorkerFrameStats> alone(1);
   alone[0].set_cpu_ms(5);
@@ -142,7 +151,8 @@ TEST(ChooseRings, NeverExceedsTheMemoryAndTakesTheFastestThatFits) {
     const VolumeSize v{1e8 + 1e10 * u(rng), 100 + int(rng() % 1000)};
     const double memory = 1e8 + 2e10 * u(rng);
     const int frames = 1 + rng() % 100;
-    const RingChoice choice = ChooseRings(c, v, s, frames, memory);
+    const int loaded = static_cast<int>(rng() % (s.workers + 1));  // 0: nothing held
+    const RingChoice choice = ChooseRings(c, v, s, frames, memory, loaded);
     ASSERT_GE(choice.rings, 1);
     ASSERT_LE(choice.rings, s.workers);
     ASSERT_FALSE(choice.why.empty());
@@ -154,12 +164,15 @@ TEST(ChooseRings, NeverExceedsTheMemoryAndTakesTheFastestThatFits) {
       continue;
     }
     ASSERT_LE(choice.prediction.memory_per_worker, memory);
-    const double chosen = choice.prediction.load_ms + frames * choice.prediction.frame_ms;
+    auto job_ms = [&](int r, const Prediction& p) {
+      return (r == loaded ? 0 : p.load_ms) + frames * p.frame_ms;
+    };
+    const double chosen = job_ms(choice.rings, choice.prediction);
     for (int r = 1; r <= s.workers; ++r) {
       s.rings = r;
       const Prediction p = Predict(c, v, s);
       if (p.memory_per_worker > memory) continue;
-      ASSERT_LE(chosen, (p.load_ms + frames * p.frame_ms) / 0.98 + 1e-9) << r;
+      ASSERT_LE(chosen, job_ms(r, p) / 0.98 + 1e-9) << r;
     }
   }
 }
@@ -176,6 +189,8 @@ TEST(ChooseRings, LongJobsTakeMoreRingsOneFrameOnASlowLinkFewer) {
   const double memory = 8e9;
   EXPECT_EQ(ChooseRings(c, v, s, 1, memory).rings, 1) << "a copy per ring costs 16 s a ring";
   EXPECT_GT(ChooseRings(c, v, s, 100000, memory).rings, 1);
+  // The slabs of 4 rings already held: a short job keeps them.
+  EXPECT_EQ(ChooseRings(c, v, s, 1, memory, /*loaded_rings=*/4).rings, 4);
   // Memory for a quarter of the volume: at most 2 rings.
   const RingChoice tight = ChooseRings(c, v, s, 100000, 2 * (2e9 / 4 + 2 * 2e9 / 500) + 64e6);
   EXPECT_LE(tight.rings, 2);

@@ -32,14 +32,18 @@ Prediction PredictFrame(const FrameCosts& c, const VolumeSize& v, const ClusterS
   const bool spread = s.hosts > 1;
   const double ring_gbits = spread ? s.network.gbits : kLoopbackGbits;
 
-  // Each ring traces 1/R of the image's rows; the smallest ring's slabs are
-  // the largest, so its workers finish last.
+  // Each ring traces 1/R of the image's rows, so a ring of n workers gives
+  // each 1/(R n) of the work: the smallest ring's workers have the most. A
+  // ring of one worker has no slabs to be uneven and no plane to forward
+  // over; a worker inside a longer ring forwards over two planes, one at an
+  // end over one. The slowest of the two ring sizes sets the frame.
   const double crossings = c.crossings_per_cut / s.rings;  // per plane of a ring
-  const double cpu_ms = c.tracer_cpu_ms / (s.rings * n_min) * (s.workers > 1 ? c.imbalance : 1);
-  // A worker inside the ring forwards over two planes, one at an end over one.
-  const double forward_ms =
-      n_min > 1 ? std::min(2, n_min - 1) * crossings * c.forward_cpu_us / 1e3 : 0;
-  p.trace_ms = (cpu_ms + forward_ms) / cores;
+  auto worker_ms = [&](int n) {
+    if (n <= 1) return c.tracer_cpu_ms / s.rings;
+    return c.tracer_cpu_ms / (s.rings * n) * c.imbalance +
+           std::min(2, n - 1) * crossings * c.forward_cpu_us / 1e3;
+  };
+  p.trace_ms = std::max(worker_ms(n_min), worker_ms(n_max)) / cores;
 
   // Ring neighbours are packed on hosts, so a host's link carries the planes
   // at the edges of its block of workers, in both directions, for every ring
@@ -87,19 +91,26 @@ Prediction Predict(const FrameCosts& costs, const VolumeSize& volume, const Clus
 FrameCosts FrameCostsFrom(const std::vector<v1::WorkerFrameStats>& workers,
                           const FrameCosts& fallback) {
   FrameCosts c = fallback;
-  double cpu = 0, rays = 0, sent = 0, bytes = 0, max_active = 0, sum_active = 0;
+  double cpu = 0, rays = 0, sent = 0, bytes = 0;
+  // Per ring: workers, slowest and summed active time. Rings of unequal
+  // sizes finish apart by their layout, which the model sees itself; the
+  // imbalance is the slabs' within a ring.
   std::vector<int> ring_size;
+  std::vector<double> max_active, sum_active;
   for (const v1::WorkerFrameStats& w : workers) {
     cpu += w.cpu_ms();
     rays += w.rays_traced();
     sent += w.rays_sent();
     bytes += w.bytes_sent();
-    max_active = std::max(max_active, w.active_ms());
-    sum_active += w.active_ms();
-    if (w.ring() >= 0) {
-      if (ring_size.size() <= size_t(w.ring())) ring_size.resize(w.ring() + 1);
-      ++ring_size[w.ring()];
+    const size_t ring = static_cast<size_t>(std::max(0, w.ring()));
+    if (ring_size.size() <= ring) {
+      ring_size.resize(ring + 1);
+      max_active.resize(ring + 1);
+      sum_active.resize(ring + 1);
     }
+    ++ring_size[ring];
+    max_active[ring] = std::max(max_active[ring], w.active_ms());
+    sum_active[ring] += w.active_ms();
   }
   int planes = 0;  // slab planes crossed: one fewer than a ring's workers
   for (int n : ring_size) planes += std::max(0, n - 1);
@@ -113,9 +124,13 @@ FrameCosts FrameCostsFrom(const std::vector<v1::WorkerFrameStats>& workers,
     c.crossings_per_cut = sent / planes * std::max<size_t>(1, ring_size.size());
     c.bytes_per_ray = bytes / sent;
   }
-  if (sum_active > 0 && workers.size() > 1) {
-    c.imbalance = max_active / (sum_active / workers.size());
+  double imbalance = 0;
+  for (size_t r = 0; r < ring_size.size(); ++r) {
+    if (ring_size[r] > 1 && sum_active[r] > 0) {
+      imbalance = std::max(imbalance, max_active[r] / (sum_active[r] / ring_size[r]));
+    }
   }
+  if (imbalance > 0) c.imbalance = imbalance;
   return c;
 }
 
@@ -151,7 +166,7 @@ absl::StatusOr<int> ParseRings(absl::string_view setting) {
 }
 
 RingChoice ChooseRings(const FrameCosts& costs, const VolumeSize& volume, ClusterShape shape,
-                       int frames, double memory_per_worker) {
+                       int frames, double memory_per_worker, int loaded_rings) {
   RingChoice best;
   double best_ms = 0;
   bool found = false;
@@ -160,9 +175,10 @@ RingChoice ChooseRings(const FrameCosts& costs, const VolumeSize& volume, Cluste
     shape.rings = r;
     const Prediction p = Predict(costs, volume, shape);
     const bool fits = p.memory_per_worker <= memory_per_worker;
-    const double job_ms = p.load_ms + std::max(1, frames) * p.frame_ms;
+    const double load_ms = r == loaded_rings ? 0 : p.load_ms;  // held already
+    const double job_ms = load_ms + std::max(1, frames) * p.frame_ms;
     absl::StrAppendFormat(&considered, "%s%d ring(s): %.0f ms (frame %.1f, load %.0f), %.0f MB%s",
-                          considered.empty() ? "" : "; ", r, job_ms, p.frame_ms, p.load_ms,
+                          considered.empty() ? "" : "; ", r, job_ms, p.frame_ms, load_ms,
                           p.memory_per_worker / (1 << 20), fits ? "" : " (does not fit)");
     if (fits && (!found || job_ms < best_ms * 0.98)) {
       found = true;

@@ -17,15 +17,16 @@
 namespace transtick {
 
 // What one frame of a view costs, whatever the cluster: measured on a
-// frame (FrameCostsFrom) or assumed (kDefaultFrameCosts).
+// frame (FrameCostsFrom) or assumed (DefaultFrameCosts). The constants no
+// frame shows are as fitted on emulated hosts (docs/cluster-model.md).
 struct FrameCosts {
   double tracer_cpu_ms = 0;      // the tracers' CPU for the whole image, summed
   double rays = 0;               // rays traced, all kinds
   double crossings_per_cut = 0;  // rays crossing one slab plane, both ways, whole image
   double bytes_per_ray = 106;    // on the wire: the record and its framing
-  double forward_cpu_us = 2.0;   // CPU to send and to receive one ray, both ends summed
-  double imbalance = 1.1;        // slowest worker's tracing over the mean, after balancing
-  double fixed_ms = 8;           // a frame's start, end and image at no latency
+  double forward_cpu_us = 0.5;   // CPU to send and to receive one ray, both ends summed
+  double imbalance = 1.1;        // a ring's slowest worker's tracing over its mean
+  double fixed_ms = 38;          // a frame's start, end and image at no latency
   double rounds = 3;             // root-worker and worker-display round trips in series
   double deposit_bytes = 0;      // to the display while the frame runs (20 a deposit)
   double image_bytes = 0;        // the image on to the root, after the last deposit
@@ -33,7 +34,7 @@ struct FrameCosts {
   // The frame's critical chain: a ray crossing the whole ring and a shadow
   // ray crossing back, each hop a link's latency plus a batch's linger,
   // this many ring lengths of them (fitted on the emulated runs).
-  double chain_rings = 2;
+  double chain_rings = 0;
 };
 
 // The network between hosts: one-way latency and each host's bandwidth
@@ -101,10 +102,12 @@ struct RingChoice {
 // The number of rings for a job of `frames` frames on `shape` (its `rings`
 // ignored): the one with the least predicted time for the job, slabs sent
 // once and every frame, among those whose largest slab fits in
-// `memory_per_worker` bytes; fewer rings on a tie within 2%. When none
-// fits, 1 ring (the smallest slabs) and a `why` that says so.
+// `memory_per_worker` bytes; fewer rings on a tie within 2%. The workers
+// already hold the slabs of `loaded_rings` rings (0: none), which then cost
+// no loading. When none fits, 1 ring (the smallest slabs) and a `why` that
+// says so.
 RingChoice ChooseRings(const FrameCosts& costs, const VolumeSize& volume, ClusterShape shape,
-                       int frames, double memory_per_worker);
+                       int frames, double memory_per_worker, int loaded_rings = 0);
 
 }  // namespace transtick
 

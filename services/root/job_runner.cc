@@ -191,7 +191,19 @@ int JobRunner::RingsFor(FrameTask& task, const std::vector<std::shared_ptr<Worke
   }
   shape.network = options_.network;
   const VolumeSize volume{double(data.scene.MemoryBytes()), data.scene.dims()[1]};
-  const RingChoice choice = ChooseRings(costs, volume, shape, task.frames, memory);
+  // The rings whose slabs of this dataset the workers hold now: keeping
+  // them costs no loading.
+  int loaded = 0;
+  const auto held = registry_.Held();
+  for (const auto& w : workers) {
+    auto it = held.find(w->id);
+    if (it == held.end() || it->second.data_key != data.key || it->second.ring < 0) {
+      loaded = 0;
+      break;
+    }
+    loaded = std::max(loaded, it->second.ring + 1);
+  }
+  const RingChoice choice = ChooseRings(costs, volume, shape, task.frames, memory, loaded);
   spdlog::info("{}: rings auto: {} ({} costs)", task.who, choice.why,
                data.costs_pixels > 0 ? "measured" : "assumed");
   chosen = {members, choice.rings};
