@@ -176,3 +176,32 @@ TEST(OutboxTest, ManyProducersLoseNothing) {
 
 }  // namespace
 }  // namespace transtick
+
+namespace transtick {
+namespace {
+
+TEST(BufferPool, KeepsBigBuffersUpToItsBoundAndHandsThemBackEmpty) {
+  BufferPool pool(1 << 20);
+  std::string small;
+  small.reserve(1 << 10);
+  pool.Give(std::move(small));
+  EXPECT_EQ(pool.held_bytes(), 0u) << "a small buffer is not worth keeping";
+  for (int i = 0; i < 8; ++i) {
+    std::string big(256 << 10, 'x');
+    pool.Give(std::move(big));
+  }
+  EXPECT_LE(pool.held_bytes(), size_t{1} << 20) << "the pool outgrew its bound";
+  EXPECT_GE(pool.held_bytes(), size_t{768} << 10);
+  const size_t held = pool.held_bytes();
+  std::string taken = pool.Take(100 << 10);
+  EXPECT_TRUE(taken.empty());
+  EXPECT_GE(taken.capacity(), size_t{100} << 10);
+  EXPECT_EQ(pool.held_bytes(), held - taken.capacity());
+  // None big enough: a new buffer of the capacity asked for.
+  std::string fresh = pool.Take(4 << 20);
+  EXPECT_GE(fresh.capacity(), size_t{4} << 20);
+  EXPECT_EQ(pool.held_bytes(), held - taken.capacity());
+}
+
+}  // namespace
+}  // namespace transtick

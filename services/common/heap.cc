@@ -31,15 +31,16 @@ std::chrono::nanoseconds ProcessCpu() {
   return std::chrono::seconds(ts.tv_sec) + std::chrono::nanoseconds(ts.tv_nsec);
 }
 
-// $TRANSTICK_HEAP_KEEP_MB, 0 .. 4096; 64 when unset or malformed.
+// $TRANSTICK_HEAP_KEEP_MB, 0 .. 2047 (mallopt takes an int of bytes); 64
+// when unset or malformed.
 int KeepMb() {
   constexpr int kDefault = 64;
   const char* env = std::getenv("TRANSTICK_HEAP_KEEP_MB");
   if (env == nullptr || *env == '\0') return kDefault;
   char* end = nullptr;
   const long mb = std::strtol(env, &end, 10);
-  if (*end != '\0' || mb < 0 || mb > 4096) {
-    std::cerr << "TRANSTICK_HEAP_KEEP_MB=" << env << " is not a number of MB in [0, 4096]; using "
+  if (*end != '\0' || mb < 0 || mb > 2047) {
+    std::cerr << "TRANSTICK_HEAP_KEEP_MB=" << env << " is not a number of MB in [0, 2047]; using "
               << kDefault << "\n";
     return kDefault;
   }
