@@ -179,7 +179,7 @@ const CommandDoc kWatchDoc = {
     ""};
 
 const CommandDoc kStatusDoc = {"transtick status", "",
-                               "Lists the workers of a running cluster, with their rings and "
+                               "Lists the workers of a running cluster, with their memory, rings and "
                                "slabs, and its jobs.",
                                0, 0,
                                With({{"root", "HOST:PORT", "the cluster's root (required)"}},
@@ -888,6 +888,10 @@ int StatusCommand(int argc, char** argv) {
   }
   for (const auto& w : reply.workers()) {
     std::printf("  worker %s at %s, %d threads", w.id().c_str(), w.address().c_str(), w.threads());
+    if (w.memory_bytes() > 0) {
+      std::printf(", %.0f MB%s", w.memory_bytes() / 1048576.0,
+                  w.memory_shared() ? " of its host's" : "");
+    }
     if (w.ring() >= 0) {
       std::printf(", ring %d, slab [%d, %d)", w.ring(), w.slab_begin(), w.slab_end());
     }

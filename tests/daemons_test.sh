@@ -72,7 +72,11 @@ timeout 10 "$build/services/display/transtick-display" --listen 127.0.0.1:$rport
   --metrics off >"$dir/dup.log" 2>&1 && fail "a display started on the root's port"
 grep -q "cannot listen on 127.0.0.1:$rport" "$dir/dup.log" ||
   fail "second daemon on a taken port: $(cat "$dir/dup.log")"
-"$T" status --root 127.0.0.1:$rport | sed -n 's/.* at 127.0.0.1:\([0-9]*\),.*/\1/p' >"$dir/ports"
+"$T" status --root 127.0.0.1:$rport >"$dir/status.log"
+sed -n 's/.* at 127.0.0.1:\([0-9]*\),.*/\1/p' "$dir/status.log" >"$dir/ports"
+# Each worker offers its host's memory (no --memory-mb, no cgroup limit
+# here unless the machine has one), shown with it.
+[[ $(grep -c " MB" "$dir/status.log") == 3 ]] || fail "status shows no worker memory: $(cat "$dir/status.log")"
 [[ $( (cat "$dir/ports"; echo $rport; echo $dport) | sort -u | wc -l) == 5 ]] ||
   fail "daemons share ports: workers on $(tr '\n' ' ' <"$dir/ports"), root $rport, display $dport"
 

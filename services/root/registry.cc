@@ -158,6 +158,8 @@ void Registry::Describe(v1::StatusReply* reply) {
     info->set_id(w->id);
     info->set_address(w->address);
     info->set_threads(w->threads);
+    info->set_memory_bytes(w->memory_bytes);
+    info->set_memory_shared(w->memory_shared);
     auto held = held_.find(w->id);
     info->set_ring(held == held_.end() ? -1 : held->second.ring);
     if (held != held_.end()) {
