@@ -80,9 +80,10 @@ if ((${#points[@]} == 0)); then
   else
     # 4 workers on links with neither a delay nor a rate limit (this
     # machine's floor); latency at 4 workers; bandwidth at two latencies;
-    # workers and rings at 0.5 ms and 10 Gbit/s.
+    # workers and rings at 0.5 ms and 10 Gbit/s, and the root's own choice
+    # there (--rings auto) beside them.
     points=(4:1:0:0 4:1:0.05:10 4:1:0.5:10 4:1:5:10 4:1:0.5:1 4:1:5:1
-            2:1:0.5:10 8:1:0.5:10 4:2:0.5:10 8:2:0.5:10 8:4:0.5:10)
+            2:1:0.5:10 8:1:0.5:10 4:2:0.5:10 8:2:0.5:10 8:4:0.5:10 4:auto:0.5:10)
   fi
 fi
 for p in "${points[@]}"; do
