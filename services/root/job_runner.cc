@@ -33,6 +33,18 @@ void SleepUnless(std::chrono::milliseconds d, const std::function<bool()>& cance
   }
 }
 
+double PixelsOf(const FrameTask& task) {
+  return static_cast<double>(task.request->camera.width) * task.request->camera.height;
+}
+
+// What a frame of the task costs: as the dataset's last frame did, for this
+// frame's pixels, else as assumed.
+FrameCosts CostsFor(const FrameTask& task) {
+  const LoadedDataset& data = *task.data;
+  return data.costs_pixels > 0 ? ScaledCosts(data.costs, data.costs_pixels, PixelsOf(task))
+                               : DefaultFrameCosts(PixelsOf(task));
+}
+
 }  // namespace
 
 JobRunner::JobRunner(const RunnerOptions& options, JobQueue& queue, Registry& registry,
@@ -139,22 +151,6 @@ void FrameTurns::Release() {
   busy_ = false;
 }
 
-namespace {
-
-double PixelsOf(const FrameTask& task) {
-  return static_cast<double>(task.request->camera.width) * task.request->camera.height;
-}
-
-// What a frame of the task costs: as the dataset's last frame did, for this
-// frame's pixels, else as assumed.
-FrameCosts CostsFor(const FrameTask& task) {
-  const LoadedDataset& data = *task.data;
-  return data.costs_pixels > 0 ? ScaledCosts(data.costs, data.costs_pixels, PixelsOf(task))
-                               : DefaultFrameCosts(PixelsOf(task));
-}
-
-}  // namespace
-
 int JobRunner::RingsFor(FrameTask& task, const std::vector<std::shared_ptr<WorkerEntry>>& workers) {
   const int setting = task.rings < 0 ? options_.rings : task.rings;
   if (setting != kAutoRings) return setting;
@@ -167,19 +163,20 @@ int JobRunner::RingsFor(FrameTask& task, const std::vector<std::shared_ptr<Worke
   const FrameCosts costs = CostsFor(task);
   // Hosts by the workers' addresses; a worker offering its host's memory
   // shares it with the others there.
+  std::vector<std::string> host_of;  // by worker
   std::map<std::string, int> on_host, host_threads;
   int threads = 1 << 20;
   for (const auto& w : workers) {
-    const std::string host = w->address.substr(0, w->address.rfind(':'));
+    const std::string& host = host_of.emplace_back(w->address.substr(0, w->address.rfind(':')));
     ++on_host[host];
     host_threads[host] = std::max(host_threads[host], w->threads);
     threads = std::min(threads, w->threads);
   }
   double memory = std::numeric_limits<double>::infinity();
-  for (const auto& w : workers) {
-    if (w->memory_bytes == 0) continue;
-    const std::string host = w->address.substr(0, w->address.rfind(':'));
-    memory = std::min(memory, double(w->memory_bytes) / (w->memory_shared ? on_host[host] : 1));
+  for (size_t i = 0; i < workers.size(); ++i) {
+    const WorkerEntry& w = *workers[i];
+    if (w.memory_bytes == 0) continue;
+    memory = std::min(memory, double(w.memory_bytes) / (w.memory_shared ? on_host[host_of[i]] : 1));
   }
   ClusterShape shape;
   shape.workers = static_cast<int>(workers.size());

@@ -92,7 +92,7 @@ absl::StatusOr<std::unique_ptr<WorkerNode>> WorkerNode::Start(const WorkerNodeOp
       "worker {} serving on {} ({} tracer threads, {:.0f} MB{}, metrics on {}), registering with {}",
       node->id_, node->address_, node->threads_, node->memory_.bytes / 1048576.0,
       node->memory_.shared ? " of the host's" : "",
-               node->metrics_ ? std::to_string(node->metrics_->port()) : "no port", options.root);
+      node->metrics_ ? std::to_string(node->metrics_->port()) : "no port", options.root);
   return node;
 }
 
