@@ -541,6 +541,31 @@ float Tracer::Sample(const Vec3& p) const {
   return lerp(lerp(c00, c10, fy), lerp(c01, c11, fy), fz);
 }
 
+namespace {
+
+// Central differences at the 8 voxels around a point, trilinearly weighted:
+// `at(x, y, z)` reads a scalar. One sequence of operations whatever reads
+// them, so the fast and the clamped path give the same bits.
+template <typename At>
+TRANSTICK_INLINE Vec3f WeightedDifferences(At at, int x0, int y0, int z0, const float f[3],
+                                           float hx, float hy, float hz) {
+  Vec3f g{0, 0, 0};
+  for (int dz = 0; dz < 2; ++dz) {
+    for (int dy = 0; dy < 2; ++dy) {
+      for (int dx = 0; dx < 2; ++dx) {
+        const int x = x0 + dx, y = y0 + dy, z = z0 + dz;
+        const float w = (dx ? f[0] : 1 - f[0]) * (dy ? f[1] : 1 - f[1]) * (dz ? f[2] : 1 - f[2]);
+        Vec3f c{(at(x + 1, y, z) - at(x - 1, y, z)) * hx, (at(x, y + 1, z) - at(x, y - 1, z)) * hy,
+                (at(x, y, z + 1) - at(x, y, z - 1)) * hz};
+        g += c * w;
+      }
+    }
+  }
+  return g;
+}
+
+}  // namespace
+
 Vec3f Tracer::Gradient(const Vec3& p) const {
   const double qx = p.x - 0.5, qy = p.y - 0.5, qz = p.z - 0.5;
   const int x0 = static_cast<int>(std::floor(qx)), y0 = static_cast<int>(std::floor(qy)),
@@ -551,20 +576,22 @@ Vec3f Tracer::Gradient(const Vec3& p) const {
   const float hx = static_cast<float>(0.5 * inv_spacing_.x),
               hy = static_cast<float>(0.5 * inv_spacing_.y),
               hz = static_cast<float>(0.5 * inv_spacing_.z);
-  Vec3f g{0, 0, 0};
-  for (int dz = 0; dz < 2; ++dz) {
-    for (int dy = 0; dy < 2; ++dy) {
-      for (int dx = 0; dx < 2; ++dx) {
-        const int x = x0 + dx, y = y0 + dy, z = z0 + dz;
-        const float w = (dx ? f[0] : 1 - f[0]) * (dy ? f[1] : 1 - f[1]) * (dz ? f[2] : 1 - f[2]);
-        Vec3f c{(s.Scalar(x + 1, y, z) - s.Scalar(x - 1, y, z)) * hx,
-                (s.Scalar(x, y + 1, z) - s.Scalar(x, y - 1, z)) * hy,
-                (s.Scalar(x, y, z + 1) - s.Scalar(x, y, z - 1)) * hz};
-        g += c * w;
-      }
-    }
+  // Away from the volume's faces and the slab's last stored planes the 4^3
+  // voxels read need no clamping: addressed from one pointer (the clamped
+  // reads cost a shaded point about 1,400 instructions).
+  const auto& dims = s.dims();
+  if (x0 >= 1 && x0 + 2 < dims[0] && z0 >= 1 && z0 + 2 < dims[2] && y0 - 1 >= s.scalar_y_begin() &&
+      y0 + 2 < s.scalar_y_end()) {
+    const ptrdiff_t row = dims[0];
+    const ptrdiff_t plane = row * (s.scalar_y_end() - s.scalar_y_begin());
+    const float* base = s.scalars().data() + z0 * plane + (y0 - s.scalar_y_begin()) * row + x0;
+    auto at = [&](int x, int y, int z) {
+      return base[(z - z0) * plane + (y - y0) * row + (x - x0)];
+    };
+    return WeightedDifferences(at, x0, y0, z0, f, hx, hy, hz);
   }
-  return g;
+  auto at = [&](int x, int y, int z) { return s.Scalar(x, y, z); };
+  return WeightedDifferences(at, x0, y0, z0, f, hx, hy, hz);
 }
 
 const Tracer::TableEntry& Tracer::Lookup(float value) const {
