@@ -263,14 +263,20 @@ TEST(IsosurfaceTest, CrossingWalkWalksTheFieldsCells) {
 
 // Wherever the field takes values of two materials inside a voxel (on a
 // 5^3 grid of points, faces included), the voxel is a candidate; and the
-// label is not trivially all ones.
+// label is not trivially all ones. The later trials are thin volumes (1 to
+// 3 voxels along some axis), where the neighbourhood filter clamps on both
+// sides.
 TEST(IsosurfaceTest, EveryVoxelAFieldSurfaceCrossesIsACandidate) {
   std::mt19937_64 rng(4);
   std::uniform_real_distribution<double> unit(0, 1);
   size_t voxels = 0, candidates = 0;
-  for (int trial = 0; trial < 60; ++trial) {
+  for (int trial = 0; trial < 160; ++trial) {
     Volume v;
-    v.dims = {6 + static_cast<int>(rng() % 3), 6, 5 + static_cast<int>(rng() % 4)};
+    if (trial < 60) {
+      v.dims = {6 + static_cast<int>(rng() % 3), 6, 5 + static_cast<int>(rng() % 4)};
+    } else {
+      for (int a = 0; a < 3; ++a) v.dims[a] = 1 + static_cast<int>(rng() % (a == 1 ? 3 : 7));
+    }
     v.values.resize(v.VoxelCount());
     // Smooth blobs plus noise, so that some neighbourhoods hold one material.
     const double cx = unit(rng) * 6, cy = unit(rng) * 6, cz = unit(rng) * 6;
