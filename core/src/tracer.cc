@@ -264,7 +264,7 @@ TRANSTICK_INLINE std::optional<Tracer::Step> Tracer::Walk(Walker& w, Outcome* ou
     return std::nullopt;
   }
   std::optional<Segment> seg;
-  if (--w.steps_left < 0 || !(seg = w.trav.Next())) {
+  if (--w.steps_left < 0 || !(seg = w.trav.NextInside())) {
     ++counters.truncated;
     *outcome = Outcome::kFinished;
     return std::nullopt;

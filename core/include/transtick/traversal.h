@@ -121,8 +121,15 @@ class Traversal {
   // scene's slab when its brick is occupied (callers stop at the slab's
   // planes).
   TRANSTICK_INLINE std::optional<Segment> Next() {
+    if (!Inside(cell_, scene_->dims())) return std::nullopt;
+    return NextInside();
+  }
+  // Next() for a caller that has checked that cell() is inside the volume
+  // (the tracer's walk does, before it looks at the slab).
+  // REQUIRES: Inside(cell(), dims).
+  TRANSTICK_INLINE std::optional<Segment> NextInside() {
     const auto& dims = scene_->dims();
-    if (!Inside(cell_, dims)) return std::nullopt;
+    TRANSTICK_DCHECK(Inside(cell_, dims));
     // A uniform 2^3 cell is left by the box of cells of its material ahead
     // of it (a uniform brick by the brick, when that reaches further),
     // unless the ray runs mostly along the track in a mixed brick, where the
