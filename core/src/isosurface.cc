@@ -137,16 +137,29 @@ int SideChanges(const RayCubic& g, double span, SideChange out[3]) {
   return count;
 }
 
+RayAxes::RayAxes(const Vec3& d) : direction(d) {
+  for (int a = 0; a < 3; ++a) {
+    const bool along = MovesAlong(d[a]);
+    step[a] = along ? (d[a] > 0 ? 1 : -1) : 0;
+    dir[a] = along ? d[a] : 0.0;
+    inv[a] = along ? 1.0 / d[a] : 0.0;
+  }
+}
+
 CrossingWalk::CrossingWalk(const Scene& scene, const Bands& bands, const Vec3& origin,
-                           const Vec3& dir, double t0, double t1, int band)
-    : scene_(&scene), bands_(&bands), origin_(origin), t1_(t1), band_(band), t_(t0) {
-  const Vec3 start = origin + dir * t0;
+                           const RayAxes& axes, double t0, double t1, int band)
+    : scene_(&scene),
+      bands_(&bands),
+      origin_(origin),
+      dir_(axes.dir),
+      inv_(axes.inv),
+      step_(axes.step),
+      t1_(t1),
+      band_(band),
+      t_(t0) {
+  const Vec3 start = origin + axes.direction * t0;
   double moves = 0;
   for (int a = 0; a < 3; ++a) {
-    const bool along = MovesAlong(dir[a]);
-    step_[a] = along ? (dir[a] > 0 ? 1 : -1) : 0;
-    dir_[a] = along ? dir[a] : 0.0;
-    inv_[a] = along ? 1.0 / dir[a] : 0.0;
     moves += std::abs(dir_[a]);
     // The cell of the field holding the start: corners at voxel centres
     // base + 0.5 and base + 1.5; base runs from -1 to dims - 1 inside the

@@ -317,14 +317,14 @@ bool Tracer::Shade(RayDescriptor& ray, uint8_t m, const Vec3& p, const Vec3& vie
 }
 
 bool Tracer::CrossingsOf(std::optional<CrossingWalk>& walk, const RayDescriptor& ray,
-                         const Segment& seg) const {
+                         const RayAxes& axes, const Segment& seg) const {
   // A candidate segment right after another goes on with the same walk:
   // the cell across the plane between them keeps its roots.
   if (walk && walk->t1() == seg.t0) {
     walk->Extend(seg.t1);
     return false;
   }
-  walk.emplace(scene_, bands_, ray.origin, ray.direction, seg.t0, seg.t1, ray.band);
+  walk.emplace(scene_, bands_, ray.origin, axes, seg.t0, seg.t1, ray.band);
   return true;
 }
 
@@ -348,6 +348,8 @@ Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescrip
   Walker walker = MakeWalker(ray);
   const Vec3 view = Normalize(-(ray.direction / inv_spacing_));
   std::optional<CrossingWalk> walk;  // through consecutive candidate segments
+  // For each walk (smooth surfaces only: from a zero vector it costs no division).
+  const RayAxes axes(smooth_ ? ray.direction : Vec3{0, 0, 0});
   int counted = 0;                   // its cells in the work profile so far
   Outcome outcome;
   while (auto step = Walk(walker, &outcome, counters)) {
@@ -374,7 +376,7 @@ Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescrip
         ray.material = n;
       }
       if (m != Classification::kCandidate) continue;  // one band throughout
-      if (CrossingsOf(walk, ray, seg)) counted = 0;
+      if (CrossingsOf(walk, ray, axes, seg)) counted = 0;
       while (auto c = walk->Next()) {
         const uint16_t before = ray.band;
         const uint8_t n = bands_.material(c->band);
@@ -435,6 +437,7 @@ Tracer::Outcome Tracer::TraceShadow(RayDescriptor& ray, TraceCounters& counters)
   };
   Walker walker = MakeWalker(ray);
   std::optional<CrossingWalk> walk;
+  const RayAxes axes(smooth_ ? ray.direction : Vec3{0, 0, 0});
   int counted = 0;
   Outcome outcome;
   while (auto step = Walk(walker, &outcome, counters)) {
@@ -452,7 +455,7 @@ Tracer::Outcome Tracer::TraceShadow(RayDescriptor& ray, TraceCounters& counters)
         if (dark) return walker.Stop(ray, Outcome::kFinished);
       }
       if (m != Classification::kCandidate) continue;
-      if (CrossingsOf(walk, ray, step->seg)) counted = 0;
+      if (CrossingsOf(walk, ray, axes, step->seg)) counted = 0;
       const int plane = step->cell[1] - walker.y_begin;
       while (auto c = walk->Next()) {
         const uint8_t n = bands_.material(c->band);

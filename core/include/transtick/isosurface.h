@@ -91,9 +91,24 @@ struct Crossing {
 // and bands must outlive it.
 // REQUIRES: the scalar planes the cells touch are stored in `scene` (a
 // slab's own planes and one ghost plane each side), band < bands.size().
+// A ray's direction as a walk steps along it, made once per ray: per axis
+// the step (-1, 0 or +1), the component (0 on an axis the ray does not move
+// along, as MovesAlong says) and its reciprocal (0 there too).
+struct RayAxes {
+  explicit RayAxes(const Vec3& direction);
+  Vec3 direction;  // as given
+  std::array<int, 3> step;
+  std::array<double, 3> dir;
+  std::array<double, 3> inv;
+};
+
 class CrossingWalk {
  public:
   CrossingWalk(const Scene& scene, const Bands& bands, const Vec3& origin, const Vec3& dir,
+               double t0, double t1, int band)
+      : CrossingWalk(scene, bands, origin, RayAxes(dir), t0, t1, band) {}
+  // The same walk, with the ray's axes made once for all its walks.
+  CrossingWalk(const Scene& scene, const Bands& bands, const Vec3& origin, const RayAxes& axes,
                double t0, double t1, int band);
 
   std::optional<Crossing> Next();

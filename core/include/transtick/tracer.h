@@ -182,7 +182,7 @@ class Tracer {
   // The crossings of candidate segment `seg` of `ray`: `walk` extended to
   // it when it ends where seg starts, else a new walk (returns true).
   bool CrossingsOf(std::optional<CrossingWalk>& walk, const RayDescriptor& ray,
-                   const Segment& seg) const;
+                   const RayAxes& axes, const Segment& seg) const;
   // Adds the cells `walk` entered since `counted` of them were counted to
   // the work profile at `plane` (an index into plane_work).
   static void CountCells(const CrossingWalk& walk, int plane, int& counted,
