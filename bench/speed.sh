@@ -4,7 +4,8 @@
 #   1. in process: frame time on 1 thread and on every core, rays/s per
 #      core, traversal steps per ray and the frame's ns per step, for smooth
 #      and for voxel surfaces (render_bench, cthead 400x400, 45 degrees,
-#      shadows on);
+#      shadows on), and with valgrind installed the instructions a frame
+#      costs, which the load does not move (bench/instructions.sh);
 #   2. the cluster: the embedded cluster of 1, 2 and 4 workers against the
 #      in-process frame in the same rounds, and the summed tracer CPU of N
 #      workers over 1 (cluster_bench scaling);
@@ -17,7 +18,7 @@
 #      (bench/paraview_compare.sh; installs ParaView when missing).
 #
 # Usage: bench/speed.sh [--paraview] [BUILD_DIR]
-# Takes about 8 minutes (12 with ParaView) on 2 cores.
+# Takes about 9 minutes (13 with ParaView) on 2 cores.
 set -euo pipefail
 src=$(cd "$(dirname "$0")/.." && pwd)
 paraview=0
@@ -43,6 +44,10 @@ section "1. in process (render_bench): smooth surfaces"
 "$build/bench/render_bench" --volume "$volume" --azimuth 45 --repeat 8
 section "1. in process (render_bench): voxel surfaces"
 "$build/bench/render_bench" --volume "$volume" --materials "$tmp/voxel.json" --azimuth 45 --repeat 8
+if command -v valgrind >/dev/null; then
+  section "1. in process: instructions a frame (bench/instructions.sh)"
+  bash "$src/bench/instructions.sh" "$build"
+fi
 
 section "2. cluster over in-process (cluster_bench scaling, smooth)"
 "$build/bench/cluster_bench" scaling --volume "$volume" --repeat 5
