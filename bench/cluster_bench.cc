@@ -6,6 +6,8 @@
 //   cluster_bench forward [--rays N]
 //   cluster_bench tables  [--volume FILE] [--materials FILE] [--size WxH]
 //                         [--repeat N] [--grid N]
+//   cluster_bench hops    [--volume FILE] [--materials FILE] [--size WxH]
+//                         [--workers 2,4,8]
 //
 // scaling: the in-process render on all cores, then an embedded cluster
 //   (root, display and N workers, real gRPC on 127.0.0.1) for each N. Each
@@ -26,6 +28,13 @@
 //   workers, frontal and 45 degree views, without and with balancing) and
 //   Table 2 (elapsed time for 2, 4 and 8 workers and the relative
 //   efficiency T_2W / ((n/2) T_nW)), plus active and CPU times.
+// hops: whether a ray should skip the slabs it only passes through. For N
+//   equal slabs, frontal and at 45 degrees, every ray of a frame is traced
+//   in this process slab by slab as the ring routes it (RingLayout); a hop
+//   is a ray handed to a neighbour, a transit hop one the slab it left did
+//   nothing to (no hit, no shadow ray, colour, transmittance, material and
+//   band as they came). Prints hops and transit hops per frame, their
+//   share, and the traversal steps the transits took.
 //
 // Defaults: cthead.nrrd in $TRANSTICK_DATA_DIR (else ../shared/data),
 // examples/cthead_materials.json, 400x400, azimuth 45, shadows on, 5 repeats.
@@ -55,6 +64,8 @@
 #include "transtick/camera.h"
 #include "transtick/image_io.h"
 #include "transtick/ray_codec.h"
+#include "transtick/ring_layout.h"
+#include "transtick/tracer.h"
 #include "transtick/render.h"
 #include "transtick/scene.h"
 #include "transtick/volume_io.h"
@@ -72,7 +83,7 @@ namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
 constexpr char kUsage[] =
-    "usage: cluster_bench scaling|forward|tables [--volume FILE] [--materials FILE]\n"
+    "usage: cluster_bench scaling|forward|tables|hops [--volume FILE] [--materials FILE]\n"
     "                     [--size WxH] [--azimuth DEG] [--repeat N] [--workers 1,2,4]\n"
     "                     [--rays N] [--grid N] [--threads N] [--balance MODE]\n";
 
@@ -104,7 +115,7 @@ std::string Parse(int argc, char** argv, Options* o) {
   if (argc < 2) return "a mode is required";
   o->mode = argv[1];
   if (o->mode == "--help" || o->mode == "-h") return "help";
-  if (o->mode != "scaling" && o->mode != "forward" && o->mode != "tables") {
+  if (o->mode != "scaling" && o->mode != "forward" && o->mode != "tables" && o->mode != "hops") {
     return "unknown mode '" + o->mode + "'";
   }
   for (int i = 2; i < argc; ++i) {
@@ -490,6 +501,81 @@ double Imbalance(const std::vector<double>& active) {
   return mean > 0 ? *std::max_element(active.begin(), active.end()) / mean : 0;
 }
 
+// ---------------------------------------------------------------- hops
+
+int Hops(const Options& o) {
+  auto setup = Prepare(o);
+  if (!setup.ok()) return Fail(setup.status());
+  const Scene& whole = *setup->scene;
+  std::printf("volume %s, %dx%d, shadows on, equal slabs; per frame\n", o.volume.c_str(), o.width,
+              o.height);
+  std::printf("%-8s %7s %10s %12s %8s %14s %12s\n", "view", "slabs", "hops", "transit hops",
+              "share", "transit steps", "all steps");
+  for (double azimuth : {0.0, 45.0}) {
+    const v1::View view = MakeView(o, azimuth);
+    auto camera = Camera::Create(*ToCameraSpec(view), setup->extent);
+    if (!camera.ok()) return Fail(camera.status());
+    const RenderSettings settings = ToRenderSettings(view);
+    for (int n : o.workers) {
+      const int planes = whole.dims()[1];
+      if (n < 1 || n > planes) continue;
+      std::vector<int> cuts;
+      for (int i = 0; i <= n; ++i) cuts.push_back(static_cast<int>(int64_t{planes} * i / n));
+      const RingLayout layout(cuts, whole.dims(), whole.spacing(), *camera);
+      std::vector<Scene> slabs;
+      std::vector<Tracer> tracers;
+      slabs.reserve(n);
+      for (int i = 0; i < n; ++i) slabs.push_back(whole.Slab(cuts[i], cuts[i + 1]));
+      for (const Scene& sc : slabs) tracers.emplace_back(sc, settings, *camera);
+      std::vector<std::vector<RayDescriptor>> queues(n);
+      for (int i = 0; i < n; ++i)
+        for (int py = 0; py < camera->height(); ++py)
+          for (int px = 0; px < camera->width(); ++px) {
+            RayDescriptor ray;
+            if (layout.Primary(i, px, py, 0, 1, tracers[i], &ray) ==
+                RingLayout::PrimaryRole::kTrace) {
+              queues[i].push_back(ray);
+            }
+          }
+      uint64_t hops = 0, transit = 0, transit_steps = 0, steps = 0;
+      std::vector<RayDescriptor> spawned;
+      for (bool busy = true; busy;) {
+        busy = false;
+        for (int i = 0; i < n; ++i) {
+          std::vector<RayDescriptor> queue = std::move(queues[i]);
+          queues[i].clear();
+          for (RayDescriptor& ray : queue) {
+            busy = true;
+            const RayDescriptor before = ray;
+            spawned.clear();
+            Deposit deposit;
+            TraceCounters counters;
+            const Tracer::Outcome outcome = tracers[i].Trace(ray, spawned, deposit, counters);
+            steps += counters.segments;
+            for (const RayDescriptor& r : spawned) queues[i].push_back(r);
+            if (outcome != Tracer::Outcome::kLeftSlab) continue;
+            const RingLayout::Hop hop = layout.Route(i, ray.cell);
+            if (hop == RingLayout::Hop::kFinished) continue;
+            ++hops;
+            if (spawned.empty() && counters.surface_hits == 0 && ray.color == before.color &&
+                ray.transmittance == before.transmittance && ray.material == before.material &&
+                ray.band == before.band) {
+              ++transit;
+              transit_steps += counters.segments;
+            }
+            queues[RingLayout::Neighbour(i, hop)].push_back(ray);
+          }
+        }
+      }
+      std::printf("%-8s %7d %10llu %12llu %7.1f%% %14llu %12llu\n", azimuth == 0 ? "frontal" : "45 deg",
+                  n, static_cast<unsigned long long>(hops), static_cast<unsigned long long>(transit),
+                  hops ? 100.0 * transit / hops : 0.0, static_cast<unsigned long long>(transit_steps),
+                  static_cast<unsigned long long>(steps));
+    }
+  }
+  return 0;
+}
+
 int Tables(const Options& o) {
   auto setup = Prepare(o);
   if (!setup.ok()) return Fail(setup.status());
@@ -602,6 +688,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   if (options.mode == "forward") return transtick::Forward(options);
+  if (options.mode == "hops") return transtick::Hops(options);
   if (options.mode == "scaling") return transtick::Scaling(options);
   return transtick::Tables(options);
 }
