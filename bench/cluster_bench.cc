@@ -567,10 +567,11 @@ int Hops(const Options& o) {
           }
         }
       }
-      std::printf("%-8s %7d %10llu %12llu %7.1f%% %14llu %12llu\n", azimuth == 0 ? "frontal" : "45 deg",
-                  n, static_cast<unsigned long long>(hops), static_cast<unsigned long long>(transit),
-                  hops ? 100.0 * transit / hops : 0.0, static_cast<unsigned long long>(transit_steps),
-                  static_cast<unsigned long long>(steps));
+      using ull = unsigned long long;
+      std::printf("%-8s %7d %10llu %12llu %7.1f%% %14llu %12llu\n",
+                  azimuth == 0 ? "frontal" : "45 deg", n, static_cast<ull>(hops),
+                  static_cast<ull>(transit), hops ? 100.0 * transit / hops : 0.0,
+                  static_cast<ull>(transit_steps), static_cast<ull>(steps));
     }
   }
   return 0;

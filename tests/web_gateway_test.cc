@@ -8,6 +8,10 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -190,6 +194,27 @@ class WebGatewayTest : public ::testing::Test {
   std::unique_ptr<WebGateway> gateway_;
   std::unique_ptr<httplib::Client> http_;
 };
+
+// A gateway destroyed at once after it started used to leave httplib's
+// listening thread in accept() for ever (its stop() does nothing before the
+// loop runs), and the destructor waiting on it: the test hung now and then.
+// A watchdog fails it instead of letting it hang.
+TEST_F(WebGatewayTest, StopsRightAfterItStarts) {
+  std::atomic<bool> done{false};
+  std::thread watchdog([&] {
+    for (int i = 0; i < 600 && !done; ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+    if (!done) {
+      std::fprintf(stderr, "a gateway did not stop within 60 s of starting\n");
+      std::abort();
+    }
+  });
+  for (int i = 0; i < 200; ++i) StartGateway({});
+  gateway_.reset();
+  done = true;
+  watchdog.join();
+}
 
 TEST_F(WebGatewayTest, FramesAreTheInProcessRenderAndTheNewestCameraWins) {
   const std::string id = Open(Camera(30));

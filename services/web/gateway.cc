@@ -6,6 +6,7 @@
 #include <spdlog/spdlog.h>
 
 #include <atomic>
+#include <chrono>
 #include <cstring>
 #include <deque>
 #include <fstream>
@@ -811,7 +812,23 @@ absl::Status WebGateway::Impl::Start() {
     return absl::UnavailableError(absl::StrCat("cannot bind ", options_.listen));
   }
   port_ = port;
-  thread_ = std::thread([&http] { http.listen_after_bind(); });
+  // httplib's stop() does nothing until the listening thread has begun its
+  // loop: a gateway destroyed right after it started left that thread in
+  // accept() for ever, and its destructor waiting on it (seen in
+  // web_gateway_test). So the gateway is up only once the loop runs.
+  auto listened = std::make_shared<std::atomic<bool>>(false);
+  thread_ = std::thread([&http, listened] {
+    http.listen_after_bind();
+    *listened = true;
+  });
+  while (!http.is_running() && !*listened) {
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
+  if (!http.is_running()) {
+    thread_.join();
+    return absl::UnavailableError(absl::StrCat("the gateway on ", options_.listen,
+                                               " stopped listening as it started"));
+  }
   reaper_ = std::thread([this] { Reap(); });
   return absl::OkStatus();
 }
