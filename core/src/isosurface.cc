@@ -147,132 +147,170 @@ RayAxes::RayAxes(const Vec3& d) : direction(d) {
 }
 
 CrossingWalk::CrossingWalk(const Scene& scene, const Bands& bands, const Vec3& origin,
-                           const RayAxes& axes, double t0, double t1, int band)
+                           const RayAxes& axes, double t0, double t1, int band,
+                           const WalkWork& work)
     : scene_(&scene),
       bands_(&bands),
+      grid_(scene.field().empty() ? nullptr : &scene.field()),
+      work_(work),
       origin_(origin),
       dir_(axes.dir),
       inv_(axes.inv),
       step_(axes.step),
+      octant_(BrickMap::OctantOf(axes.step.data())),
       t1_(t1),
-      band_(band),
       t_(t0) {
-  const Vec3 start = origin + axes.direction * t0;
-  double moves = 0;
+  SetBand(band);
+  start_ = band < 0;
   for (int a = 0; a < 3; ++a) {
-    moves += std::abs(dir_[a]);
-    // The cell of the field holding the start: corners at voxel centres
-    // base + 0.5 and base + 1.5; base runs from -1 to dims - 1 inside the
-    // volume (the half cells at the faces). Clamped only against overflow:
-    // beyond the faces the corners clamp as the field does.
-    base_[a] = FloorClamped(start[a] - 0.5, -(1 << 30), 1 << 30);
+    // The face ahead of cell c and the one behind it: moving up, faces c
+    // and c - 1; moving down, c - 1 and c.
+    ahead_[a] = step_[a] < 0 ? -1 : 0;
+    behind_[a] = step_[a] < 0 ? 0 : -1;
   }
-  for (int a = 0; a < 3; ++a) {
-    if (step_[a] == 0) {
-      enter_[a] = -std::numeric_limits<double>::infinity();
-      leave_[a] = std::numeric_limits<double>::infinity();
-    } else {
-      enter_[a] = PlaneTime(a, step_[a] > 0 ? base_[a] : base_[a] + 1);
-      leave_[a] = PlaneTime(a, step_[a] > 0 ? base_[a] + 1 : base_[a]);
+  if (grid_) {
+    grid_labels_ = grid_->labels();
+    grid_group_band_ = grid_->group_bands();
+    grid_reach_ = grid_->reach();
+    grid_first_ = {0, grid_->row_begin(), 0};
+    grid_count_ = grid_->cells();
+    const auto& n = grid_->cells();
+    const auto& g = grid_->groups();
+    const ptrdiff_t label_stride[3] = {1, n[0], ptrdiff_t{n[0]} * n[1]};
+    const ptrdiff_t group_stride[3] = {1, g[0], ptrdiff_t{g[0]} * g[1]};
+    for (int a = 0; a < 3; ++a) {
+      label_step_[a] = step_[a] * label_stride[a];
+      group_step_[a] = step_[a] * group_stride[a];
     }
   }
   // The cells a ray can cross in [t0, t1): one more per unit it moves
   // along each axis, and a few for the ends.
+  const double moves = std::abs(dir_[0]) + std::abs(dir_[1]) + std::abs(dir_[2]);
   const double span = t1 - t0;
-  max_cells_ = 4 + static_cast<int>(span > 0 ? std::min(span * moves, 1e7) : 0);
-  // An empty segment (a ray through an edge or a corner of its column)
-  // holds no crossing, but a walk extended from it must go on as one begun
-  // at t0 with the new end would: done at its end, with no cell entered.
-  at_end_ = !(t0 < t1);
-  done_ = at_end_ || !EnterCell();
-}
-
-bool CrossingWalk::EnterCell() {
-  for (;;) {
-    if (++cells_ > max_cells_) return false;
-    // The cell's span along the ray: the last of the entry times of the
-    // axes the ray moves on, the first of their exit times (the lowest axis
-    // on a tie, so that every node takes the same path).
-    const double t_in = std::max({enter_[0], enter_[1], enter_[2]});
-    int exit_axis = 0;
-    if (leave_[1] < leave_[exit_axis]) exit_axis = 1;
-    if (leave_[2] < leave_[exit_axis]) exit_axis = 2;
-    const double t_out = leave_[exit_axis];
-    if (step_[exit_axis] == 0) return false;  // a ray along no axis
-    t_in_ = t_in;
-    t_out_ = t_out;
-    exit_axis_ = exit_axis;
-    const double lo = std::max(t_in, t_), hi = std::min(t_out, t1_);
-    // A cell the ray only touches at an edge or a corner (t_in = t_out)
-    // holds no root of its own; the walk goes on through it.
-    if (t_in < t_out && lo < hi) {
-      scene_->Corners(base_[0], base_[1], base_[2], corners_.data());
-      // Branch-free (minss, maxss): which corner is least is random.
-      float mn = corners_[0], mx = corners_[0];
-      for (int k = 1; k < 8; ++k) {
-        mn = corners_[k] < mn ? corners_[k] : mn;
-        mx = corners_[k] > mx ? corners_[k] : mx;
-      }
-      lo_value_ = mn;
-      hi_value_ = mx;
-      hi_ = hi;
-      loaded_ = true;
-      solved_ = false;
-      cache_[0].edge = cache_[1].edge = -1;
-      last_edge_ = -1;
-      return true;
+  max_steps_ = 4 + static_cast<int>(span > 0 ? std::min(span * moves, 1e7) : 0);
+  // The cell the ray is in at t0: every face crossed before t0 crossed.
+  // Its span begins at the last of its entry faces, the time a walk from
+  // earlier would have entered it.
+  t_in_ = -std::numeric_limits<double>::infinity();
+  for (int a = 0; a < 3; ++a) {
+    if (step_[a] == 0) {
+      constexpr double kFar = 1 << 30;
+      c_[a] = static_cast<int>(std::floor(std::clamp(origin_[a] + 0.5, -kFar, kFar)));
+      leave_[a] = std::numeric_limits<double>::infinity();
+    } else {
+      t_in_ = std::max(t_in_, Land<false>(a, t0, &c_[a], &leave_[a]));
     }
-    loaded_ = false;
-    if (t_out >= t1_) {
-      at_end_ = true;
-      return false;
-    }
-    Step(exit_axis);
   }
+  SetExit();
 }
 
-void CrossingWalk::Step(int a) {
-  // Each time from its plane between voxel centres, never by adding up
-  // steps: the entry plane is the exit plane the ray just crossed.
-  base_[a] += step_[a];
-  enter_[a] = leave_[a];
-  leave_[a] = PlaneTime(a, step_[a] > 0 ? base_[a] + 1 : base_[a]);
+template <bool kInclusive>
+TRANSTICK_INLINE double CrossingWalk::Land(int a, double t, int* cell, double* leave_time) const {
+  // The cell holding the point, then corrected by the face times
+  // themselves, which rounding may put on the other side of t (by far less
+  // than a cell: Tracer::Validate keeps origins within 1e9 voxels).
+  constexpr double kFar = 1 << 30;  // beyond any volume; no overflow in c + 1
+  const double p = origin_[a] + dir_[a] * t + 0.5;
+  int c = static_cast<int>(std::floor(p > -kFar ? (p < kFar ? p : kFar) : -kFar));  // NaN: -kFar
+  auto crossed = [t](double tk) { return kInclusive ? tk <= t : tk < t; };
+  double leave = FaceTime(a, c + ahead_[a]);
+  double enter = FaceTime(a, c + behind_[a]);
+  if (crossed(leave)) {
+    c += step_[a];
+    enter = leave;
+    leave = FaceTime(a, c + ahead_[a]);
+  } else if (!crossed(enter)) {
+    c -= step_[a];
+    leave = enter;
+    enter = FaceTime(a, c + behind_[a]);
+  }
+  *cell = c;
+  *leave_time = leave;
+  return enter;
+}
+
+TRANSTICK_INLINE void CrossingWalk::SetExit() {
+  // The first of the exit times (the lowest axis on a tie, so that every
+  // node takes the same path).
+  int e = 0;
+  if (leave_[1] < leave_[e]) e = 1;
+  if (leave_[2] < leave_[e]) e = 2;
+  exit_axis_ = e;
+  t_out_ = leave_[e];
+}
+
+TRANSTICK_INLINE void CrossingWalk::Step() {
+  // Each time from its plane, never by adding up steps. The new cell is
+  // entered across the face just left, so its span begins there: that is
+  // the last of its entry faces, as a walk begun in it finds.
+  const int a = exit_axis_;
+  t_in_ = t_out_;
+  c_[a] += step_[a];
+  leave_[a] = FaceTime(a, c_[a] + ahead_[a]);
+  SetExit();
+  loaded_ = false;
+  if (work_.planes) Count(c_[1], work_.step);
+}
+
+TRANSTICK_INLINE void CrossingWalk::Count(int y, uint64_t units) {
+  work_.planes[std::clamp(y, work_.y_begin, work_.y_end - 1) - work_.y_begin] += units;
+}
+
+void CrossingWalk::Load() {
+  scene_->Corners(c_[0] - 1, c_[1] - 1, c_[2] - 1, corners_.data());
+  // Branch-free (minss, maxss): which corner is least is random.
+  float mn = corners_[0], mx = corners_[0];
+  for (int k = 1; k < 8; ++k) {
+    mn = corners_[k] < mn ? corners_[k] : mn;
+    mx = corners_[k] > mx ? corners_[k] : mx;
+  }
+  lo_value_ = mn;
+  hi_value_ = mx;
+  loaded_ = true;
+  solved_ = false;
+  cache_[0].edge = cache_[1].edge = -1;
+  last_edge_ = -1;
+  ++loads_;
+  if (work_.planes) Count(c_[1], work_.cell);
+}
+
+int CrossingWalk::StartBand() {
+  // The field at the ray's point, from the cell the walk is in (the point
+  // kept in it against rounding), in double.
+  if (grid_ && grid_->Holds(c_[0], c_[1], c_[2])) {
+    const uint8_t label = grid_->Label(c_[0], c_[1], c_[2]);
+    if (label != FieldGrid::kMixed) return label;
+  }
+  CellCorners k;
+  scene_->Corners(c_[0] - 1, c_[1] - 1, c_[2] - 1, k.data());
+  double f[3];
+  for (int a = 0; a < 3; ++a) {
+    f[a] = std::clamp(origin_[a] + dir_[a] * t_ - (c_[a] - 0.5), 0.0, 1.0);
+  }
+  double v = 0;
+  for (int i = 0; i < 8; ++i) {
+    v += (i & 1 ? f[0] : 1 - f[0]) * (i & 2 ? f[1] : 1 - f[1]) * (i & 4 ? f[2] : 1 - f[2]) * k[i];
+  }
+  int band = 0;
+  for (float e : bands_->edges()) band += e <= v;
+  return band;
 }
 
 void CrossingWalk::Extend(double new_t1) {
   if (!(new_t1 > t1_)) return;
-  const double old_t1 = t1_;
+  const double moves = (new_t1 - t1_) * (std::abs(dir_[0]) + std::abs(dir_[1]) + std::abs(dir_[2]));
+  max_steps_ += 4 + static_cast<int>(std::min(moves, 1e7));
   t1_ = new_t1;
-  const double moves = (new_t1 - old_t1) * (std::abs(dir_[0]) + std::abs(dir_[1]) + std::abs(dir_[2]));
-  max_cells_ += 4 + static_cast<int>(std::min(moves, 1e7));
-  if (!done_) {
+  if (!at_end_) return;
+  // The walk ended in its current cell: that cell's part grows. Its roots,
+  // once read, are kept (one may have been taken already).
+  at_end_ = done_ = false;
+  if (loaded_) {
     hi_ = std::min(t_out_, t1_);
-  } else if (at_end_) {
-    done_ = false;
-    at_end_ = false;
-    if (loaded_ && old_t1 < t_out_) {
-      // The current cell goes on into the new part: its roots up to the
-      // new end become eligible.
-      hi_ = std::min(t_out_, t1_);
-    } else if (loaded_) {
-      done_ = !AdvanceCell();
-    } else {
-      // The same cell again, now with a part before the new end (none yet
-      // when the walk began empty).
-      if (cells_ > 0) --cells_;
-      done_ = !EnterCell();
-    }
+    state_ = State::kRoots;
+  } else {
+    state_ = State::kExamine;
   }
-}
-
-bool CrossingWalk::AdvanceCell() {
-  if (t_out_ >= t1_) {
-    at_end_ = true;
-    return false;
-  }
-  loaded_ = false;
-  Step(exit_axis_);
-  return EnterCell();
 }
 
 const CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
@@ -286,8 +324,8 @@ const CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
     // far the ray's origin lies; and its Bernstein coefficients on
     // [0, span], whose hull holds the cubic there.
     const Vec3 p = origin_ + Vec3{dir_[0], dir_[1], dir_[2]} * t_in_;
-    const std::array<double, 3> entry = {p.x - (base_[0] + 0.5), p.y - (base_[1] + 0.5),
-                                         p.z - (base_[2] + 0.5)};
+    const std::array<double, 3> entry = {p.x - (c_[0] - 0.5), p.y - (c_[1] - 0.5),
+                                         p.z - (c_[2] - 0.5)};
     cubic_ = CellCubic(corners_, entry, dir_, 0);
     const double p1 = cubic_.c * span, p2 = cubic_.b * span * span,
                  p3 = cubic_.a * span * span * span;
@@ -325,33 +363,210 @@ std::optional<std::pair<double, int>> CrossingWalk::Candidate(int edge, bool up)
   return std::nullopt;
 }
 
-std::optional<Crossing> CrossingWalk::Next() {
+std::optional<Crossing> CrossingWalk::NextRoot() {
+  // Band b lies between edge b - 1 below and edge b above. An edge the
+  // corners do not straddle (lo < e <= hi) is not crossed in this cell.
   const std::vector<float>& edges = bands_->edges();
-  while (!done_) {
-    // Band b lies between edge b - 1 below and edge b above. An edge the
-    // corners do not straddle (lo < e <= hi) is not crossed in this cell.
-    const int down = band_ - 1, up = band_;
-    std::optional<std::pair<double, int>> best;
-    bool best_up = false;
-    if (down >= 0 && edges[down] > lo_value_ && edges[down] <= hi_value_) {
-      best = Candidate(down, false);
-    }
-    if (up < static_cast<int>(edges.size()) && edges[up] > lo_value_ && edges[up] <= hi_value_) {
-      auto c = Candidate(up, true);
-      if (c && (!best || c->first < best->first)) best = c, best_up = true;
-    }
-    // A root on the cell's far plane is the cell's; one at t1 is the next
-    // segment's.
-    if (best && (best->first < hi_ || (best->first == hi_ && hi_ < t1_))) {
-      t_ = best->first;
-      last_edge_ = best_up ? up : down;
-      last_index_ = best->second;
-      band_ = best_up ? Bands::Above(up) : Bands::Below(down);
-      return Crossing{t_, band_};
-    }
-    done_ = !AdvanceCell();
+  const int down = band_ - 1, up = band_;
+  std::optional<std::pair<double, int>> best;
+  bool best_up = false;
+  if (down >= 0 && down < static_cast<int>(edges.size()) && edges[down] > lo_value_ &&
+      edges[down] <= hi_value_) {
+    best = Candidate(down, false);
+  }
+  if (up >= 0 && up < static_cast<int>(edges.size()) && edges[up] > lo_value_ &&
+      edges[up] <= hi_value_) {
+    auto c = Candidate(up, true);
+    if (c && (!best || c->first < best->first)) best = c, best_up = true;
+  }
+  // A root on the cell's far face is the cell's; one at t1 is the next
+  // walk's.
+  if (best && (best->first < hi_ || (best->first == hi_ && hi_ < t1_))) {
+    t_ = best->first;
+    last_edge_ = best_up ? up : down;
+    last_index_ = best->second;
+    SetBand(best_up ? Bands::Above(up) : Bands::Below(down));
+    return Crossing{t_, band_, true};
   }
   return std::nullopt;
+}
+
+std::optional<Crossing> CrossingWalk::Next() {
+  if (start_) {
+    start_ = false;
+    SetBand(StartBand());
+    return Crossing{t_, band_, false};
+  }
+  while (!done_) {
+    if (state_ == State::kRoots) {
+      if (auto c = NextRoot()) return c;
+      state_ = State::kLeave;
+    }
+    if (state_ == State::kLeave) {
+      if (t_out_ >= t1_) {
+        at_end_ = done_ = true;
+        break;
+      }
+      if (++steps_ > max_steps_) {
+        truncated_ = done_ = true;
+        break;
+      }
+      Step();
+      state_ = State::kExamine;
+    }
+    if (auto c = Scan()) return c;
+  }
+  return std::nullopt;
+}
+
+std::optional<Crossing> CrossingWalk::Scan() {
+  // The walk's state in locals while it moves (written back whenever it
+  // stops), so that it stays in registers.
+  std::array<int, 3> c = c_;
+  double leave[3] = {leave_[0], leave_[1], leave_[2]};
+  double t_in = t_in_, t_out = t_out_;
+  int exit = exit_axis_;
+  int steps = steps_;
+  auto stop = [&] {
+    c_ = c;
+    for (int a = 0; a < 3; ++a) leave_[a] = leave[a];
+    t_in_ = t_in;
+    t_out_ = t_out;
+    exit_axis_ = exit;
+    steps_ = steps;
+  };
+  auto set_exit = [&] {
+    exit = 0;
+    if (leave[1] < leave[exit]) exit = 1;
+    if (leave[2] < leave[exit]) exit = 2;
+    t_out = leave[exit];
+  };
+  const FieldGrid* grid = grid_;
+  // While the cell is in the grid: its label's index and its group's.
+  size_t li = 0, gi = 0;
+  bool held = false;
+  auto locate = [&] {
+    held = grid && grid->Holds(c[0], c[1], c[2]);
+    if (held) {
+      li = grid->Index(c[0], c[1], c[2]);
+      gi = grid->GroupIndex(c[0], c[1], c[2]);
+    }
+  };
+  locate();
+  for (;;) {
+    // The cell's part of [t0, t1): [from, to), and its far face when that
+    // lies before t1. A cell the ray only touches at an edge or a corner
+    // (t_in = t_out) has none.
+    const double from = std::max(t_in, t_), to = std::min(t_out, t1_);
+    bool mixed = true;
+    if (held) {
+      const int band = label_band_;
+      int r;
+      if (grid_group_band_[gi] == band && (r = grid_reach_[8 * gi + octant_]) > 0) {
+        // A box of groups of the ray's band ahead (its reach toward the
+        // ray's octant): nothing in it. On past it, or to t1 when it
+        // reaches that far. (A box of one group holds a few cells: they
+        // are stepped.)
+        if (++steps > max_steps_) {
+          stop();
+          truncated_ = done_ = true;
+          return std::nullopt;
+        }
+        // The face it leaves by (cells [lo, hi) lie between faces lo - 1
+        // and hi - 1), the lowest axis on a tie.
+        double t = std::numeric_limits<double>::infinity();
+        int out = 0, face = 0;
+        for (int a = 0; a < 3; ++a) {
+          if (step_[a] == 0) continue;
+          const int g = (c[a] - grid_first_[a]) >> 1;
+          const int f = grid_first_[a] + (step_[a] > 0 ? std::min((g + r + 1) << 1, grid_count_[a]) - 1
+                                                       : (std::max(g - r, 0) << 1) - 1);
+          const double ta = FaceTime(a, f);
+          if (ta < t) t = ta, out = a, face = f;
+        }
+        if (!(t < t1_)) {
+          stop();
+          at_end_ = done_ = true;
+          return std::nullopt;
+        }
+        // Every face crossed up to t, the box's own included: the cell a
+        // walk stepping cell by cell would be in after leaving the box,
+        // entered at t.
+        for (int a = 0; a < 3; ++a) {
+          if (a == out) {
+            c[a] = face - ahead_[a] + step_[a];
+            leave[a] = FaceTime(a, c[a] + ahead_[a]);
+          } else if (step_[a] != 0) {
+            Land<true>(a, t, &c[a], &leave[a]);
+          }
+        }
+        t_in = t;
+        set_exit();
+        ++jumps_;
+        if (work_.planes) Count(c[1], work_.step);
+        locate();
+        continue;
+      }
+      const uint8_t label = grid_labels_[li];
+      if (label == band) {
+        mixed = false;  // nothing to find here
+      } else if (label != FieldGrid::kMixed) {
+        mixed = false;
+        if (t_in < t_out && from < to) {
+          // All of one band, not the ray's: the ray takes it here.
+          stop();
+          SetBand(label);
+          t_ = from;
+          last_edge_ = -1;
+          state_ = State::kLeave;
+          return Crossing{from, band_, false};
+        }
+      }
+    }
+    if (mixed && t_in < t_out && (from < to || (from == t_out && t_out < t1_))) {
+      // A cell whose roots to look for: the walk stops only at one.
+      c_ = c;
+      t_in_ = t_in;
+      t_out_ = t_out;
+      Load();
+      hi_ = to;
+      if (auto crossing = NextRoot()) {
+        stop();
+        state_ = State::kRoots;
+        return crossing;
+      }
+    }
+    // On to the next cell, across the face the ray leaves by: its span
+    // begins there, the last of its entry faces, as a walk begun in it
+    // finds. Each time from its plane, never by adding up steps.
+    if (t_out >= t1_) {
+      stop();
+      loaded_ = mixed && loaded_;
+      at_end_ = done_ = true;
+      return std::nullopt;
+    }
+    if (++steps > max_steps_) {
+      stop();
+      truncated_ = done_ = true;
+      return std::nullopt;
+    }
+    const int a = exit;
+    t_in = t_out;
+    c[a] += step_[a];
+    leave[a] = FaceTime(a, c[a] + ahead_[a]);
+    set_exit();
+    loaded_ = false;
+    if (held) {
+      // Into the next group when the new cell is its first along a.
+      const int local = c[a] - grid_first_[a];
+      li += label_step_[a];
+      if (((local ^ ahead_[a]) & 1) == 0) gi += group_step_[a];
+      held = static_cast<unsigned>(local) < static_cast<unsigned>(grid_count_[a]);
+    } else {
+      locate();
+    }
+    if (work_.planes) Count(c[1], work_.step);
+  }
 }
 
 }  // namespace transtick

@@ -64,7 +64,7 @@ template <typename Plane>
 void Filter3(const Volume& v, Plane plane) {
   const int nx = v.dims[0], ny = v.dims[1], nz = v.dims[2];
   const size_t area = static_cast<size_t>(nx) * ny;
-  // r = pick(pick(r, a) , b) over rows, with a or b absent (null).
+  // r = pick(pick(r, a), b) over rows, with a or b absent (null).
   auto row = [nx](const float* l, const float* h, const float* la, const float* ha,
                   const float* lb, const float* hb, float* lo, float* hi) {
     if (la && lb) {
@@ -133,197 +133,6 @@ void Filter3(const Volume& v, Plane plane) {
 
 }  // namespace
 
-void BrickMap::SetDims(std::array<int, 3> dims) {
-  for (int a = 0; a < 3; ++a) {
-    bdims_[a] = (dims[a] + kBrick - 1) >> kShift;
-    cdims_[a] = bdims_[a] * (kBrick / 2);
-    cinside_[a] = (dims[a] + 1) / 2;
-  }
-  bricks_.assign(static_cast<size_t>(bdims_[0]) * bdims_[1] * bdims_[2], 0);
-  cells_.assign(static_cast<size_t>(cdims_[0]) * cdims_[1] * cdims_[2], 0);
-}
-
-BrickMap BrickMap::Build(std::span<const uint8_t> labels, std::array<int, 3> dims,
-                         bool uniform_materials) {
-  BrickMap b;
-  b.SetDims(dims);
-  // The first voxel seen fixes a cell's material, any other makes it mixed;
-  // without uniform materials every voxel that is not void does. A cell with
-  // no voxel inside the volume stays void.
-  std::vector<uint8_t> seen(b.cells_.size(), 0);
-  size_t i = 0;
-  for (int z = 0; z < dims[2]; ++z) {
-    for (int y = 0; y < dims[1]; ++y) {
-      const size_t row = b.CellIndex(0, y, z);
-      for (int x = 0; x < dims[0]; ++x, ++i) {
-        const size_t k = row + (x >> 1);
-        const uint8_t m = uniform_materials || labels[i] == 0 ? labels[i] : kMixed;
-        if (!seen[k]) {
-          seen[k] = 1;
-          b.cells_[k] = m;
-        } else if (b.cells_[k] != m) {
-          b.cells_[k] = kMixed;
-        }
-      }
-    }
-  }
-  // A brick has the material its cells with voxels share, else it is mixed.
-  std::vector<uint8_t> brick_seen(b.bricks_.size(), 0);
-  b.ForEachBrickCell([&](size_t brick, size_t cell) {
-    if (!seen[cell]) return;
-    if (!brick_seen[brick]) {
-      brick_seen[brick] = 1;
-      b.bricks_[brick] = b.cells_[cell];
-    } else if (b.bricks_[brick] != b.cells_[cell]) {
-      b.bricks_[brick] = kMixed;
-    }
-  });
-  b.FillCells();
-  b.ComputeReach(0, dims[1]);
-  return b;
-}
-
-BrickMap BrickMap::ForSlab(int y_begin, int y_end) const {
-  BrickMap b;
-  b.bdims_ = bdims_;
-  b.bricks_ = bricks_;
-  b.cdims_ = cdims_;
-  b.cinside_ = cinside_;
-  b.cells_ = cells_;
-  b.ComputeReach(y_begin, y_end);
-  return b;
-}
-
-std::vector<uint8_t> BrickMap::bytes() const {
-  std::vector<uint8_t> out = bricks_;
-  ForEachBrickCell([&](size_t brick, size_t cell) {
-    if (bricks_[brick] == kMixed) out.push_back(cells_[cell]);
-  });
-  return out;
-}
-
-uint8_t BrickMap::MaxMaterial() const {
-  uint8_t most = 0;
-  for (uint8_t m : cells_) {
-    if (m != kMixed) most = std::max(most, m);
-  }
-  return most;
-}
-
-void BrickMap::FillCells() {
-  // The cells of uniform bricks have the brick's material.
-  ForEachBrickCell([&](size_t brick, size_t cell) {
-    if (bricks_[brick] != kMixed) cells_[cell] = bricks_[brick];
-  });
-}
-
-void BrickMap::ComputeReach(int y_begin, int y_end) {
-  // The rows of cells that hold planes [y_begin, y_end).
-  row_begin_ = std::clamp(y_begin >> 1, 0, cdims_[1]);
-  rows_ = y_end > y_begin ? std::clamp((y_end + 1) >> 1, row_begin_, cdims_[1]) - row_begin_ : 0;
-  reach_cells_ = static_cast<size_t>(cdims_[0]) * rows_ * cdims_[2];
-  // For each octant, the largest uniform box at each cell by the classic
-  // largest-square recurrence in 3D: the box of side r + 1 with the cell at
-  // its corner is uniform when the cell is and the boxes of side r at its
-  // seven neighbours toward the octant are, in its material. One pass per
-  // octant, from the octant's far corner back. Cells past the volume's
-  // faces, and a border around the grid that keeps every neighbour in
-  // bounds, match anything with reach kMaxReach: the traversal clips its
-  // boxes to the volume.
-  const int nx = cdims_[0] + 2, ny = cdims_[1] + 2, nz = cdims_[2] + 2;
-  constexpr uint16_t kAny = 0xffff;
-  const size_t n = static_cast<size_t>(nx) * ny * nz;
-  std::vector<uint16_t> m(n, kAny);
-  auto index = [&](int x, int y, int z) { return (static_cast<size_t>(z) * ny + y) * nx + x; };
-  size_t k = 0;
-  for (int z = 1; z + 1 < nz; ++z)
-    for (int y = 1; y + 1 < ny; ++y)
-      for (int x = 1; x + 1 < nx; ++x, ++k) {
-        if (x <= cinside_[0] && y <= cinside_[1] && z <= cinside_[2]) m[index(x, y, z)] = cells_[k];
-      }
-  reach_.assign(8 * reach_cells_, 0);
-  // 16 bits like the materials, so that the loops over rows vectorise.
-  std::vector<uint16_t> r(n);
-  std::vector<uint16_t> rows(nx);  // the bound from the neighbours off the row
-  for (int octant = 0; octant < 8; ++octant) {
-    const int sx = octant & 1 ? -1 : 1, sy = octant & 2 ? -1 : 1, sz = octant & 4 ? -1 : 1;
-    std::fill(r.begin(), r.end(), static_cast<uint16_t>(kMaxReach));
-    // Toward the octant's far corner first: each cell after its neighbours.
-    // Rows (padded, as y below) behind the kept ones toward the octant are
-    // not needed.
-    const int first_row = row_begin_ + 1, last_row = row_begin_ + rows_;
-    for (int zi = 1; zi + 1 < nz; ++zi) {
-      const int z = sz > 0 ? nz - 1 - zi : zi;
-      for (int yi = 1; yi + 1 < ny; ++yi) {
-        const int y = sy > 0 ? ny - 1 - yi : yi;
-        if (sy > 0 ? y < first_row : y > last_row) break;
-        const size_t row = index(0, y, z);
-        // The six neighbours in the rows ahead along y and z, at x and at
-        // x + sx: simple loops over rows, which the compiler vectorises.
-        const uint16_t* __restrict mrow = &m[row];
-        uint16_t* __restrict bounds = rows.data();
-        for (int x = 1; x + 1 < nx; ++x) bounds[x] = mrow[x] == kMixed ? 0 : kMaxReach;
-        const size_t ahead[3] = {index(0, y + sy, z), index(0, y, z + sz), index(0, y + sy, z + sz)};
-        for (size_t a : ahead) {
-          for (int dx : {0, sx}) {
-            // Offsets from the row's start, never before the array's.
-            const uint16_t* __restrict mq = m.data() + a;
-            const uint16_t* __restrict rq = r.data() + a;
-            for (int x = 1; x + 1 < nx; ++x) {
-              // rq + 1 for a neighbour of the same material, kMaxReach for
-              // one past the faces, else 0, without branches (a cell past
-              // the faces itself gets a meaningless bound, never used).
-              const uint16_t same = static_cast<uint16_t>(-(mq[x + dx] == mrow[x]));
-              const uint16_t any = static_cast<uint16_t>(-(mq[x + dx] == kAny));
-              const uint16_t bound =
-                  static_cast<uint16_t>(((rq[x + dx] + 1) & same) | (kMaxReach & any));
-              bounds[x] = bounds[x] < bound ? bounds[x] : bound;
-            }
-          }
-        }
-        // The neighbour along the row, in order from the far end.
-        for (int xi = 1; xi + 1 < nx; ++xi) {
-          const int x = sx > 0 ? nx - 1 - xi : xi;
-          const size_t here = row + x, q = here + sx;
-          const uint16_t mine = m[here];
-          if (mine == kAny) continue;
-          const int bound = m[q] == kAny ? kMaxReach : (m[q] == mine ? r[q] + 1 : 0);
-          r[here] = static_cast<uint16_t>(std::min<int>(rows[x], bound));
-        }
-      }
-    }
-    uint8_t* out = reach_.data() + octant * reach_cells_;
-    k = 0;
-    for (int z = 1; z + 1 < nz; ++z)
-      for (int y = first_row; y <= last_row; ++y)
-        for (int x = 1; x + 1 < nx; ++x, ++k)
-          out[k] = m[index(x, y, z)] == kAny ? 0 : static_cast<uint8_t>(r[index(x, y, z)]);
-  }
-}
-
-absl::StatusOr<BrickMap> BrickMap::FromBytes(std::array<int, 3> dims, std::vector<uint8_t> bytes,
-                                             int y_begin, int y_end) {
-  BrickMap b;
-  b.SetDims(dims);
-  const size_t n = b.bricks_.size();
-  const size_t mixed =
-      bytes.size() < n ? 0 : static_cast<size_t>(std::count(bytes.begin(), bytes.begin() + n, kMixed));
-  const size_t want = n + 64 * mixed;
-  if (bytes.size() != want) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "brick map: ", bytes.size(), " bytes, expected ", bytes.size() < n ? n : want, " (", n,
-        " bricks", bytes.size() < n ? "" : absl::StrCat(", ", mixed, " mixed"), ")"));
-  }
-  std::copy(bytes.begin(), bytes.begin() + n, b.bricks_.begin());
-  const uint8_t* cells = bytes.data() + n;
-  b.ForEachBrickCell([&](size_t brick, size_t cell) {
-    if (b.bricks_[brick] == kMixed) b.cells_[cell] = *cells++;
-  });
-  b.FillCells();
-  b.ComputeReach(y_begin, y_end < 0 ? dims[1] : y_end);
-  return b;
-}
-
 std::vector<uint8_t> DvrVisibility(const Volume& volume, const TransferFunction& transfer) {
   // A fine table of "is alpha > 0 anywhere in this value bin", with a prefix
   // count so a [lo, hi] query is two lookups. Bins are conservative: a bin is
@@ -356,7 +165,9 @@ std::vector<uint8_t> DvrVisibility(const Volume& volume, const TransferFunction&
   const size_t area = static_cast<size_t>(volume.dims[0]) * volume.dims[1];
   Filter3(volume, [&](int z, const float* mn, const float* mx) {
     uint8_t* out = labels.data() + z * area;
-    for (size_t i = 0; i < area; ++i) out[i] = prefix[bin(mx[i]) + 1] - prefix[bin(mn[i])] > 0 ? 1 : 0;
+    for (size_t i = 0; i < area; ++i) {
+      out[i] = prefix[bin(mx[i]) + 1] - prefix[bin(mn[i])] > 0 ? 1 : 0;
+    }
   });
   return labels;
 }
@@ -484,6 +295,7 @@ absl::StatusOr<Scene> Scene::ForSurfaces(const Volume& volume,
   scene.scalar_y_begin_ = 0;
   scene.scalar_planes_ = volume.dims[1];
   scene.scalars_ = volume.values;
+  scene.BuildField();
   return scene;
 }
 
@@ -546,6 +358,7 @@ absl::StatusOr<Scene> Scene::FromParts(RenderMode mode, std::array<int, 3> dims,
   scene.bricks_ = std::move(bricks);
   scene.classification_ = std::move(classification);
   scene.transfer_ = std::move(transfer);
+  scene.BuildField();
   return scene;
 }
 
@@ -614,11 +427,25 @@ absl::StatusOr<Scene> Scene::Reslab(int y_begin, int y_end, const std::vector<st
                        s.scalar_y_begin_ + i));
     }
   }
+  s.BuildField();
   return s;
 }
 
+void Scene::BuildField() {
+  field_ = FieldGrid();
+  if (mode_ != RenderMode::kSurfaces || classification_.surface != SurfaceModel::kSmooth ||
+      y_begin() >= y_end()) {
+    return;
+  }
+  // Cell c spans [c - 0.5, c + 0.5] along y: cells y_begin .. y_end hold
+  // every point of the slab's planes.
+  field_ = FieldGrid::Build(scalars_, dims_, scalar_y_begin_, scalar_planes_, y_begin(),
+                            y_end() + 1, Bands(classification_));
+}
+
 size_t Scene::MemoryBytes() const {
-  return sticks_.MemoryBytes() + scalars_.size() * sizeof(float) + bricks_.MemoryBytes();
+  return sticks_.MemoryBytes() + scalars_.size() * sizeof(float) + bricks_.MemoryBytes() +
+         field_.MemoryBytes();
 }
 
 const char* RenderModeName(RenderMode mode) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "absl/strings/str_cat.h"
 #include "transtick/isosurface.h"
@@ -225,7 +226,9 @@ Tracer::Outcome Tracer::Trace(RayDescriptor& ray, std::vector<RayDescriptor>& sp
     counters.plane_work[ray.cell[1] - scene_.y_begin()] += kRayWork;
   }
   Outcome outcome;
-  if (ray.kind == RayKind::kShadow) {
+  if (smooth_) {
+    outcome = TraceSmooth(ray, spawned, counters);
+  } else if (ray.kind == RayKind::kShadow) {
     outcome = TraceShadow(ray, counters);
   } else if (scene_.mode() == RenderMode::kSurfaces) {
     outcome = TraceSurfaces(ray, spawned, counters);
@@ -316,96 +319,110 @@ bool Tracer::Shade(RayDescriptor& ray, uint8_t m, const Vec3& p, const Vec3& vie
   return ray.transmittance < settings_.min_transmittance;
 }
 
-bool Tracer::CrossingsOf(std::optional<CrossingWalk>& walk, const RayDescriptor& ray,
-                         const RayAxes& axes, const Segment& seg) const {
-  // A candidate segment right after another goes on with the same walk:
-  // the cell across the plane between them keeps its roots.
-  if (walk && walk->t1() == seg.t0) {
-    walk->Extend(seg.t1);
-    return false;
+Tracer::Outcome Tracer::TraceSmooth(RayDescriptor& ray, std::vector<RayDescriptor>& spawned,
+                                    TraceCounters& counters) const {
+  const int y_begin = scene_.y_begin(), y_end = scene_.y_end();
+  // A ray whose plane another slab holds goes on there (RingLayout::Route),
+  // as Walk sends it.
+  if (ray.cell[1] < y_begin || ray.cell[1] >= y_end) return Outcome::kLeftSlab;
+  const auto& dims = scene_.dims();
+  const RayAxes axes(ray.direction);
+  // The ray's part here: from t to where it leaves the volume, or the slab
+  // before that (each time from its plane).
+  double t_volume = std::numeric_limits<double>::infinity();
+  double t_slab = t_volume;
+  for (int a = 0; a < 3; ++a) {
+    if (axes.step[a] == 0) continue;
+    t_volume = std::min(t_volume, ((axes.step[a] > 0 ? dims[a] : 0) - ray.origin[a]) * axes.inv[a]);
   }
-  walk.emplace(scene_, bands_, ray.origin, axes, seg.t0, seg.t1, ray.band);
-  return true;
+  if (axes.step[1] > 0 && y_end < dims[1]) {
+    t_slab = (y_end - ray.origin.y) * axes.inv[1];
+  } else if (axes.step[1] < 0 && y_begin > 0) {
+    t_slab = (y_begin - ray.origin.y) * axes.inv[1];
+  }
+  const bool leaves_slab = t_slab < t_volume;
+  const double end = std::max(std::min(t_volume, t_slab), ray.t);
+  WalkWork work;
+  if (counters.plane_work) work = {counters.plane_work, y_begin, y_end, kSegmentWork, kCellWork};
+  CrossingWalk walk(scene_, bands_, ray.origin, axes, ray.t, end,
+                    ray.band == RayDescriptor::kNoBand ? -1 : ray.band, work);
+  const bool primary = ray.kind == RayKind::kPrimary;
+  const Vec3 view = Normalize(-(ray.direction / inv_spacing_));
+  const auto& materials = scene_.classification().materials;
+  bool finished = false;
+  while (auto c = walk.Next()) {
+    const uint16_t before = ray.band;
+    const uint8_t n = bands_.material(c->band);
+    ray.band = static_cast<uint16_t>(c->band);
+    if (n != 0 && n != ray.material) {
+      if (primary) {
+        // The exact hit, kept in its cell (and near the slab) against
+        // rounding. Its shadow ray starts right there, on the side the ray
+        // came from (the lit side: Light turns the normal toward the
+        // viewer), in the band it came from: the walk leaves that band only
+        // by an edge's next root. Where the band was not a root's (the
+        // ray's start, or after rounding), in the band found there.
+        const Vec3 p = HitPoint(ray, c->t, walk.cell());
+        const uint16_t light_band = c->root && before != RayDescriptor::kNoBand ? before : ray.band;
+        const std::array<int32_t, 3> at = {FloorClamped(p.x, 0, dims[0] - 1),
+                                           FloorClamped(p.y, y_begin, y_end - 1),
+                                           FloorClamped(p.z, 0, dims[2] - 1)};
+        finished = Shade(ray, n, p, view, at, 0, light_band, bands_.material(light_band), spawned,
+                         counters);
+      } else {
+        // A shadow ray dims by each material it enters.
+        ray.transmittance *= 1.0f - materials[n - 1].opacity;
+        if (ray.transmittance < settings_.min_transmittance) {
+          ray.transmittance = 0;
+          finished = true;
+        }
+      }
+    }
+    ray.material = n;
+    if (finished) break;
+  }
+  counters.segments += walk.cells();
+  if (walk.truncated()) {
+    ++counters.truncated;
+    return Outcome::kFinished;
+  }
+  if (finished || !leaves_slab) return Outcome::kFinished;
+  // Resumes on the neighbour at the plane: its walk begins in the cell this
+  // one is in there.
+  ray.t = end;
+  const Vec3 p = ray.origin + ray.direction * end;
+  ray.cell = {FloorClamped(p.x, 0, dims[0] - 1), axes.step[1] > 0 ? y_end : y_begin - 1,
+              FloorClamped(p.z, 0, dims[2] - 1)};
+  return Outcome::kLeftSlab;
 }
 
-void Tracer::CountCells(const CrossingWalk& walk, int plane, int& counted,
-                        TraceCounters& counters) {
-  // (An extended walk may count the cell it was in once more, or once less.)
-  if (counters.plane_work && walk.cells() > counted) {
-    counters.plane_work[plane] += static_cast<uint64_t>(walk.cells() - counted) * kCellWork;
+Vec3 Tracer::HitPoint(const RayDescriptor& ray, double t, const std::array<int, 3>& cell) const {
+  // In the cell of the field (c - 0.5 .. c + 0.5), the volume, and a
+  // quarter voxel of the slab: every plane a gradient there reads is
+  // stored.
+  const auto& dims = scene_.dims();
+  Vec3 p = ray.origin + ray.direction * t;
+  for (int a = 0; a < 3; ++a) {
+    double lo = std::max(cell[a] - 0.5, 0.0), hi = std::min(cell[a] + 0.5, double(dims[a]));
+    if (a == 1) {
+      lo = std::max(lo, scene_.y_begin() - 0.25);
+      hi = std::min(hi, scene_.y_end() + 0.25);
+    }
+    p[a] = std::max(lo, std::min(hi, p[a]));
   }
-  counted = walk.cells();
-}
-
-uint16_t Tracer::BandAt(const Vec3& p, const std::array<int32_t, 3>& cell, uint8_t label) const {
-  const float value = label == Classification::kCandidate ? Sample(p)
-                                                          : scene_.Scalar(cell[0], cell[1], cell[2]);
-  return static_cast<uint16_t>(bands_.Of(value));
+  return p;
 }
 
 Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescriptor>& spawned,
                                       TraceCounters& counters) const {
+  // The paper's voxel faces (smooth surfaces: TraceSmooth).
   Walker walker = MakeWalker(ray);
   const Vec3 view = Normalize(-(ray.direction / inv_spacing_));
-  std::optional<CrossingWalk> walk;  // through consecutive candidate segments
-  // For each walk (smooth surfaces only: from a zero vector it costs no division).
-  const RayAxes axes(smooth_ ? ray.direction : Vec3{0, 0, 0});
-  int counted = 0;                   // its cells in the work profile so far
   Outcome outcome;
   while (auto step = Walk(walker, &outcome, counters)) {
     const Segment& seg = step->seg;
     const std::array<int32_t, 3>& cell = step->cell;
     const uint8_t m = seg.material;
-    if (smooth_) {
-      // The ray's first segment, or a voxel whose material is not the
-      // band's (rounding at a crossing just before it): the band from the
-      // field here. Entering a material this way is a surface where the
-      // volume's faces clip it; its shadow ray starts at the same point, in
-      // that material (no root lies there to hit).
-      if (m != Classification::kCandidate) walk.reset();
-      if (ray.band == RayDescriptor::kNoBand ||
-          (m != Classification::kCandidate && m != bands_.material(ray.band))) {
-        const Vec3 p = ClampToCell(ray.origin + ray.direction * seg.t0, cell);
-        ray.band = BandAt(p, cell, m);
-        const uint8_t n = bands_.material(ray.band);
-        if (n != 0 && n != ray.material &&
-            Shade(ray, n, p, view, cell, 0, ray.band, n, spawned, counters)) {
-          ray.material = n;
-          return walker.Stop(ray, Outcome::kFinished);
-        }
-        ray.material = n;
-      }
-      if (m != Classification::kCandidate) continue;  // one band throughout
-      if (CrossingsOf(walk, ray, axes, seg)) counted = 0;
-      while (auto c = walk->Next()) {
-        const uint16_t before = ray.band;
-        const uint8_t n = bands_.material(c->band);
-        ray.band = static_cast<uint16_t>(c->band);
-        if (n != 0 && n != ray.material) {
-          // The exact hit, kept in the segment's column against rounding.
-          // Its shadow ray starts right there, on the side the ray came
-          // from (the lit side: Light turns the normal toward the viewer),
-          // in the band it came from: the walk leaves that band only by
-          // an edge's next root.
-          Vec3 p = ray.origin + ray.direction * c->t;
-          p.x = std::clamp(p.x, double(cell[0]), double(cell[0] + 1));
-          p.y = std::clamp(p.y, double(cell[1]), double(cell[1] + 1));
-          p.z = std::clamp(p.z, 0.0, double(scene_.dims()[2]));
-          const std::array<int32_t, 3> at = {cell[0], cell[1],
-                                             FloorClamped(p.z, 0, scene_.dims()[2] - 1)};
-          const bool finished = Shade(ray, n, p, view, at, 0, before, bands_.material(before),
-                                      spawned, counters);
-          ray.material = n;
-          if (finished) {
-            CountCells(*walk, cell[1] - walker.y_begin, counted, counters);
-            return walker.Stop(ray, Outcome::kFinished);
-          }
-        }
-        ray.material = n;
-      }
-      CountCells(*walk, cell[1] - walker.y_begin, counted, counters);
-      continue;
-    }
     if (m != 0 && m != ray.material) {
       // Start a voxel and a half toward the light: a shadow ray from the
       // face of a voxel-exact surface would otherwise hit the surface's own
@@ -428,52 +445,18 @@ Tracer::Outcome Tracer::TraceSurfaces(RayDescriptor& ray, std::vector<RayDescrip
 
 Tracer::Outcome Tracer::TraceShadow(RayDescriptor& ray, TraceCounters& counters) const {
   const auto& materials = scene_.classification().materials;
-  // Entering material n: true once the ray is dark enough to finish.
-  auto enter = [&](uint8_t n) {
-    ray.transmittance *= 1.0f - materials[n - 1].opacity;
-    if (ray.transmittance >= settings_.min_transmittance) return false;
-    ray.transmittance = 0;
-    return true;
-  };
   Walker walker = MakeWalker(ray);
-  std::optional<CrossingWalk> walk;
-  const RayAxes axes(smooth_ ? ray.direction : Vec3{0, 0, 0});
-  int counted = 0;
   Outcome outcome;
   while (auto step = Walk(walker, &outcome, counters)) {
     const uint8_t m = step->seg.material;
-    if (smooth_) {
-      // As in TraceSurfaces.
-      if (m != Classification::kCandidate) walk.reset();
-      if (ray.band == RayDescriptor::kNoBand ||
-          (m != Classification::kCandidate && m != bands_.material(ray.band))) {
-        const Vec3 p = ClampToCell(ray.origin + ray.direction * step->seg.t0, step->cell);
-        ray.band = BandAt(p, step->cell, m);
-        const uint8_t n = bands_.material(ray.band);
-        const bool dark = n != 0 && n != ray.material && enter(n);
-        ray.material = n;
-        if (dark) return walker.Stop(ray, Outcome::kFinished);
-      }
-      if (m != Classification::kCandidate) continue;
-      if (CrossingsOf(walk, ray, axes, step->seg)) counted = 0;
-      const int plane = step->cell[1] - walker.y_begin;
-      while (auto c = walk->Next()) {
-        const uint8_t n = bands_.material(c->band);
-        ray.band = static_cast<uint16_t>(c->band);
-        const bool dark = n != 0 && n != ray.material && enter(n);
-        ray.material = n;
-        if (dark) {
-          CountCells(*walk, plane, counted, counters);
-          return walker.Stop(ray, Outcome::kFinished);
-        }
-      }
-      CountCells(*walk, plane, counted, counters);
-      continue;
-    }
     if (m != 0 && m != ray.material) {
-      const bool dark = enter(m);
+      // Entering material m dims the ray; dark enough, it finishes.
+      ray.transmittance *= 1.0f - materials[m - 1].opacity;
       ray.material = m;
-      if (dark) return walker.Stop(ray, Outcome::kFinished);
+      if (ray.transmittance < settings_.min_transmittance) {
+        ray.transmittance = 0;
+        return walker.Stop(ray, Outcome::kFinished);
+      }
     }
     ray.material = m;
   }
@@ -581,7 +564,7 @@ Vec3f Tracer::Gradient(const Vec3& p) const {
               hz = static_cast<float>(0.5 * inv_spacing_.z);
   // Away from the volume's faces and the slab's last stored planes the 4^3
   // voxels read need no clamping: addressed from one pointer (the clamped
-  // reads cost a shaded point about 1,400 instructions).
+  // reads cost a shaded point about 1,700 instructions).
   const auto& dims = s.dims();
   if (x0 >= 1 && x0 + 2 < dims[0] && z0 >= 1 && z0 + 2 < dims[2] && y0 - 1 >= s.scalar_y_begin() &&
       y0 + 2 < s.scalar_y_end()) {

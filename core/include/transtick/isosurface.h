@@ -16,9 +16,12 @@
 #define TRANSTICK_ISOSURFACE_H_
 
 #include <array>
+#include <cstddef>
+#include <cstdint>
 #include <optional>
 
 #include "transtick/classification.h"
+#include "transtick/field_grid.h"
 #include "transtick/scene.h"
 #include "transtick/vec.h"
 
@@ -63,34 +66,6 @@ struct SideChange {
 // sequence of operations.
 int SideChanges(const RayCubic& g, double span, SideChange out[3]);
 
-// Where a ray's field changes band (classification.h, Bands): at t the
-// field crosses an interval edge and the ray enters `band`.
-struct Crossing {
-  double t;
-  int band;
-};
-
-// The crossings a ray meets in [t0, t1), in order, as the band it is in
-// changes: from band b the next crossing is the first root, at or after
-// where the ray is, of edge b - 1 going down or edge b going up (a value
-// exactly on an edge belongs to the band above, as in Bands::Of). The walk
-// goes through the cells of the field (corners at voxel centres, clamped at
-// the volume's faces, as Tracer::Sample reads it) that the ray crosses.
-//
-// Each cell's roots are those of its cubic over the cell's whole span
-// [t_in, t_out] along the ray (SideChanges): a function of the ray and the cell's eight samples
-// only, the same for every node and every segment that touches the cell.
-// So the crossings a ray meets do not depend on how its walk is cut into
-// segments or slabs, as long as each piece starts in the band the last
-// ended in.
-//
-//   CrossingWalk walk(scene, bands, origin, dir, t0, t1, band);
-//   while (auto c = walk.Next()) { ... c->t, c->band ... }
-//
-// A value type made per segment on the stack. Not thread-safe; the scene
-// and bands must outlive it.
-// REQUIRES: the scalar planes the cells touch are stored in `scene` (a
-// slab's own planes and one ghost plane each side), band < bands.size().
 // A ray's direction as a walk steps along it, made once per ray: per axis
 // the step (-1, 0 or +1), the component (0 on an axis the ray does not move
 // along, as MovesAlong says) and its reciprocal (0 there too).
@@ -102,67 +77,163 @@ struct RayAxes {
   std::array<double, 3> inv;
 };
 
+// Where a ray's band changes: at t the ray enters `band`. Most are roots,
+// where the field crosses an interval edge. The others (root false) take
+// the band the field has where the walk found the ray in another: at the
+// start of a ray that has no band yet, or in a cell all of one band that
+// is not the ray's (rounding at a crossing just before it).
+struct Crossing {
+  double t;
+  int band;
+  bool root = true;
+};
+
+// Where a walk adds its work, per plane of a slab (TraceCounters::plane_work
+// in tracer.h): `step` units per cell stepped into or box jumped, `cell`
+// more per cell whose corners it reads.
+struct WalkWork {
+  uint64_t* planes = nullptr;  // planes[y - y_begin]; null: not counted
+  int y_begin = 0;
+  int y_end = 0;
+  uint64_t step = 0;
+  uint64_t cell = 0;
+};
+
+// The crossings a ray meets in [t0, t1), in order, as the band it is in
+// changes: from band b the next crossing is the first root, at or after
+// where the ray is, of edge b - 1 going down or edge b going up (a value
+// exactly on an edge belongs to the band above, as in Bands::Of). The walk
+// goes through the cells of the field (field_grid.h: corners at voxel
+// centres, clamped at the volume's faces, as Tracer::Sample reads them)
+// that the ray crosses, in the order of the times it crosses their faces
+// (the lowest axis first on a tie), each time computed from its plane.
+//
+// Each cell's roots are those of its cubic over the cell's whole span
+// [t_in, t_out] along the ray (SideChanges): a function of the ray and the
+// cell's eight samples only. A root on a cell's far face is the cell's; one
+// at t1 is left to whoever walks on from t1. A walk begun at t (a new node,
+// a new segment) starts in the cell the walk from earlier would be in at
+// t: the one whose faces crossed before t are exactly the planes crossed
+// before t. So the crossings a ray meets do not depend on where its walk is
+// cut, as long as each piece starts in the band the last ended in. The
+// scene's FieldGrid only lets the walk jump boxes of cells of the ray's
+// band, where it would find nothing (field_grid.h).
+//
+//   CrossingWalk walk(scene, bands, origin, dir, t0, t1, band);
+//   while (auto c = walk.Next()) { ... c->t, c->band ... }
+//
+// A value type made per ray on the stack. Not thread-safe; the scene and
+// bands must outlive it.
+// REQUIRES: the scalar planes the cells touch are stored in `scene` (a
+// slab's own planes and one ghost plane each side), band < bands.size().
 class CrossingWalk {
  public:
+  // `band` is the band the ray is in at t0, or -1 when it has none yet:
+  // the first crossing is then the field's band at t0 (root false).
   CrossingWalk(const Scene& scene, const Bands& bands, const Vec3& origin, const Vec3& dir,
                double t0, double t1, int band)
       : CrossingWalk(scene, bands, origin, RayAxes(dir), t0, t1, band) {}
   // The same walk, with the ray's axes made once for all its walks.
   CrossingWalk(const Scene& scene, const Bands& bands, const Vec3& origin, const RayAxes& axes,
-               double t0, double t1, int band);
+               double t0, double t1, int band, const WalkWork& work = {});
 
   std::optional<Crossing> Next();
 
-  // Goes on past t1 to a new end: the crossings of [t1, new_t1) follow as
-  // a walk started at t1 in the band the last crossing entered would give
-  // them, but the cell the walk is in keeps its solved roots (consecutive
-  // segments of a ray share the cells across the planes between them).
-  // REQUIRES: new_t1 >= t1(), and every crossing before t1 was taken.
+  // Goes on past t1 to a new end, as a walk begun with that end would.
+  // REQUIRES: every crossing before t1 was taken.
   void Extend(double new_t1);
   double t1() const { return t1_; }
-  // The cells of the field the walk has entered so far.
-  int cells() const { return cells_; }
+
+  // The cell of the field the walk is in (per axis c, spanning [c - 0.5,
+  // c + 0.5]), and the cells stepped into, boxes jumped and cells whose
+  // corners were read so far.
+  const std::array<int, 3>& cell() const { return c_; }
+  int cells() const { return steps_; }
+  int jumps() const { return jumps_; }
+  int solved() const { return loads_; }
+  // Whether the walk stopped at its bound on steps before t1 (never, by
+  // the argument in docs/design.md, "Why every ray ends").
+  bool truncated() const { return truncated_; }
 
  private:
+  enum class State : uint8_t { kExamine, kRoots, kLeave };
   // The roots of one edge in the current cell, in increasing t.
   struct EdgeRoots {
     int edge = -1;
     int count = 0;
     SideChange at[3];  // t along the ray
   };
-  bool EnterCell();    // sets up the current cell; false when the walk is done
-  bool AdvanceCell();  // to the next cell; false when the walk is done
-  void Step(int axis);  // base_ one cell along `axis`, and its plane times
-  // When the ray crosses the plane between voxel centres k + 0.5.
-  double PlaneTime(int axis, int k) const { return (k + 0.5 - origin_[axis]) * inv_[axis]; }
+  // The time the ray crosses the plane through the voxel centres of index
+  // k on `axis`: the face between cells k and k + 1.
+  double FaceTime(int axis, int k) const { return (k + 0.5 - origin_[axis]) * inv_[axis]; }
+  // Puts the walk's cell on `axis` where it is at t, once every face
+  // crossed before t (at or before t, when kInclusive) has been crossed;
+  // returns the time of the face it entered that cell by.
+  template <bool kInclusive>
+  double Land(int axis, double t, int* cell, double* leave) const;
+  void SetExit();     // exit_axis_ and t_out_ from leave_
+  void Step();        // to the next cell, across the face the ray leaves by
+  // Examines the current cell and walks on, jumping boxes of the ray's
+  // band, to the first cell with something to do: a crossing into the band
+  // of a cell all of one band (returned), a cell whose roots to look for
+  // (read, state kRoots), or the end (done_).
+  std::optional<Crossing> Scan();
+  void Count(int y, uint64_t units);  // adds work at plane y (work_.planes set)
+  void Load();        // reads the current cell's corners
+  int StartBand();    // the field's band at t_
   const EdgeRoots& Roots(int edge);
   // The first root of `edge` going `up` at or after t_, past the root just
   // taken when it is this edge's.
   std::optional<std::pair<double, int>> Candidate(int edge, bool up);
+  std::optional<Crossing> NextRoot();
+  void SetBand(int band) {
+    band_ = band;
+    label_band_ = band >= 0 && band < FieldGrid::kMixed ? band : -1;
+  }
 
   const Scene* scene_;
   const Bands* bands_;
+  const FieldGrid* grid_;  // null when the scene has none: every cell is read
+  // The grid's arrays, where its cells begin (y: the first row) and how
+  // many there are per axis, and what a step along each axis adds to a
+  // cell's label index and to its group's.
+  const uint8_t* grid_labels_ = nullptr;
+  const uint8_t* grid_group_band_ = nullptr;
+  const uint8_t* grid_reach_ = nullptr;
+  std::array<int, 3> grid_first_ = {0, 0, 0};
+  std::array<int, 3> grid_count_ = {0, 0, 0};
+  ptrdiff_t label_step_[3] = {0, 0, 0};
+  ptrdiff_t group_step_[3] = {0, 0, 0};
+  WalkWork work_;
   Vec3 origin_;
   std::array<double, 3> dir_;
   std::array<double, 3> inv_;  // 1 / dir_, 0 where the ray does not move
   std::array<int, 3> step_;
+  int octant_;
   double t1_;
-  int max_cells_;
-  int cells_ = 0;
+  int max_steps_;
+  int steps_ = 0;
+  int jumps_ = 0;
+  int loads_ = 0;
+  bool truncated_ = false;
   bool done_ = false;
-  bool at_end_ = false;  // done because the current cell reaches past t1
-  bool loaded_ = false;  // the current cell's corners are read
-  int band_;
+  bool at_end_ = false;    // done because the current cell reaches t1
+  bool start_ = false;     // the ray has no band yet
+  bool loaded_ = false;    // the current cell's corners are read
+  State state_ = State::kExamine;
+  int band_ = 0;
+  int label_band_ = -1;    // band_ as a FieldGrid label, -1 if none can be
   double t_;               // where the ray is: crossings before it are behind
   int last_edge_ = -1;     // the edge of the crossing just taken, in this cell
   int last_index_ = -1;    // and its index among that edge's roots
-  // The current cell.
-  std::array<int, 3> base_;
-  // Along each axis, when the ray enters and leaves the cell's slab
-  // (-inf and inf on an axis it does not move along).
-  double enter_[3], leave_[3];
+  // Per axis, the face ahead of cell c (c + ahead_) and behind it.
+  int ahead_[3], behind_[3];
+  // The current cell, and along each axis when the ray leaves its slab of
+  // cells (inf on an axis it does not move along).
+  std::array<int, 3> c_;
+  double leave_[3];
   double t_in_ = 0, t_out_ = 0, hi_ = 0;  // its span, and the end of its part in [t0, t1)
-  int exit_axis_ = -1;
+  int exit_axis_ = 0;
   float lo_value_ = 0, hi_value_ = 0;  // its corners' least and greatest value
   bool solved_ = false;                // cubic_ and hull_ are set
   RayCubic cubic_;                     // the field along the ray, s = t - t_in

@@ -164,6 +164,8 @@ class Tracer {
   // bound w.steps_left counts down) or left the slab.
   static std::optional<Step> Walk(Walker& w, Outcome* outcome, TraceCounters& counters);
 
+  // The paper's voxel surfaces: primary rays (TraceSurfaces) and shadow
+  // rays (TraceShadow) over the traversal's segments.
   Outcome TraceSurfaces(RayDescriptor& ray, std::vector<RayDescriptor>& spawned,
                         TraceCounters& counters) const;
   // Shades the surface of material m that `ray` meets at point p (index
@@ -175,18 +177,14 @@ class Tracer {
              const std::array<int32_t, 3>& shadow_cell, double shadow_t, uint16_t shadow_band,
              uint8_t shadow_material, std::vector<RayDescriptor>& spawned,
              TraceCounters& counters) const;
-  // Smooth surfaces: the band at a point of a segment in `cell`, for a
-  // ray that has none yet. In a candidate voxel the field's own value;
-  // elsewhere the voxel's, which its whole voxel shares.
-  uint16_t BandAt(const Vec3& p, const std::array<int32_t, 3>& cell, uint8_t label) const;
-  // The crossings of candidate segment `seg` of `ray`: `walk` extended to
-  // it when it ends where seg starts, else a new walk (returns true).
-  bool CrossingsOf(std::optional<CrossingWalk>& walk, const RayDescriptor& ray,
-                   const RayAxes& axes, const Segment& seg) const;
-  // Adds the cells `walk` entered since `counted` of them were counted to
-  // the work profile at `plane` (an index into plane_work).
-  static void CountCells(const CrossingWalk& walk, int plane, int& counted,
-                         TraceCounters& counters);
+  // Smooth surfaces, primary and shadow rays alike: one CrossingWalk over
+  // the field's cells from ray.t to where the ray leaves the slab or the
+  // volume (docs/design.md, "Smooth surfaces").
+  Outcome TraceSmooth(RayDescriptor& ray, std::vector<RayDescriptor>& spawned,
+                      TraceCounters& counters) const;
+  // Where a smooth surface is shaded: the point at t kept in the field's
+  // cell `cell`, in the volume, and within a quarter voxel of the slab.
+  Vec3 HitPoint(const RayDescriptor& ray, double t, const std::array<int, 3>& cell) const;
   Outcome TraceShadow(RayDescriptor& ray, TraceCounters& counters) const;
   Outcome TraceDvr(RayDescriptor& ray, TraceCounters& counters) const;
 
