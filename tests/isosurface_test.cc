@@ -12,6 +12,8 @@
 
 #include "gtest/gtest.h"
 #include "transtick/classification.h"
+#include "transtick/field_grid.h"
+#include "transtick/traversal.h"
 #include "transtick/volume.h"
 
 namespace transtick {
@@ -315,6 +317,225 @@ TEST(IsosurfaceTest, EveryVoxelAFieldSurfaceCrossesIsACandidate) {
   }
   EXPECT_LT(candidates, voxels * 9 / 10);
   EXPECT_GT(candidates, voxels / 20);
+}
+
+// A smooth volume with plateaus (values rounded to steps of 25, so that
+// whole regions share a band and some values fall exactly on an edge) and
+// three materials: wide uniform space for the grid to jump, and surfaces.
+Volume BlobVolume(std::mt19937_64& rng, std::array<int, 3> dims, Classification* c) {
+  std::uniform_real_distribution<double> unit(0, 1);
+  Volume v;
+  v.dims = dims;
+  v.values.resize(v.VoxelCount());
+  double centre[3][3], radius[3];
+  for (int b = 0; b < 3; ++b) {
+    for (int a = 0; a < 3; ++a) centre[b][a] = unit(rng) * dims[a];
+    radius[b] = 2 + unit(rng) * dims[0] / 3.0;
+  }
+  for (int z = 0; z < dims[2]; ++z)
+    for (int y = 0; y < dims[1]; ++y)
+      for (int x = 0; x < dims[0]; ++x) {
+        double f = 0;
+        for (int b = 0; b < 3; ++b) {
+          const double r = std::hypot(x - centre[b][0], y - centre[b][1], z - centre[b][2]);
+          f += 1000 * std::max(0.0, 1 - r / radius[b]);
+        }
+        v.values[v.Index(x, y, z)] = static_cast<float>(25 * std::round(f / 25));
+      }
+  c->materials = {Material{.name = "a", .min = 200, .max = 500},
+                  Material{.name = "b", .min = 500, .max = 800, .opacity = 0.5f},
+                  Material{.name = "c", .min = 900, .max = 5000}};
+  return v;
+}
+
+// A cell the grid labels with a band has the field in that band
+// throughout (dense sampling, faces included), and the grid both labels
+// and leaves enough cells mixed to matter.
+TEST(IsosurfaceTest, FieldGridLabelsOnlyCellsOfOneBand) {
+  std::mt19937_64 rng(11);
+  size_t uniform = 0, mixed = 0;
+  for (int trial = 0; trial < 12; ++trial) {
+    Classification c;
+    const Volume v = BlobVolume(rng, {12 + static_cast<int>(rng() % 6), 10, 9}, &c);
+    const Bands bands(c);
+    auto scene = Scene::ForSurfaces(v, c);
+    ASSERT_TRUE(scene.ok()) << scene.status();
+    const FieldGrid& grid = scene->field();
+    ASSERT_FALSE(grid.empty());
+    ASSERT_EQ(grid.cells()[0], v.dims[0] + 1);
+    for (int z = 0; z <= v.dims[2]; ++z)
+      for (int y = 0; y <= v.dims[1]; ++y)
+        for (int x = 0; x <= v.dims[0]; ++x) {
+          ASSERT_TRUE(grid.Holds(x, y, z));
+          const uint8_t label = grid.Label(x, y, z);
+          if (label == FieldGrid::kMixed) {
+            ++mixed;
+            continue;
+          }
+          ++uniform;
+          for (int k = 0; k < 64; ++k) {
+            const Vec3 p{x - 0.5 + (k & 3) / 3.0, y - 0.5 + (k >> 2 & 3) / 3.0,
+                         z - 0.5 + (k >> 4) / 3.0};
+            ASSERT_EQ(bands.Of(static_cast<float>(FieldAt(*scene, p))), label)
+                << "trial " << trial << " cell " << x << "," << y << "," << z;
+          }
+        }
+  }
+  EXPECT_GT(mixed, uniform / 50);
+  EXPECT_GT(uniform, mixed);
+}
+
+// Rays through the whole volume, walked once on the whole scene and again
+// piece by piece on slabs of it (Scene::Slab: each with its own grid, which
+// jumps other boxes), each piece from where the last stopped, at the slab's
+// plane, in the band it ended in: the same crossings, bit for bit. Rays
+// along axes and through the cells' faces and edges (half-integer
+// coordinates) are among them.
+TEST(IsosurfaceTest, CrossingsDoNotDependOnTheSlabsAGridIsCutInto) {
+  std::mt19937_64 rng(12);
+  std::uniform_real_distribution<double> unit(0, 1), dir(-1, 1);
+  size_t crossings = 0, jumps = 0, pieces = 0;
+  for (int trial = 0; trial < 10; ++trial) {
+    Classification c;
+    const Volume v = BlobVolume(rng, {20, 24, 16}, &c);
+    const Bands bands(c);
+    auto whole = Scene::ForSurfaces(v, c);
+    ASSERT_TRUE(whole.ok()) << whole.status();
+    // Random cuts along y, slabs one plane thick among them.
+    std::vector<int> cuts = {0, v.dims[1]};
+    for (int k = 2 + static_cast<int>(rng() % 4); k > 0; --k) {
+      cuts.push_back(1 + static_cast<int>(rng() % (v.dims[1] - 1)));
+    }
+    if (trial % 3 == 0) cuts.push_back(cuts.back() + 1);
+    std::sort(cuts.begin(), cuts.end());
+    cuts.erase(std::unique(cuts.begin(), cuts.end()), cuts.end());
+    std::vector<Scene> slabs;
+    for (size_t k = 0; k + 1 < cuts.size(); ++k) slabs.push_back(whole->Slab(cuts[k], cuts[k + 1]));
+    for (int r = 0; r < 300; ++r) {
+      Vec3 o{unit(rng) * v.dims[0], unit(rng) * v.dims[1], unit(rng) * v.dims[2]};
+      Vec3 d{dir(rng), dir(rng), dir(rng)};
+      if (r % 5 == 0) o = {std::floor(o.x) + 0.5, std::floor(o.y) + 0.5, o.z};
+      if (r % 7 == 0) d = {r % 2 ? 1.0 : -1.0, 0, 0};
+      if (r % 11 == 0) d = {0, r % 2 ? 1.0 : -1.0, 0};
+      if (r % 13 == 0) d = {1, r % 2 ? 1.0 : -1.0, 0};
+      d = d * (1 / Length(d));
+      const auto box = IntersectBox(o, d, v.dims);
+      if (!box) continue;
+      const double t0 = std::max(0.0, (*box)[0]), t1 = (*box)[1];
+      std::vector<Crossing> all;
+      CrossingWalk walk(*whole, bands, o, d, t0, t1, -1);
+      while (auto x = walk.Next()) all.push_back(*x);
+      jumps += walk.jumps();
+      // The same ray slab by slab, as the ring hands it on.
+      std::vector<Crossing> cut;
+      int band = -1;
+      double t = t0;
+      // The slab holding the start, then the next one along y each time,
+      // as the ring hands a ray on.
+      const Vec3 start = o + d * t0;
+      int s = 0;
+      while (s + 1 < static_cast<int>(slabs.size()) && start.y >= cuts[s + 1]) ++s;
+      for (; s >= 0 && s < static_cast<int>(slabs.size()); s += d.y > 0 ? 1 : -1) {
+        double end = t1;
+        if (d.y > 0 && s + 1 < static_cast<int>(slabs.size())) end = (cuts[s + 1] - o.y) / d.y;
+        if (d.y < 0 && s > 0) end = (cuts[s] - o.y) / d.y;
+        end = std::max(std::min(end, t1), t);
+        CrossingWalk piece(slabs[s], bands, o, d, t, end, band);
+        while (auto x = piece.Next()) {
+          cut.push_back(*x);
+          band = x->band;
+        }
+        ++pieces;
+        t = end;
+        if (d.y == 0) break;
+      }
+      ASSERT_EQ(cut.size(), all.size()) << "trial " << trial << " ray " << r;
+      for (size_t k = 0; k < all.size(); ++k) {
+        ASSERT_EQ(cut[k].t, all[k].t) << "trial " << trial << " ray " << r << " crossing " << k;
+        ASSERT_EQ(cut[k].band, all[k].band);
+        ASSERT_EQ(cut[k].root, all[k].root);
+      }
+      crossings += all.size();
+    }
+  }
+  EXPECT_GT(crossings, 3000u);
+  EXPECT_GT(jumps, 500u);
+  EXPECT_GT(pieces, 3000u);
+}
+
+// Ties on purpose: the field 100 (x - 0.5) has its roots on the cells'
+// faces (x = k + 0.5 for edges 100 k), and a ray from (a + 0.5, b, z)
+// along (1, +-1, 0) crosses each x face at the very time it crosses a y
+// plane, where slabs one plane thick cut it. A walk resumed at a plane
+// must begin in the cell the whole walk is in there (not the next one),
+// or the root on that cell's far face is lost.
+TEST(IsosurfaceTest, CrossingsOnFacesAtSlabPlanesAreTakenOnce) {
+  Volume v;
+  v.dims = {16, 16, 4};
+  v.values.resize(v.VoxelCount());
+  for (int z = 0; z < v.dims[2]; ++z)
+    for (int y = 0; y < v.dims[1]; ++y)
+      for (int x = 0; x < v.dims[0]; ++x) v.values[v.Index(x, y, z)] = 100.0f * x;
+  Classification c;
+  c.materials = {Material{.name = "a", .min = 300, .max = 600},
+                 Material{.name = "b", .min = 600, .max = 1100, .opacity = 0.5f}};
+  const Bands bands(c);
+  auto whole = Scene::ForSurfaces(v, c);
+  ASSERT_TRUE(whole.ok()) << whole.status();
+  std::vector<Scene> slabs;
+  for (int y = 0; y < v.dims[1]; ++y) slabs.push_back(whole->Slab(y, y + 1));
+  int rays = 0;
+  for (int a = 0; a < 4; ++a) {
+    for (int b = 0; b < v.dims[1]; ++b) {
+      for (const double dy : {1.0, -1.0}) {
+        const Vec3 o{a + 0.5, b + 0.0, 1.3};
+        const Vec3 d = Vec3{1, dy, 0} * (1 / std::sqrt(2.0));
+        const auto box = IntersectBox(o, d, v.dims);
+        if (!box) continue;
+        const double t0 = (*box)[0], t1 = (*box)[1];
+        std::vector<Crossing> all;
+        CrossingWalk walk(*whole, bands, o, d, t0, t1, -1);
+        while (auto x = walk.Next()) all.push_back(*x);
+        std::vector<Crossing> cut;
+        int band = -1;
+        double t = t0;
+        // Slab b (the plane the ray starts on) and on, as the ring hands it.
+        int s = dy > 0 ? b : b - 1;
+        for (; s >= 0 && s < v.dims[1]; s += dy > 0 ? 1 : -1) {
+          double end = (dy > 0 ? s + 1 - o.y : s - o.y) / d.y;
+          end = std::max(std::min(end, t1), t);
+          CrossingWalk piece(slabs[s], bands, o, d, t, end, band);
+          while (auto x = piece.Next()) {
+            cut.push_back(*x);
+            band = x->band;
+          }
+          t = end;
+        }
+        // The ray meets each edge on an x face: 300, 600 and 1100 at x =
+        // 3.5, 6.5 and 11.5 (those ahead of its start), once each. (A root
+        // that rounds to just past its cell's far face is taken as the
+        // next cell's band, at the same t: root false.)
+        std::vector<std::pair<double, int>> faces;  // x, and the band beyond it
+        int beyond = 1;
+        for (double e : {3.5, 6.5, 11.5}) {
+          if (e > o.x && (o + d * t1).x > e) faces.push_back({e, beyond});
+          ++beyond;
+        }
+        ASSERT_EQ(all.size(), faces.size() + 1) << "a " << a << " b " << b << " dy " << dy;
+        for (size_t k = 0; k < faces.size(); ++k) {
+          EXPECT_NEAR((o + d * all[k + 1].t).x, faces[k].first, 1e-12);
+          EXPECT_EQ(all[k + 1].band, faces[k].second);
+        }
+        ASSERT_EQ(cut.size(), all.size()) << "a " << a << " b " << b << " dy " << dy;
+        for (size_t k = 0; k < all.size(); ++k) {
+          EXPECT_EQ(cut[k].t, all[k].t);
+          EXPECT_EQ(cut[k].band, all[k].band);
+        }
+        ++rays;
+      }
+    }
+  }
+  EXPECT_GT(rays, 100);
 }
 
 }  // namespace

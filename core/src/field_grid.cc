@@ -15,7 +15,7 @@ FieldGrid FieldGrid::Build(const std::vector<float>& scalars, std::array<int, 3>
   const int nx = dims[0], ny = dims[1], nz = dims[2];
   g.cells_ = {nx + 1, row_end - row_begin, nz + 1};
   g.row_begin_ = row_begin;
-  g.labels_.resize(static_cast<size_t>(g.cells_[0]) * g.cells_[1] * g.cells_[2]);
+  std::vector<uint8_t> labels(static_cast<size_t>(g.cells_[0]) * g.cells_[1] * g.cells_[2]);
   const std::vector<float>& edges = bands.edges();
   // The band of a value: how many edges lie at or below it (Bands::Of).
   auto band = [&](float v) {
@@ -37,7 +37,7 @@ FieldGrid FieldGrid::Build(const std::vector<float>& scalars, std::array<int, 3>
   // corners read, then of each pair along x (clamped at the faces).
   std::vector<float> lo(nx), hi(nx);
   std::vector<uint8_t> nan(nx);
-  uint8_t* out = g.labels_.data();
+  uint8_t* out = labels.data();
   for (int cz = 0; cz <= nz; ++cz) {
     for (int cy = row_begin; cy < row_end; ++cy) {
       const float* r[4] = {voxel_row(cy - 1, cz - 1), voxel_row(cy, cz - 1),
@@ -58,20 +58,25 @@ FieldGrid FieldGrid::Build(const std::vector<float>& scalars, std::array<int, 3>
       }
     }
   }
-  // The groups and their reach, as a brick map over the labels finds them,
-  // kept in a layout the walk indexes once for both.
-  const BrickMap map = BrickMap::Build(g.labels_, g.cells_, /*uniform_materials=*/true);
-  for (int a = 0; a < 3; ++a) g.groups_[a] = (g.cells_[a] + 1) / 2;
-  const size_t groups = static_cast<size_t>(g.groups_[0]) * g.groups_[1] * g.groups_[2];
-  g.group_band_.resize(groups);
-  g.reach_.resize(8 * groups);
+  // The groups and their reach, as a brick map over the labels finds them.
+  const BrickMap map = BrickMap::Build(labels, g.cells_, /*uniform_materials=*/true);
+  for (int a = 0; a < 3; ++a) g.group_dims_[a] = (g.cells_[a] + 1) / 2;
+  g.groups_.resize(static_cast<size_t>(g.group_dims_[0]) * g.group_dims_[1] * g.group_dims_[2]);
+  const auto& n = g.cells_;
   size_t k = 0;
-  for (int z = 0; z < g.groups_[2]; ++z) {
-    for (int y = 0; y < g.groups_[1]; ++y) {
-      for (int x = 0; x < g.groups_[0]; ++x, ++k) {
-        g.group_band_[k] = map.Cell(2 * x, 2 * y, 2 * z);
+  for (int z = 0; z < g.group_dims_[2]; ++z) {
+    for (int y = 0; y < g.group_dims_[1]; ++y) {
+      for (int x = 0; x < g.group_dims_[0]; ++x, ++k) {
+        Group& group = g.groups_[k];
+        for (int s = 0; s < 8; ++s) {
+          // Past the faces: the cell inside nearest to it.
+          const int cx = std::min(2 * x + (s & 1), n[0] - 1);
+          const int cy = std::min(2 * y + (s >> 1 & 1), n[1] - 1);
+          const int cz = std::min(2 * z + (s >> 2), n[2] - 1);
+          group.label[s] = labels[(static_cast<size_t>(cz) * n[1] + cy) * n[0] + cx];
+        }
         for (int octant = 0; octant < 8; ++octant) {
-          g.reach_[8 * k + octant] = static_cast<uint8_t>(map.Reach(2 * x, 2 * y, 2 * z, octant));
+          group.reach[octant] = static_cast<uint8_t>(map.Reach(2 * x, 2 * y, 2 * z, octant));
         }
       }
     }

@@ -2,7 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
+
+#if defined(__SSE__)
+#include <immintrin.h>
+#endif
 
 #include "transtick/traversal.h"
 
@@ -40,12 +45,12 @@ int SlopeRoots(const RayCubic& g, double lo, double hi, double out[2]) {
 }
 
 // The root of g in [lo, hi], where g(lo) and g(hi) differ in sign and g
-// is monotonic: Newton's method from the secant point, kept inside the
+// changes sign once: Newton's method from the secant point, kept inside the
 // bracket (a step that would leave it bisects instead), for at most 64
 // steps. It ends when a Newton step moves t by at most 1e-12 of the
 // piece's length, so that the error left is of the order of that step's
 // square, or when bisection has shrunk the bracket as far.
-double Refine(const RayCubic& g, double lo, double glo, double hi, double ghi) {
+double RefineRoot(const RayCubic& g, double lo, double glo, double hi, double ghi) {
   const double tolerance = (hi - lo) * 1e-12;
   double t = lo - glo * (hi - lo) / (ghi - glo);
   if (!(t > lo && t < hi)) t = 0.5 * (lo + hi);
@@ -130,7 +135,7 @@ int SideChanges(const RayCubic& g, double span, SideChange out[3]) {
   for (int k = 0; k <= n; ++k) {
     const double b = k < n ? splits[k] : span;
     const double gb = g(b);
-    if ((ga < 0) != (gb < 0)) out[count++] = {Refine(g, a, ga, b, gb), gb >= 0};
+    if ((ga < 0) != (gb < 0)) out[count++] = {RefineRoot(g, a, ga, b, gb), gb >= 0};
     a = b;
     ga = gb;
   }
@@ -153,7 +158,7 @@ CrossingWalk::CrossingWalk(const Scene& scene, const Bands& bands, const Vec3& o
       bands_(&bands),
       grid_(scene.field().empty() ? nullptr : &scene.field()),
       work_(work),
-      origin_(origin),
+      origin_{origin.x, origin.y, origin.z},
       dir_(axes.dir),
       inv_(axes.inv),
       step_(axes.step),
@@ -169,19 +174,12 @@ CrossingWalk::CrossingWalk(const Scene& scene, const Bands& bands, const Vec3& o
     behind_[a] = step_[a] < 0 ? 0 : -1;
   }
   if (grid_) {
-    grid_labels_ = grid_->labels();
-    grid_group_band_ = grid_->group_bands();
-    grid_reach_ = grid_->reach();
+    grid_groups_ = grid_->group_data();
     grid_first_ = {0, grid_->row_begin(), 0};
     grid_count_ = grid_->cells();
-    const auto& n = grid_->cells();
     const auto& g = grid_->groups();
-    const ptrdiff_t label_stride[3] = {1, n[0], ptrdiff_t{n[0]} * n[1]};
     const ptrdiff_t group_stride[3] = {1, g[0], ptrdiff_t{g[0]} * g[1]};
-    for (int a = 0; a < 3; ++a) {
-      label_step_[a] = step_[a] * label_stride[a];
-      group_step_[a] = step_[a] * group_stride[a];
-    }
+    for (int a = 0; a < 3; ++a) group_step_[a] = step_[a] * group_stride[a];
   }
   // The cells a ray can cross in [t0, t1): one more per unit it moves
   // along each axis, and a few for the ends.
@@ -258,7 +256,18 @@ TRANSTICK_INLINE void CrossingWalk::Count(int y, uint64_t units) {
 
 void CrossingWalk::Load() {
   scene_->Corners(c_[0] - 1, c_[1] - 1, c_[2] - 1, corners_.data());
-  // Branch-free (minss, maxss): which corner is least is random.
+  // Four lanes at a time (minps, maxps); a NaN corner gives a NaN or a
+  // number here, and no root either way.
+#if defined(__SSE__)
+  const __m128 a = _mm_loadu_ps(corners_.data()), b = _mm_loadu_ps(corners_.data() + 4);
+  __m128 mn = _mm_min_ps(a, b), mx = _mm_max_ps(a, b);
+  mn = _mm_min_ps(mn, _mm_movehl_ps(mn, mn));
+  mx = _mm_max_ps(mx, _mm_movehl_ps(mx, mx));
+  mn = _mm_min_ss(mn, _mm_shuffle_ps(mn, mn, 1));
+  mx = _mm_max_ss(mx, _mm_shuffle_ps(mx, mx, 1));
+  lo_value_ = _mm_cvtss_f32(mn);
+  hi_value_ = _mm_cvtss_f32(mx);
+#else
   float mn = corners_[0], mx = corners_[0];
   for (int k = 1; k < 8; ++k) {
     mn = corners_[k] < mn ? corners_[k] : mn;
@@ -266,6 +275,7 @@ void CrossingWalk::Load() {
   }
   lo_value_ = mn;
   hi_value_ = mx;
+#endif
   loaded_ = true;
   solved_ = false;
   cache_[0].edge = cache_[1].edge = -1;
@@ -288,9 +298,15 @@ int CrossingWalk::StartBand() {
     f[a] = std::clamp(origin_[a] + dir_[a] * t_ - (c_[a] - 0.5), 0.0, 1.0);
   }
   double v = 0;
+  double lo = k[0], hi = k[0];
   for (int i = 0; i < 8; ++i) {
     v += (i & 1 ? f[0] : 1 - f[0]) * (i & 2 ? f[1] : 1 - f[1]) * (i & 4 ? f[2] : 1 - f[2]) * k[i];
+    lo = std::min<double>(lo, k[i]);
+    hi = std::max<double>(hi, k[i]);
   }
+  // Within the corners' range, as the field is, whatever the rounding: so
+  // a cell's label and the band found in it agree.
+  v = std::max(lo, std::min(hi, v));
   int band = 0;
   for (float e : bands_->edges()) band += e <= v;
   return band;
@@ -313,7 +329,7 @@ void CrossingWalk::Extend(double new_t1) {
   }
 }
 
-const CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
+CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
   // The two edges of a band differ in parity: one slot each.
   EdgeRoots& r = cache_[edge & 1];
   if (r.edge == edge) return r;
@@ -323,9 +339,8 @@ const CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
     // cell coordinates, so that the coefficients stay well scaled however
     // far the ray's origin lies; and its Bernstein coefficients on
     // [0, span], whose hull holds the cubic there.
-    const Vec3 p = origin_ + Vec3{dir_[0], dir_[1], dir_[2]} * t_in_;
-    const std::array<double, 3> entry = {p.x - (c_[0] - 0.5), p.y - (c_[1] - 0.5),
-                                         p.z - (c_[2] - 0.5)};
+    std::array<double, 3> entry;
+    for (int a = 0; a < 3; ++a) entry[a] = origin_[a] + dir_[a] * t_in_ - (c_[a] - 0.5);
     cubic_ = CellCubic(corners_, entry, dir_, 0);
     const double p1 = cubic_.c * span, p2 = cubic_.b * span * span,
                  p3 = cubic_.a * span * span * span;
@@ -338,6 +353,7 @@ const CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
   const double e = bands_->edges()[edge];
   r.edge = edge;
   r.count = 0;
+  r.refined = true;
   // Most cells whose corners straddle an edge are crossed by the ray
   // without a root: when every Bernstein coefficient lies on one side of
   // the edge, so does the cubic, and no extremum is needed.
@@ -347,15 +363,34 @@ const CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
   }
   RayCubic g = cubic_;
   g.d -= e;
+  // One change of sign among the coefficients, none of them 0, leaves the
+  // cubic one simple root in the span (Bernstein polynomials diminish
+  // variation): bracketed by the span's ends, with no extrema to find.
+  const double b0 = hull_[0] - e, b1 = hull_[1] - e, b2 = hull_[2] - e, b3 = hull_[3] - e;
+  const int changes = ((b0 < 0) != (b1 < 0)) + ((b1 < 0) != (b2 < 0)) + ((b2 < 0) != (b3 < 0));
+  const double g_end = g(span);
+  if (changes == 1 && b0 != 0 && b1 != 0 && b2 != 0 && b3 != 0 && (g.d < 0) != (g_end < 0)) {
+    r.count = 1;
+    r.refined = false;
+    r.end = g_end;
+    r.at[0].up = g_end >= 0;
+    return r;
+  }
   r.count = SideChanges(g, span, r.at);
   for (int k = 0; k < r.count; ++k) r.at[k].t += t_in_;
   return r;
 }
 
 std::optional<std::pair<double, int>> CrossingWalk::Candidate(int edge, bool up) {
-  const EdgeRoots& r = Roots(edge);
+  EdgeRoots& r = Roots(edge);
   for (int k = 0; k < r.count; ++k) {
     if (r.at[k].up != up) continue;
+    if (!r.refined) {
+      RayCubic g = cubic_;
+      g.d -= bands_->edges()[edge];
+      r.at[0].t = RefineRoot(g, 0, g.d, t_out_ - t_in_, r.end) + t_in_;
+      r.refined = true;
+    }
     // One edge's roots alternate in direction: past the one just taken
     // by index, so that a double root (up and down at one t) is taken twice.
     if (edge == last_edge_ ? k > last_index_ : r.at[k].t >= t_) return std::pair{r.at[k].t, k};
@@ -427,6 +462,7 @@ std::optional<Crossing> CrossingWalk::Scan() {
   double t_in = t_in_, t_out = t_out_;
   int exit = exit_axis_;
   int steps = steps_;
+  bool loaded = false;  // the current cell's corners were read
   auto stop = [&] {
     c_ = c;
     for (int a = 0; a < 3; ++a) leave_[a] = leave[a];
@@ -434,22 +470,36 @@ std::optional<Crossing> CrossingWalk::Scan() {
     t_out_ = t_out;
     exit_axis_ = exit;
     steps_ = steps;
+    loaded_ = loaded;
   };
   auto set_exit = [&] {
-    exit = 0;
-    if (leave[1] < leave[exit]) exit = 1;
-    if (leave[2] < leave[exit]) exit = 2;
-    t_out = leave[exit];
+    // Without branches (which axis is next is random).
+    const double l01 = leave[1] < leave[0] ? leave[1] : leave[0];
+    const int e01 = leave[1] < leave[0] ? 1 : 0;
+    exit = leave[2] < l01 ? 2 : e01;
+    t_out = leave[2] < l01 ? leave[2] : l01;
   };
   const FieldGrid* grid = grid_;
-  // While the cell is in the grid: its label's index and its group's.
-  size_t li = 0, gi = 0;
+  // The walk's constants, read once: no store in the loop below may alias
+  // them, so they stay in registers.
+  const double t1 = t1_, t_here = t_;
+  const int max_steps = max_steps_;
+  const int band = label_band_;
+  const int octant = octant_;
+  const FieldGrid::Group* const groups = grid_groups_;
+  // A group all of the ray's band has these eight labels (none can match
+  // a ray without a band's label: a group all kMixed reaches nowhere).
+  const uint64_t all_band = band >= 0 ? 0x0101010101010101ull * static_cast<uint64_t>(band) : ~0ull;
+  uint64_t* const planes = work_.planes;
+  // While the cell is in the grid: its group's index and its place there.
+  size_t gi = 0;
+  int sub = 0;
   bool held = false;
   auto locate = [&] {
     held = grid && grid->Holds(c[0], c[1], c[2]);
     if (held) {
-      li = grid->Index(c[0], c[1], c[2]);
       gi = grid->GroupIndex(c[0], c[1], c[2]);
+      sub = grid->Sub(c[0], c[1], c[2]);
     }
   };
   locate();
@@ -457,17 +507,19 @@ std::optional<Crossing> CrossingWalk::Scan() {
     // The cell's part of [t0, t1): [from, to), and its far face when that
     // lies before t1. A cell the ray only touches at an edge or a corner
     // (t_in = t_out) has none.
-    const double from = std::max(t_in, t_), to = std::min(t_out, t1_);
+    const double from = std::max(t_in, t_here), to = std::min(t_out, t1);
     bool mixed = true;
     if (held) {
-      const int band = label_band_;
+      const FieldGrid::Group& group = groups[gi];
+      uint64_t labels;
+      std::memcpy(&labels, group.label, sizeof(labels));
       int r;
-      if (grid_group_band_[gi] == band && (r = grid_reach_[8 * gi + octant_]) > 0) {
+      if (labels == all_band && (r = group.reach[octant]) > 0) {
         // A box of groups of the ray's band ahead (its reach toward the
         // ray's octant): nothing in it. On past it, or to t1 when it
         // reaches that far. (A box of one group holds a few cells: they
         // are stepped.)
-        if (++steps > max_steps_) {
+        if (++steps > max_steps) {
           stop();
           truncated_ = done_ = true;
           return std::nullopt;
@@ -484,7 +536,7 @@ std::optional<Crossing> CrossingWalk::Scan() {
           const double ta = FaceTime(a, f);
           if (ta < t) t = ta, out = a, face = f;
         }
-        if (!(t < t1_)) {
+        if (!(t < t1)) {
           stop();
           at_end_ = done_ = true;
           return std::nullopt;
@@ -503,11 +555,11 @@ std::optional<Crossing> CrossingWalk::Scan() {
         t_in = t;
         set_exit();
         ++jumps_;
-        if (work_.planes) Count(c[1], work_.step);
+        if (planes) Count(c[1], work_.step);
         locate();
         continue;
       }
-      const uint8_t label = grid_labels_[li];
+      const uint8_t label = group.label[sub];
       if (label == band) {
         mixed = false;  // nothing to find here
       } else if (label != FieldGrid::kMixed) {
@@ -523,12 +575,13 @@ std::optional<Crossing> CrossingWalk::Scan() {
         }
       }
     }
-    if (mixed && t_in < t_out && (from < to || (from == t_out && t_out < t1_))) {
+    if (mixed && t_in < t_out && (from < to || (from == t_out && t_out < t1))) {
       // A cell whose roots to look for: the walk stops only at one.
       c_ = c;
       t_in_ = t_in;
       t_out_ = t_out;
       Load();
+      loaded = true;
       hi_ = to;
       if (auto crossing = NextRoot()) {
         stop();
@@ -539,13 +592,12 @@ std::optional<Crossing> CrossingWalk::Scan() {
     // On to the next cell, across the face the ray leaves by: its span
     // begins there, the last of its entry faces, as a walk begun in it
     // finds. Each time from its plane, never by adding up steps.
-    if (t_out >= t1_) {
+    if (t_out >= t1) {
       stop();
-      loaded_ = mixed && loaded_;
       at_end_ = done_ = true;
       return std::nullopt;
     }
-    if (++steps > max_steps_) {
+    if (++steps > max_steps) {
       stop();
       truncated_ = done_ = true;
       return std::nullopt;
@@ -555,17 +607,17 @@ std::optional<Crossing> CrossingWalk::Scan() {
     c[a] += step_[a];
     leave[a] = FaceTime(a, c[a] + ahead_[a]);
     set_exit();
-    loaded_ = false;
+    loaded = false;
     if (held) {
       // Into the next group when the new cell is its first along a.
       const int local = c[a] - grid_first_[a];
-      li += label_step_[a];
-      if (((local ^ ahead_[a]) & 1) == 0) gi += group_step_[a];
+      sub ^= 1 << a;
+      gi += group_step_[a] & -static_cast<ptrdiff_t>(((local ^ ahead_[a]) & 1) == 0);
       held = static_cast<unsigned>(local) < static_cast<unsigned>(grid_count_[a]);
     } else {
       locate();
     }
-    if (work_.planes) Count(c[1], work_.step);
+    if (planes) Count(c[1], work_.step);
   }
 }
 

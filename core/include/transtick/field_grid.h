@@ -46,7 +46,7 @@ class FieldGrid {
                          int scalar_y_begin, int scalar_planes, int row_begin, int row_end,
                          const Bands& bands);
 
-  bool empty() const { return labels_.empty(); }
+  bool empty() const { return groups_.empty(); }
   // Cells per axis of the rows held: dims[0] + 1, the rows, dims[2] + 1.
   const std::array<int, 3>& cells() const { return cells_; }
   int row_begin() const { return row_begin_; }
@@ -56,38 +56,37 @@ class FieldGrid {
            static_cast<unsigned>(y - row_begin_) < static_cast<unsigned>(cells_[1]) &&
            static_cast<unsigned>(z) < static_cast<unsigned>(cells_[2]);
   }
-  // A cell's label, by its index. REQUIRES: Holds(x, y, z).
-  size_t Index(int x, int y, int z) const {
-    return (static_cast<size_t>(z) * cells_[1] + (y - row_begin_)) * cells_[0] + x;
-  }
-  uint8_t Label(int x, int y, int z) const { return labels_[Index(x, y, z)]; }
-  const uint8_t* labels() const { return labels_.data(); }
 
-  // The 2^3 groups of cells: group (x >> 1, (y - row_begin) >> 1, z >> 1)
-  // of cell (x, y, z). A group's band is its cells' when they share one,
-  // else kMixed; its reach toward an octant (BrickMap::Reach: bit a set
-  // toward -a) is the largest r for which the box of (r + 1)^3 groups with
-  // it at the corner toward the octant, clipped to the grid, is all of its
-  // band (0 for a mixed group).
-  const std::array<int, 3>& groups() const { return groups_; }
+  // The cells in 2^3 groups: group (x >> 1, (y - row_begin) >> 1, z >> 1)
+  // holds cell (x, y, z), as its cell Sub(x, y, z). A group's record holds
+  // its cells' labels and its reach toward each octant (bit a set: toward
+  // -a, as BrickMap::Reach): the largest r for which the box of (r + 1)^3
+  // groups with it at the corner toward the octant, clipped to the grid, is
+  // all of its band; 0 when its cells' bands differ. A walk reads one
+  // record, one cache line, per cell. Cells of a group past the grid's
+  // faces repeat a label of the group's.
+  struct Group {
+    uint8_t label[8];
+    uint8_t reach[8];
+  };
+  const std::array<int, 3>& groups() const { return group_dims_; }
   // REQUIRES: Holds(x, y, z).
   size_t GroupIndex(int x, int y, int z) const {
-    return (static_cast<size_t>(z >> 1) * groups_[1] + ((y - row_begin_) >> 1)) * groups_[0] +
+    return (static_cast<size_t>(z >> 1) * group_dims_[1] + ((y - row_begin_) >> 1)) *
+               group_dims_[0] +
            (x >> 1);
   }
-  const uint8_t* group_bands() const { return group_band_.data(); }
-  // reach()[8 * group + octant].
-  const uint8_t* reach() const { return reach_.data(); }
+  int Sub(int x, int y, int z) const { return (x & 1) | ((y - row_begin_) & 1) << 1 | (z & 1) << 2; }
+  const Group* group_data() const { return groups_.data(); }
+  uint8_t Label(int x, int y, int z) const { return groups_[GroupIndex(x, y, z)].label[Sub(x, y, z)]; }
 
-  size_t MemoryBytes() const { return labels_.size() + group_band_.size() + reach_.size(); }
+  size_t MemoryBytes() const { return groups_.size() * sizeof(Group); }
 
  private:
   std::array<int, 3> cells_ = {0, 0, 0};
   int row_begin_ = 0;
-  std::vector<uint8_t> labels_;  // x fastest, then rows, then z
-  std::array<int, 3> groups_ = {0, 0, 0};
-  std::vector<uint8_t> group_band_;  // likewise
-  std::vector<uint8_t> reach_;       // 8 per group, by octant
+  std::array<int, 3> group_dims_ = {0, 0, 0};
+  std::vector<Group> groups_;  // x fastest, then rows, then z
 };
 
 }  // namespace transtick

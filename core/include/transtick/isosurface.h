@@ -161,6 +161,11 @@ class CrossingWalk {
   struct EdgeRoots {
     int edge = -1;
     int count = 0;
+    // The one root of a cubic whose Bernstein coefficients change sign
+    // once is refined only when a crossing in its direction is looked for
+    // (a shadow ray leaving the surface it starts on never looks).
+    bool refined = true;
+    double end = 0;    // unrefined: the cubic less the edge at the span's end
     SideChange at[3];  // t along the ray
   };
   // The time the ray crosses the plane through the voxel centres of index
@@ -181,7 +186,7 @@ class CrossingWalk {
   void Count(int y, uint64_t units);  // adds work at plane y (work_.planes set)
   void Load();        // reads the current cell's corners
   int StartBand();    // the field's band at t_
-  const EdgeRoots& Roots(int edge);
+  EdgeRoots& Roots(int edge);
   // The first root of `edge` going `up` at or after t_, past the root just
   // taken when it is this edge's.
   std::optional<std::pair<double, int>> Candidate(int edge, bool up);
@@ -194,18 +199,15 @@ class CrossingWalk {
   const Scene* scene_;
   const Bands* bands_;
   const FieldGrid* grid_;  // null when the scene has none: every cell is read
-  // The grid's arrays, where its cells begin (y: the first row) and how
+  // The grid's groups, where its cells begin (y: the first row) and how
   // many there are per axis, and what a step along each axis adds to a
-  // cell's label index and to its group's.
-  const uint8_t* grid_labels_ = nullptr;
-  const uint8_t* grid_group_band_ = nullptr;
-  const uint8_t* grid_reach_ = nullptr;
+  // group's index.
+  const FieldGrid::Group* grid_groups_ = nullptr;
   std::array<int, 3> grid_first_ = {0, 0, 0};
   std::array<int, 3> grid_count_ = {0, 0, 0};
-  ptrdiff_t label_step_[3] = {0, 0, 0};
   ptrdiff_t group_step_[3] = {0, 0, 0};
   WalkWork work_;
-  Vec3 origin_;
+  std::array<double, 3> origin_;  // an array: indexed by a variable axis without branches
   std::array<double, 3> dir_;
   std::array<double, 3> inv_;  // 1 / dir_, 0 where the ray does not move
   std::array<int, 3> step_;
