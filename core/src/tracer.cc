@@ -348,7 +348,7 @@ Tracer::Outcome Tracer::TraceSmooth(RayDescriptor& ray, std::vector<RayDescripto
   CrossingWalk walk(scene_, bands_, ray.origin, axes, ray.t, end,
                     ray.band == RayDescriptor::kNoBand ? -1 : ray.band, work);
   const bool primary = ray.kind == RayKind::kPrimary;
-  const Vec3 view = Normalize(-(ray.direction / inv_spacing_));
+  std::optional<Vec3> view;  // toward the eye, made at the first hit (divisions and a root)
   const auto& materials = scene_.classification().materials;
   bool finished = false;
   while (auto c = walk.Next()) {
@@ -368,7 +368,8 @@ Tracer::Outcome Tracer::TraceSmooth(RayDescriptor& ray, std::vector<RayDescripto
         const std::array<int32_t, 3> at = {FloorClamped(p.x, 0, dims[0] - 1),
                                            FloorClamped(p.y, y_begin, y_end - 1),
                                            FloorClamped(p.z, 0, dims[2] - 1)};
-        finished = Shade(ray, n, p, view, at, 0, light_band, bands_.material(light_band), spawned,
+        if (!view) view = Normalize(-(ray.direction / inv_spacing_));
+        finished = Shade(ray, n, p, *view, at, 0, light_band, bands_.material(light_band), spawned,
                          counters);
       } else {
         // A shadow ray dims by each material it enters.
