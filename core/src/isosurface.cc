@@ -78,8 +78,11 @@ double RefineRoot(const RayCubic& g, double lo, double glo, double hi, double gh
 
 }  // namespace
 
-RayCubic CellCubic(const CellCorners& c, const std::array<double, 3>& o,
-                   const std::array<double, 3>& d, double iso) {
+namespace {
+
+// CellCubic, inlined where the walk solves a cell.
+TRANSTICK_INLINE RayCubic Cubic(const CellCorners& c, const std::array<double, 3>& o,
+                                const std::array<double, 3>& d, double iso) {
   // The interpolant along the ray, one axis at a time (Marmitt et al.):
   // along x each of the four edges (j, k) is linear in t, e = e0 + e1 t;
   // between the two edges of each z face it is quadratic, q = q0 + q1 t +
@@ -107,6 +110,13 @@ RayCubic CellCubic(const CellCorners& c, const std::array<double, 3>& o,
   g.c = q[0][1] + (w0 * d[2] + w1 * o[2]);
   g.d = q[0][0] + w0 * o[2] - iso;
   return g;
+}
+
+}  // namespace
+
+RayCubic CellCubic(const CellCorners& c, const std::array<double, 3>& o,
+                   const std::array<double, 3>& d, double iso) {
+  return Cubic(c, o, d, iso);
 }
 
 double FieldAt(const Scene& scene, const Vec3& p) {
@@ -167,6 +177,15 @@ CrossingWalk::CrossingWalk(const Scene& scene, const Bands& bands, const Vec3& o
       t_(t0) {
   SetBand(band);
   start_ = band < 0;
+  // The scalars the corners of a cell are read from (Load).
+  const auto& dims = scene.dims();
+  scalars_ = scene.scalars().data();
+  scalar_y_begin_ = scene.scalar_y_begin();
+  row_ = dims[0];
+  plane_ = static_cast<ptrdiff_t>(dims[0]) * (scene.scalar_y_end() - scene.scalar_y_begin());
+  corner_span_ = {static_cast<unsigned>(dims[0] - 1),
+                  static_cast<unsigned>(scene.scalar_y_end() - scene.scalar_y_begin() - 1),
+                  static_cast<unsigned>(dims[2] - 1)};
   for (int a = 0; a < 3; ++a) {
     // The face ahead of cell c and the one behind it: moving up, faces c
     // and c - 1; moving down, c - 1 and c.
@@ -254,12 +273,32 @@ TRANSTICK_INLINE void CrossingWalk::Count(int y, uint64_t units) {
   work_.planes[std::clamp(y, work_.y_begin, work_.y_end - 1) - work_.y_begin] += units;
 }
 
-void CrossingWalk::Load() {
-  scene_->Corners(c_[0] - 1, c_[1] - 1, c_[2] - 1, corners_.data());
+TRANSTICK_INLINE void CrossingWalk::Load() {
+  // Corner i + 2j + 4k is voxel (c - 1) + (i, j, k): away from the volume's
+  // faces and the slab's last planes, four pairs from one pointer;
+  // elsewhere clamped as Scene::Scalar does.
+  const int x = c_[0] - 1, y = c_[1] - 1, z = c_[2] - 1;
+  const bool inside = static_cast<unsigned>(x) < corner_span_[0] &&
+                      static_cast<unsigned>(y - scalar_y_begin_) < corner_span_[1] &&
+                      static_cast<unsigned>(z) < corner_span_[2];
+#if defined(__SSE__)
+  __m128 a, b;
+  if (inside) {
+    const float* p = scalars_ + z * plane_ + (y - scalar_y_begin_) * row_ + x;
+    const float* q = p + plane_;
+    a = _mm_loadh_pi(_mm_loadl_pi(_mm_setzero_ps(), reinterpret_cast<const __m64*>(p)),
+                     reinterpret_cast<const __m64*>(p + row_));
+    b = _mm_loadh_pi(_mm_loadl_pi(_mm_setzero_ps(), reinterpret_cast<const __m64*>(q)),
+                     reinterpret_cast<const __m64*>(q + row_));
+    _mm_storeu_ps(corners_.data(), a);
+    _mm_storeu_ps(corners_.data() + 4, b);
+  } else {
+    scene_->Corners(x, y, z, corners_.data());
+    a = _mm_loadu_ps(corners_.data());
+    b = _mm_loadu_ps(corners_.data() + 4);
+  }
   // Four lanes at a time (minps, maxps); a NaN corner gives a NaN or a
   // number here, and no root either way.
-#if defined(__SSE__)
-  const __m128 a = _mm_loadu_ps(corners_.data()), b = _mm_loadu_ps(corners_.data() + 4);
   __m128 mn = _mm_min_ps(a, b), mx = _mm_max_ps(a, b);
   mn = _mm_min_ps(mn, _mm_movehl_ps(mn, mn));
   mx = _mm_max_ps(mx, _mm_movehl_ps(mx, mx));
@@ -268,6 +307,8 @@ void CrossingWalk::Load() {
   lo_value_ = _mm_cvtss_f32(mn);
   hi_value_ = _mm_cvtss_f32(mx);
 #else
+  scene_->Corners(x, y, z, corners_.data());
+  (void)inside;
   float mn = corners_[0], mx = corners_[0];
   for (int k = 1; k < 8; ++k) {
     mn = corners_[k] < mn ? corners_[k] : mn;
@@ -329,7 +370,7 @@ void CrossingWalk::Extend(double new_t1) {
   }
 }
 
-CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
+TRANSTICK_INLINE CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
   // The two edges of a band differ in parity: one slot each.
   EdgeRoots& r = cache_[edge & 1];
   if (r.edge == edge) return r;
@@ -341,7 +382,7 @@ CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
     // [0, span], whose hull holds the cubic there.
     std::array<double, 3> entry;
     for (int a = 0; a < 3; ++a) entry[a] = origin_[a] + dir_[a] * t_in_ - (c_[a] - 0.5);
-    cubic_ = CellCubic(corners_, entry, dir_, 0);
+    cubic_ = Cubic(corners_, entry, dir_, 0);
     const double p1 = cubic_.c * span, p2 = cubic_.b * span * span,
                  p3 = cubic_.a * span * span * span;
     hull_[0] = cubic_.d;
@@ -381,7 +422,7 @@ CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
   return r;
 }
 
-std::optional<std::pair<double, int>> CrossingWalk::Candidate(int edge, bool up) {
+TRANSTICK_INLINE std::optional<std::pair<double, int>> CrossingWalk::Candidate(int edge, bool up) {
   EdgeRoots& r = Roots(edge);
   for (int k = 0; k < r.count; ++k) {
     if (r.at[k].up != up) continue;

@@ -199,6 +199,14 @@ class CrossingWalk {
   const Scene* scene_;
   const Bands* bands_;
   const FieldGrid* grid_;  // null when the scene has none: every cell is read
+  // The scene's scalars: planes from scalar_y_begin_, rows of row_ values,
+  // planes of plane_; a cell's corners come from one pointer when its first
+  // voxel (c - 1) lies below corner_span_ on each axis (y from
+  // scalar_y_begin_).
+  const float* scalars_;
+  int scalar_y_begin_;
+  ptrdiff_t row_, plane_;
+  std::array<unsigned, 3> corner_span_;
   // The grid's groups, where its cells begin (y: the first row) and how
   // many there are per axis, and what a step along each axis adds to a
   // group's index.
