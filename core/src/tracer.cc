@@ -9,7 +9,6 @@
 #include "transtick/traversal.h"
 
 namespace transtick {
-std::atomic<long> g_steps{0}, g_jumps{0}, g_loads{0}, g_walks{0}; std::atomic<long> g_kind[2][4];
 namespace {
 
 Vec3f ToFloat(const Vec3& v) {
@@ -384,7 +383,6 @@ Tracer::Outcome Tracer::TraceSmooth(RayDescriptor& ray, std::vector<RayDescripto
     if (finished) break;
   }
   counters.segments += walk.cells();
-  g_steps += walk.cells(); g_jumps += walk.jumps(); g_loads += walk.solved(); g_walks++; { int k = ray.kind == RayKind::kShadow; g_kind[k][0]++; g_kind[k][1] += walk.cells(); g_kind[k][2] += walk.jumps(); g_kind[k][3] += walk.solved(); }
   if (walk.truncated()) {
     ++counters.truncated;
     return Outcome::kFinished;
