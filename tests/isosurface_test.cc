@@ -263,62 +263,6 @@ TEST(IsosurfaceTest, CrossingWalkWalksTheFieldsCells) {
   EXPECT_GT(cut_rays, 5000);
 }
 
-// Wherever the field takes values of two materials inside a voxel (on a
-// 5^3 grid of points, faces included), the voxel is a candidate; and the
-// label is not trivially all ones. The later trials are thin volumes (1 to
-// 3 voxels along some axis), where the neighbourhood filter clamps on both
-// sides.
-TEST(IsosurfaceTest, EveryVoxelAFieldSurfaceCrossesIsACandidate) {
-  std::mt19937_64 rng(4);
-  std::uniform_real_distribution<double> unit(0, 1);
-  size_t voxels = 0, candidates = 0;
-  for (int trial = 0; trial < 160; ++trial) {
-    Volume v;
-    if (trial < 60) {
-      v.dims = {6 + static_cast<int>(rng() % 3), 6, 5 + static_cast<int>(rng() % 4)};
-    } else {
-      for (int a = 0; a < 3; ++a) v.dims[a] = 1 + static_cast<int>(rng() % (a == 1 ? 3 : 7));
-    }
-    v.values.resize(v.VoxelCount());
-    // Smooth blobs plus noise, so that some neighbourhoods hold one material.
-    const double cx = unit(rng) * 6, cy = unit(rng) * 6, cz = unit(rng) * 6;
-    for (int z = 0; z < v.dims[2]; ++z)
-      for (int y = 0; y < v.dims[1]; ++y)
-        for (int x = 0; x < v.dims[0]; ++x) {
-          const double r = std::hypot(x - cx, y - cy, z - cz);
-          v.values[v.Index(x, y, z)] = static_cast<float>(100 * r + 20 * unit(rng));
-        }
-    Classification c;
-    const int n = 1 + static_cast<int>(rng() % 3);
-    for (int m = 0; m < n; ++m) {
-      const float lo = static_cast<float>(unit(rng) * 500);
-      c.materials.push_back(Material{.name = "m", .min = lo, .max = lo + 50 + static_cast<float>(unit(rng) * 300)});
-    }
-    auto scene = Scene::ForSurfaces(v, c);
-    ASSERT_TRUE(scene.ok()) << scene.status();
-    const std::vector<uint8_t> labels = SurfaceCandidates(v, c);
-    ASSERT_EQ(labels.size(), v.VoxelCount());
-    for (int z = 0; z < v.dims[2]; ++z)
-      for (int y = 0; y < v.dims[1]; ++y)
-        for (int x = 0; x < v.dims[0]; ++x) {
-          bool mixed = false;
-          int first = -1;
-          for (int k = 0; k < 125 && !mixed; ++k) {
-            const double px = x + (k % 5) / 4.0, py = y + (k / 5 % 5) / 4.0, pz = z + k / 25 / 4.0;
-            const int m = c.Classify(static_cast<float>(FieldAt(*scene, Vec3{px, py, pz})));
-            if (first < 0) first = m;
-            mixed = m != first;
-          }
-          const uint8_t label = labels[v.Index(x, y, z)];
-          ++voxels;
-          candidates += label;
-          ASSERT_TRUE(!mixed || label) << "trial " << trial << " voxel " << x << "," << y << "," << z;
-        }
-  }
-  EXPECT_LT(candidates, voxels * 9 / 10);
-  EXPECT_GT(candidates, voxels / 20);
-}
-
 // A smooth volume with plateaus (values rounded to steps of 25, so that
 // whole regions share a band and some values fall exactly on an edge) and
 // three materials: wide uniform space for the grid to jump, and surfaces.

@@ -172,118 +172,15 @@ std::vector<uint8_t> DvrVisibility(const Volume& volume, const TransferFunction&
   return labels;
 }
 
-namespace {
-
-// The least and greatest value the trilinear field takes inside voxel
-// (x, y, z), give or take rounding. The voxel's centre cuts it into eight
-// boxes, one in each cell of the field around it; on each the field is
-// trilinear again, so its extremes lie at the box's corners. Those are the
-// 27 points with coordinates i, i + 1/2 or i + 1 along each axis, where
-// the field is the mean of the 1, 2, 4 or 8 samples around (indices
-// clamped at the faces, as the field is).
-std::array<double, 2> VoxelFieldRange(const Volume& v, int x, int y, int z) {
-  double n[3][3][3];
-  // The neighbours' offsets along each axis, clamped at the faces.
-  const size_t sy = v.dims[0], sz = sy * v.dims[1];
-  const ptrdiff_t ox[3] = {x > 0 ? -1 : 0, 0, x + 1 < v.dims[0] ? 1 : 0};
-  const ptrdiff_t oy[3] = {y > 0 ? -ptrdiff_t(sy) : 0, 0, y + 1 < v.dims[1] ? ptrdiff_t(sy) : 0};
-  const ptrdiff_t oz[3] = {z > 0 ? -ptrdiff_t(sz) : 0, 0, z + 1 < v.dims[2] ? ptrdiff_t(sz) : 0};
-  const float* centre = v.values.data() + v.Index(x, y, z);
-  for (int k = 0; k < 3; ++k)
-    for (int j = 0; j < 3; ++j)
-      for (int i = 0; i < 3; ++i) n[k][j][i] = centre[oz[k] + oy[j] + ox[i]];
-  // Means along x, then y, then z: offset 0 is the low face, 1 the centre,
-  // 2 the high face.
-  auto mean3 = [](double lo, double mid, double hi, double out[3]) {
-    out[0] = 0.5 * (lo + mid);
-    out[1] = mid;
-    out[2] = 0.5 * (mid + hi);
-  };
-  double ax[3][3][3], ay[3][3][3];
-  for (int k = 0; k < 3; ++k)
-    for (int j = 0; j < 3; ++j) mean3(n[k][j][0], n[k][j][1], n[k][j][2], ax[k][j]);
-  for (int k = 0; k < 3; ++k)
-    for (int i = 0; i < 3; ++i) {
-      double o[3];
-      mean3(ax[k][0][i], ax[k][1][i], ax[k][2][i], o);
-      for (int j = 0; j < 3; ++j) ay[k][j][i] = o[j];
-    }
-  double lo = INFINITY, hi = -INFINITY;
-  for (int j = 0; j < 3; ++j)
-    for (int i = 0; i < 3; ++i) {
-      double o[3];
-      mean3(ay[0][j][i], ay[1][j][i], ay[2][j][i], o);
-      for (double w : o) {
-        lo = std::min(lo, w);
-        hi = std::max(hi, w);
-      }
-    }
-  return {lo, hi};
-}
-
-}  // namespace
-
-std::vector<uint8_t> SurfaceCandidates(const Volume& volume, const Classification& classification) {
-  const Bands bands(classification);
-  const std::vector<float>& edges = bands.edges();
-  std::vector<uint8_t> labels(volume.values.size());
-  const auto& d = volume.dims;
-  const int n_edges = static_cast<int>(edges.size());
-  // An edge above everything, so that the quick test needs no branch.
-  std::vector<float> padded = edges;
-  padded.push_back(std::numeric_limits<float>::quiet_NaN());
-  std::vector<uint8_t> maybe(d[0]);
-  Filter3(volume, [&](int z, const float* mn, const float* mx) {
-    for (int y = 0; y < d[1]; ++y) {
-      // The quick test that most voxels fail, a row at a time: is the first
-      // edge above the neighbourhood's least value (the index upper_bound
-      // gives, counted without a branch: the edges are sorted) at most its
-      // greatest? (A NaN least value is above no edge, as upper_bound has it.)
-      const float* row_mn = mn + static_cast<size_t>(y) * d[0];
-      const float* row_mx = mx + static_cast<size_t>(y) * d[0];
-      if (n_edges <= 16) {
-        for (int x = 0; x < d[0]; ++x) {
-          int first = 0;
-          for (int k = 0; k < n_edges; ++k) first += !(row_mn[x] < edges[k]);
-          maybe[x] = padded[first] <= row_mx[x];
-        }
-      } else {
-        for (int x = 0; x < d[0]; ++x) {
-          auto e = std::upper_bound(edges.begin(), edges.end(), row_mn[x]);
-          maybe[x] = e != edges.end() && *e <= row_mx[x];
-        }
-      }
-      for (int x = 0; x < d[0]; ++x) {
-        if (!maybe[x]) continue;
-        const size_t i = volume.Index(x, y, z);
-        // The exact range, widened by far more than its rounding (a few
-        // ulps of the largest sample).
-        auto [lo, hi] = VoxelFieldRange(volume, x, y, z);
-        const double slack = 1e-9 * std::max(std::abs(lo), std::abs(hi));
-        lo -= slack;
-        hi += slack;
-        auto f = std::upper_bound(edges.begin(), edges.end(), lo);
-        labels[i] = f != edges.end() && *f <= hi ? 1 : 0;
-      }
-    }
-  });
-  return labels;
-}
-
 absl::StatusOr<Scene> Scene::ForSurfaces(const Volume& volume,
                                          const Classification& classification) {
   if (auto s = CheckDims(volume); !s.ok()) return s;
   if (auto s = classification.Validate(); !s.ok()) return s;
   std::vector<uint8_t> labels(volume.values.size());
+  // The paper's sticks, for either surface model: smooth surfaces walk the
+  // field's cells instead (field(), built below), but slabs are cut, sent
+  // and moved as sticks and scalars alike.
   for (size_t i = 0; i < labels.size(); ++i) labels[i] = classification.Classify(volume.values[i]);
-  if (classification.surface == SurfaceModel::kSmooth) {
-    // A candidate voxel is walked cell by cell of the field; every other
-    // voxel keeps its material, which is the field's throughout it.
-    const std::vector<uint8_t> candidates = SurfaceCandidates(volume, classification);
-    for (size_t i = 0; i < labels.size(); ++i) {
-      if (candidates[i]) labels[i] = Classification::kCandidate;
-    }
-  }
   Scene scene;
   scene.mode_ = RenderMode::kSurfaces;
   scene.dims_ = volume.dims;

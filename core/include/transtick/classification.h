@@ -42,18 +42,13 @@ const char* SurfaceModelName(SurfaceModel model);
 // intervals overlap, the first listed wins. Immutable after Validate():
 // thread-safe for concurrent reads.
 struct Classification {
-  // 255 marks mixed bricks, and smooth-surface candidates in sticks.
+  // 255 marks mixed bricks.
   static constexpr int kMaxMaterials = 254;
-  // The label of a voxel where a smooth surface may lie (SurfaceCandidates
-  // in scene.h), in place of its material.
-  static constexpr uint8_t kCandidate = 255;
   std::vector<Material> materials;
   SurfaceModel surface = SurfaceModel::kSmooth;
 
   // The largest label a voxel of this classification's sticks may carry.
-  int MaxLabel() const {
-    return surface == SurfaceModel::kSmooth ? kCandidate : static_cast<int>(materials.size());
-  }
+  int MaxLabel() const { return static_cast<int>(materials.size()); }
 
   // Checks intervals (min < max, finite), colours and coefficients in range,
   // opacity in [0, 1], at most kMaxMaterials, names non-empty.

@@ -154,17 +154,6 @@ class Scene {
 // Labels for the dvr empty-space map (see Scene::ForDvr).
 std::vector<uint8_t> DvrVisibility(const Volume& volume, const TransferFunction& transfer);
 
-// 1 for each voxel inside which the trilinear field of the samples (at
-// voxel centres) may take values of two materials of `classification`,
-// else 0: the voxels where a smooth surface can lie. Classify is constant
-// on the values between two interval edges, so a voxel holds a surface
-// only if the field's range inside it, [lo, hi], has an edge e with
-// lo < e <= hi. The range is computed exactly (the field is trilinear on
-// each eighth of the voxel, so its extremes are among 27 points) and
-// widened by far more than its rounding. A voxel labelled 0 therefore
-// holds no surface, and no root can be missed by skipping it
-// (docs/design.md, "Smooth surfaces").
-std::vector<uint8_t> SurfaceCandidates(const Volume& volume, const Classification& classification);
 
 }  // namespace transtick
 
