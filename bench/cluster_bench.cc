@@ -8,6 +8,8 @@
 //                         [--repeat N] [--grid N]
 //   cluster_bench hops    [--volume FILE] [--materials FILE] [--size WxH]
 //                         [--workers 2,4,8]
+//   cluster_bench weights [--volume FILE] [--materials FILE] [--size WxH]
+//                         [--workers 2,4] [--repeat N]
 //
 // scaling: the in-process render on all cores, then an embedded cluster
 //   (root, display and N workers, real gRPC on 127.0.0.1) for each N. Each
@@ -35,6 +37,15 @@
 //   nothing to (no hit, no shadow ray, colour, transmittance, material and
 //   band as they came). Prints hops and transit hops per frame, their
 //   share, and the traversal steps the transits took.
+// weights: what the work profile's units cost for smooth surfaces (tracer.h,
+//   kFieldWork). For N equal slabs of each view (azimuth 0, 45, 90, 135), of
+//   the volume given and of engine.nrrd beside it, every ray of a frame is
+//   traced in this process slab by slab as the ring routes it, `repeat`
+//   times; each slab's tracer CPU time (the least over the repeats) is
+//   fitted by least squares of the relative error to its counts: steps,
+//   cells of the field read, shaded points, rays taken. Prints the fitted
+//   cost of each in ns, the fit's error per slab, and the error of the
+//   weights in use.
 //
 // Defaults: cthead.nrrd in $TRANSTICK_DATA_DIR (else ../shared/data),
 // examples/cthead_materials.json, 400x400, azimuth 45, shadows on, 5 repeats.
@@ -83,7 +94,7 @@ namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
 constexpr char kUsage[] =
-    "usage: cluster_bench scaling|forward|tables|hops [--volume FILE] [--materials FILE]\n"
+    "usage: cluster_bench scaling|forward|tables|hops|weights [--volume FILE] [--materials FILE]\n"
     "                     [--size WxH] [--azimuth DEG] [--repeat N] [--workers 1,2,4]\n"
     "                     [--rays N] [--grid N] [--threads N] [--balance MODE]\n";
 
@@ -115,7 +126,8 @@ std::string Parse(int argc, char** argv, Options* o) {
   if (argc < 2) return "a mode is required";
   o->mode = argv[1];
   if (o->mode == "--help" || o->mode == "-h") return "help";
-  if (o->mode != "scaling" && o->mode != "forward" && o->mode != "tables" && o->mode != "hops") {
+  if (o->mode != "scaling" && o->mode != "forward" && o->mode != "tables" && o->mode != "hops" &&
+      o->mode != "weights") {
     return "unknown mode '" + o->mode + "'";
   }
   for (int i = 2; i < argc; ++i) {
@@ -577,6 +589,212 @@ int Hops(const Options& o) {
   return 0;
 }
 
+// ---------------------------------------------------------------- weights
+
+double ThreadCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec / 1e6;
+}
+
+// One slab's frame: its counts and its least tracer CPU time over repeats.
+struct SlabWork {
+  std::string what;
+  double counts[4] = {0, 0, 0, 0};  // steps, cells, shaded points, rays taken
+  double ms = 0;
+};
+
+// Solves the normal equations of the least squares of the relative error,
+// min sum ((w . counts - ms) / ms)^2, for the weights in `use` (the
+// others 0).
+std::array<double, 4> FitWeights(const std::vector<SlabWork>& rows, unsigned use) {
+  double a[4][5] = {};
+  for (const SlabWork& r : rows) {
+    double x[4];
+    for (int k = 0; k < 4; ++k) x[k] = use >> k & 1 ? r.counts[k] / r.ms : 0;
+    for (int i = 0; i < 4; ++i) {
+      for (int j = 0; j < 4; ++j) a[i][j] += x[i] * x[j];
+      a[i][4] += x[i];  // the target, ms / ms
+    }
+  }
+  for (int i = 0; i < 4; ++i) {  // Gauss-Jordan with partial pivoting
+    int p = i;
+    for (int r = i + 1; r < 4; ++r) {
+      if (std::abs(a[r][i]) > std::abs(a[p][i])) p = r;
+    }
+    std::swap(a[i], a[p]);
+    if (a[i][i] == 0) continue;
+    for (int r = 0; r < 4; ++r) {
+      if (r == i) continue;
+      const double f = a[r][i] / a[i][i];
+      for (int k = i; k < 5; ++k) a[r][k] -= f * a[i][k];
+    }
+  }
+  std::array<double, 4> w{};
+  for (int i = 0; i < 4; ++i) w[i] = a[i][i] != 0 ? a[i][4] / a[i][i] : 0;
+  return w;
+}
+
+double SquaredRelativeError(const std::vector<SlabWork>& rows, const std::array<double, 4>& w) {
+  double sum = 0;
+  for (const SlabWork& r : rows) {
+    double pred = 0;
+    for (int k = 0; k < 4; ++k) pred += w[k] * r.counts[k];
+    sum += (pred - r.ms) * (pred - r.ms) / (r.ms * r.ms);
+  }
+  return sum;
+}
+
+// The best fit with no weight below 0: counts that rise together (cells
+// with steps) can otherwise trade a negative weight for a larger one. Every
+// subset of the four is tried.
+std::array<double, 4> FitNonNegative(const std::vector<SlabWork>& rows) {
+  std::array<double, 4> best{};
+  double best_error = 1e300;
+  for (unsigned use = 1; use < 16; ++use) {
+    const std::array<double, 4> w = FitWeights(rows, use);
+    if (*std::min_element(w.begin(), w.end()) < 0) continue;
+    const double e = SquaredRelativeError(rows, w);
+    if (e < best_error) best_error = e, best = w;
+  }
+  return best;
+}
+
+int Weights(const Options& o) {
+  std::vector<std::pair<std::string, std::string>> inputs = {{o.volume, o.materials}};
+  const fs::path engine = fs::path(o.volume).parent_path() / "engine.nrrd";
+  const fs::path engine_materials = fs::path(o.materials).parent_path() / "engine_materials.json";
+  if (fs::exists(engine) && fs::exists(engine_materials) && engine != fs::path(o.volume)) {
+    inputs.push_back({engine.string(), engine_materials.string()});
+  }
+  std::vector<SlabWork> rows;
+  for (const auto& [volume, materials] : inputs) {
+    Options vo = o;
+    vo.volume = volume;
+    vo.materials = materials;
+    auto setup = Prepare(vo);
+    if (!setup.ok()) return Fail(setup.status());
+    const Scene& whole = *setup->scene;
+    for (double azimuth : {0.0, 45.0, 90.0, 135.0}) {
+      const v1::View view = MakeView(o, azimuth);
+      auto camera = Camera::Create(*ToCameraSpec(view), setup->extent);
+      if (!camera.ok()) return Fail(camera.status());
+      const RenderSettings settings = ToRenderSettings(view);
+      for (int n : o.workers) {
+        const int planes = whole.dims()[1];
+        if (n < 1 || n > planes) continue;
+        std::vector<int> cuts;
+        for (int i = 0; i <= n; ++i) cuts.push_back(static_cast<int>(int64_t{planes} * i / n));
+        const RingLayout layout(cuts, whole.dims(), whole.spacing(), *camera);
+        std::vector<Scene> slabs;
+        std::vector<Tracer> tracers;
+        slabs.reserve(n);
+        for (int i = 0; i < n; ++i) slabs.push_back(whole.Slab(cuts[i], cuts[i + 1]));
+        for (const Scene& sc : slabs) tracers.emplace_back(sc, settings, *camera);
+        std::vector<SlabWork> work(n);
+        std::vector<double> best(n, 1e300);
+        for (int rep = 0; rep < o.repeat; ++rep) {
+          std::vector<double> ms(n, 0);
+          std::vector<TraceCounters> counters(n);
+          std::vector<uint64_t> taken(n, 0);
+          std::vector<std::vector<RayDescriptor>> queues(n);
+          for (int i = 0; i < n; ++i) {
+            const double t0 = ThreadCpuMs();
+            for (int py = 0; py < camera->height(); ++py)
+              for (int px = 0; px < camera->width(); ++px) {
+                RayDescriptor ray;
+                if (layout.Primary(i, px, py, 0, 1, tracers[i], &ray) ==
+                    RingLayout::PrimaryRole::kTrace) {
+                  queues[i].push_back(ray);
+                }
+              }
+            ms[i] += ThreadCpuMs() - t0;
+          }
+          std::vector<RayDescriptor> spawned;
+          for (bool busy = true; busy;) {
+            busy = false;
+            for (int i = 0; i < n; ++i) {
+              std::vector<RayDescriptor> queue = std::move(queues[i]);
+              queues[i].clear();
+              const double t0 = ThreadCpuMs();
+              for (RayDescriptor& ray : queue) {
+                busy = true;
+                ++taken[i];
+                spawned.clear();
+                Deposit deposit;
+                if (tracers[i].Trace(ray, spawned, deposit, counters[i]) == Tracer::Outcome::kLeftSlab) {
+                  const RingLayout::Hop hop = layout.Route(i, ray.cell);
+                  if (hop != RingLayout::Hop::kFinished) {
+                    queues[RingLayout::Neighbour(i, hop)].push_back(ray);
+                  }
+                }
+                for (const RayDescriptor& r : spawned) queues[i].push_back(r);
+              }
+              ms[i] += ThreadCpuMs() - t0;
+            }
+          }
+          for (int i = 0; i < n; ++i) {
+            best[i] = std::min(best[i], ms[i]);
+            work[i].counts[0] = static_cast<double>(counters[i].segments);
+            work[i].counts[1] = static_cast<double>(counters[i].cells);
+            work[i].counts[2] = static_cast<double>(counters[i].surface_hits);
+            work[i].counts[3] = static_cast<double>(taken[i]);
+          }
+        }
+        for (int i = 0; i < n; ++i) {
+          work[i].ms = best[i];
+          work[i].what = absl::StrCat(fs::path(volume).filename().string(), " az ", azimuth, " ",
+                                      n, " slabs, slab ", i);
+          if (work[i].ms > 0.5) rows.push_back(work[i]);
+        }
+      }
+    }
+  }
+  if (rows.size() < 4) return Fail(absl::FailedPreconditionError("too few slabs to fit"));
+  const std::array<double, 4> w = FitNonNegative(rows);
+  // A unit of the work profile is about 5 ns: 5e-6 ms.
+  const std::array<double, 4> in_use = {kFieldWork.step * 5e-6, kFieldWork.cell * 5e-6,
+                                        kFieldWork.hit * 5e-6, kFieldWork.ray * 5e-6};
+  auto errors = [&](const std::array<double, 4>& weights, bool print) {
+    double sum = 0, worst = 0;
+    for (const SlabWork& r : rows) {
+      double pred = 0;
+      for (int k = 0; k < 4; ++k) pred += weights[k] * r.counts[k];
+      const double e = (pred - r.ms) / r.ms;
+      sum += std::abs(e);
+      worst = std::max(worst, std::abs(e));
+      if (print) {
+        std::printf("%-36s %9.0f %8.0f %6.0f %8.0f %8.2f %8.2f %+6.1f%%\n", r.what.c_str(),
+                    r.counts[0], r.counts[1], r.counts[2], r.counts[3], r.ms, pred, 100 * e);
+      }
+    }
+    return std::pair{sum / rows.size(), worst};
+  };
+  std::printf("%-36s %9s %8s %6s %8s %8s %8s %7s\n", "slab", "steps", "cells", "hits", "rays",
+              "cpu ms", "fit ms", "error");
+  const auto [mean, worst] = errors(w, true);
+  // Only their proportions cut slabs: the weights in use at their best
+  // common scale.
+  double sx = 0, sxx = 0;
+  for (const SlabWork& r : rows) {
+    double pred = 0;
+    for (int k = 0; k < 4; ++k) pred += in_use[k] * r.counts[k];
+    sx += pred / r.ms;
+    sxx += (pred / r.ms) * (pred / r.ms);
+  }
+  std::array<double, 4> scaled = in_use;
+  for (double& x : scaled) x *= sxx > 0 ? sx / sxx : 1;
+  const auto [mean_in_use, worst_in_use] = errors(scaled, false);
+  std::printf("fitted: a step %.1f ns, a cell %.1f ns, a shaded point %.1f ns, a ray %.1f ns\n",
+              w[0] * 1e6, w[1] * 1e6, w[2] * 1e6, w[3] * 1e6);
+  std::printf("relative error per slab: mean %.1f%%, worst %.1f%%; with the weights in use "
+              "(%d, %d, %d, %d units, at their best scale): mean %.1f%%, worst %.1f%%\n",
+              100 * mean, 100 * worst, static_cast<int>(kFieldWork.step),
+              static_cast<int>(kFieldWork.cell), static_cast<int>(kFieldWork.hit),
+              static_cast<int>(kFieldWork.ray), 100 * mean_in_use, 100 * worst_in_use);
+  return 0;
+}
+
 int Tables(const Options& o) {
   auto setup = Prepare(o);
   if (!setup.ok()) return Fail(setup.status());
@@ -690,6 +908,7 @@ int main(int argc, char** argv) {
   }
   if (options.mode == "forward") return transtick::Forward(options);
   if (options.mode == "hops") return transtick::Hops(options);
+  if (options.mode == "weights") return transtick::Weights(options);
   if (options.mode == "scaling") return transtick::Scaling(options);
   return transtick::Tables(options);
 }

@@ -76,6 +76,7 @@ Tracer::Tracer(const Scene& scene, const RenderSettings& settings, const Camera&
   smooth_ = scene.mode() == RenderMode::kSurfaces &&
             scene.classification().surface == SurfaceModel::kSmooth;
   if (smooth_) bands_ = Bands(scene.classification());
+  work_ = smooth_ ? &kFieldWork : &kTraversalWork;
   shadow_bias_ = 1.5 / Length(light_index_);
   const double min_spacing = std::min({sp[0], sp[1], sp[2]});
   // A step below the bound (CheckRenderSettings refuses it) is raised to it
@@ -223,7 +224,7 @@ Deposit Tracer::MissDeposit(uint32_t pixel) const {
 Tracer::Outcome Tracer::Trace(RayDescriptor& ray, std::vector<RayDescriptor>& spawned,
                               Deposit& deposit, TraceCounters& counters) const {
   if (counters.plane_work && ray.cell[1] >= scene_.y_begin() && ray.cell[1] < scene_.y_end()) {
-    counters.plane_work[ray.cell[1] - scene_.y_begin()] += kRayWork;
+    counters.plane_work[ray.cell[1] - scene_.y_begin()] += work_->ray;
   }
   Outcome outcome;
   if (smooth_) {
@@ -273,7 +274,7 @@ TRANSTICK_INLINE std::optional<Tracer::Step> Tracer::Walk(Walker& w, Outcome* ou
     return std::nullopt;
   }
   ++counters.segments;
-  if (counters.plane_work) counters.plane_work[cell[1] - w.y_begin] += kSegmentWork;
+  if (counters.plane_work) counters.plane_work[cell[1] - w.y_begin] += w.step_work;
   return Step{*seg, cell};
 }
 
@@ -284,7 +285,7 @@ bool Tracer::Shade(RayDescriptor& ray, uint8_t m, const Vec3& p, const Vec3& vie
   ++counters.surface_hits;
   if (counters.plane_work) {
     counters.plane_work[FloorClamped(p.y, scene_.y_begin(), scene_.y_end() - 1) -
-                        scene_.y_begin()] += kHitWork;
+                        scene_.y_begin()] += work_->hit;
   }
   const Material& mat = scene_.classification().materials[m - 1];
   float diffuse, specular;
@@ -343,7 +344,7 @@ Tracer::Outcome Tracer::TraceSmooth(RayDescriptor& ray, std::vector<RayDescripto
   const bool leaves_slab = t_slab < t_volume;
   const double end = std::max(std::min(t_volume, t_slab), ray.t);
   WalkWork work;
-  if (counters.plane_work) work = {counters.plane_work, y_begin, y_end, kSegmentWork, kCellWork};
+  if (counters.plane_work) work = {counters.plane_work, y_begin, y_end, work_->step, work_->cell};
   CrossingWalk walk(scene_, bands_, ray.origin, axes, ray.t, end,
                     ray.band == RayDescriptor::kNoBand ? -1 : ray.band, work);
   const bool primary = ray.kind == RayKind::kPrimary;
@@ -383,6 +384,7 @@ Tracer::Outcome Tracer::TraceSmooth(RayDescriptor& ray, std::vector<RayDescripto
     if (finished) break;
   }
   counters.segments += walk.cells();
+  counters.cells += walk.solved();
   if (walk.truncated()) {
     ++counters.truncated;
     return Outcome::kFinished;
@@ -493,7 +495,7 @@ Tracer::Outcome Tracer::TraceDvr(RayDescriptor& ray, TraceCounters& counters) co
       const TableEntry& e = Lookup(Sample(p));
       if (e.alpha <= 0) continue;
       ++counters.samples;
-      if (counters.plane_work) counters.plane_work[cell[1] - walker.y_begin] += kSampleWork;
+      if (counters.plane_work) counters.plane_work[cell[1] - walker.y_begin] += work_->sample;
       std::array<float, 3> rgb = e.color;
       if (tf.shading) {
         float diffuse, specular;

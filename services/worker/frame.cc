@@ -623,7 +623,7 @@ bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>*
           misses->push_back(tracer_.MissDeposit(static_cast<uint32_t>(row) * width + col));
           // Only the first slab deposits misses: their cost stays with
           // its first plane wherever the cuts go.
-          plane_work[0] += kRayWork;
+          plane_work[0] += tracer_.work_weights().ray;
           break;
         case RingLayout::PrimaryRole::kNone:
           break;

@@ -39,6 +39,7 @@ struct TraceCounters {
   uint64_t shadow = 0;        // shadow rays spawned
   uint64_t segments = 0;      // traversal steps taken
   uint64_t surface_hits = 0;  // shaded surface points (surfaces mode)
+  uint64_t cells = 0;         // smooth surfaces: cells of the field whose corners were read
   uint64_t samples = 0;       // shaded samples (dvr)
   // Rays finished early at the hard per-call bound on steps or samples
   // (Tracer::Trace). The termination argument says this never happens; a
@@ -46,32 +47,42 @@ struct TraceCounters {
   uint64_t truncated = 0;
   // When set, the work done in each plane of the tracer's slab (docs/
   // balancing.md, "The work profile"): plane_work[y - y_begin] for plane y,
-  // in units of kSegmentWork per traversal step, kCellWork per cell of the
-  // field a crossing walk enters, kHitWork per shaded point and
-  // kSampleWork per dvr sample. The caller owns the array (one entry per
-  // plane of the slab); Add leaves it alone.
+  // in the units of the tracer's WorkWeights. The caller owns the array
+  // (one entry per plane of the slab); Add leaves it alone.
   uint64_t* plane_work = nullptr;
   void Add(const TraceCounters& o) {
     primary += o.primary;
     shadow += o.shadow;
     segments += o.segments;
     surface_hits += o.surface_hits;
+    cells += o.cells;
     samples += o.samples;
     truncated += o.truncated;
   }
 };
 
-// Units of the work profile (TraceCounters::plane_work), about 10 ns of a
-// worker's tracer CPU each (fitted to measured workers: docs/balancing.md,
-// "The work profile"): a traversal step, a crossing walk's cell, the
-// gradient, light and shadow ray of a shaded point, a dvr sample, and what
-// a ray costs a node apart from its steps (taking it, its deposit or its
-// hand-over; a miss's deposit too).
-inline constexpr uint64_t kSegmentWork = 6;
-inline constexpr uint64_t kCellWork = 12;
-inline constexpr uint64_t kHitWork = 36;
-inline constexpr uint64_t kSampleWork = 5;
-inline constexpr uint64_t kRayWork = 9;
+// What the work profile (TraceCounters::plane_work) counts, in units of
+// about 5 ns of a worker's tracer CPU, fitted to measured slabs (docs/
+// balancing.md, "The work profile"; bench/cluster_bench weights): a step
+// of the walk (a traversal segment, or a cell or box of the field's walk),
+// a cell of the field whose corners are read, a shaded point (gradient,
+// light, its shadow ray), a dvr sample, and what a ray costs a node apart
+// from its steps (taking it, its deposit or its hand-over; a miss's deposit
+// too). The models differ in what a step is, so each has its own.
+struct WorkWeights {
+  uint64_t step;
+  uint64_t cell;
+  uint64_t hit;
+  uint64_t sample;
+  uint64_t ray;
+};
+// The paper's voxel surfaces and dvr, over the traversal's segments.
+inline constexpr WorkWeights kTraversalWork = {12, 0, 72, 10, 18};
+// Smooth surfaces, over the field's cells. (Fitted to slabs' CPU alone,
+// a ray would weigh 50 and a step 3; but a ray's fixed cost is counted on
+// the plane where a slab takes it, and weighed that much it crowds the
+// profile at the slabs' edges: the cuts came out worse. docs/balancing.md.)
+inline constexpr WorkWeights kFieldWork = {12, 24, 72, 0, 18};
 
 // Limits that keep every frame finite (docs/design.md, "Why every ray ends").
 // The finest dvr step: this many samples per voxel along the smallest
@@ -124,6 +135,8 @@ class Tracer {
                 TraceCounters& counters) const;
 
   double step() const { return step_; }
+  // The weights of the work profile for this tracer's model.
+  const WorkWeights& work_weights() const { return *work_; }
   int64_t max_segments() const { return max_segments_; }
   int64_t max_samples() const { return max_samples_; }
 
@@ -148,6 +161,7 @@ class Tracer {
     std::array<int, 3> dims;
     int y_begin, y_end;
     int64_t steps_left;
+    uint64_t step_work;  // work profile units per step
     // Writes where the walk is back into the descriptor, which then
     // resumes there (kLeftSlab), and returns `outcome`.
     Outcome Stop(RayDescriptor& ray, Outcome outcome) const {
@@ -157,7 +171,8 @@ class Tracer {
     }
   };
   Walker MakeWalker(const RayDescriptor& ray) const {
-    return {Traversal(scene_, ray), scene_.dims(), scene_.y_begin(), scene_.y_end(), max_segments_};
+    return {Traversal(scene_, ray), scene_.dims(), scene_.y_begin(), scene_.y_end(), max_segments_,
+            work_->step};
   }
   // The step every kind of ray takes next: the next segment, or nullopt
   // with *outcome set, finished (the ray left the volume, or reached the
@@ -200,6 +215,7 @@ class Tracer {
   const Scene& scene_;
   RenderSettings settings_;
   bool smooth_ = false;  // smooth surfaces (SurfaceModel::kSmooth)
+  const WorkWeights* work_ = &kTraversalWork;
   Bands bands_;
   Vec3 light_world_;        // unit, toward the light
   Vec3 light_index_;        // light_world_ / spacing
