@@ -515,6 +515,75 @@ double Imbalance(const std::vector<double>& active) {
 
 // ---------------------------------------------------------------- hops
 
+// N equal slabs of a whole-volume scene, their tracers and the ring's
+// layout, for tracing a frame slab by slab in this process (TraceRing).
+struct EqualRing {
+  static std::vector<int> Cuts(int planes, int n) {
+    std::vector<int> cuts;
+    for (int i = 0; i <= n; ++i) cuts.push_back(static_cast<int>(int64_t{planes} * i / n));
+    return cuts;
+  }
+  EqualRing(const Scene& whole, int n, const RenderSettings& settings, const Camera& camera)
+      : cuts(Cuts(whole.dims()[1], n)), layout(cuts, whole.dims(), whole.spacing(), camera) {
+    slabs.reserve(n);
+    for (int i = 0; i < n; ++i) slabs.push_back(whole.Slab(cuts[i], cuts[i + 1]));
+    for (const Scene& sc : slabs) tracers.emplace_back(sc, settings, camera);
+  }
+  EqualRing(const EqualRing&) = delete;
+  EqualRing& operator=(const EqualRing&) = delete;
+  std::vector<int> cuts;
+  RingLayout layout;
+  std::vector<Scene> slabs;     // the tracers refer to them
+  std::vector<Tracer> tracers;
+};
+
+// Traces every ray of one frame in this process, slab by slab as the ring
+// routes it (RingLayout): each slab makes its primary rays, then each slab
+// in turn traces the rays queued for it, until none are left. `timed(i,
+// work)` runs slab i's share of the work (making its primaries, or tracing
+// its queue) so that a caller may time it; `traced(i, before, ray,
+// spawned, counters, outcome)` sees each Trace call.
+template <typename Timed, typename Traced>
+void TraceRing(const RingLayout& layout, const std::vector<Tracer>& tracers, const Camera& camera,
+               Timed timed, Traced traced) {
+  const int n = static_cast<int>(tracers.size());
+  std::vector<std::vector<RayDescriptor>> queues(n);
+  for (int i = 0; i < n; ++i) {
+    timed(i, [&] {
+      for (int py = 0; py < camera.height(); ++py)
+        for (int px = 0; px < camera.width(); ++px) {
+          RayDescriptor ray;
+          if (layout.Primary(i, px, py, 0, 1, tracers[i], &ray) == RingLayout::PrimaryRole::kTrace) {
+            queues[i].push_back(ray);
+          }
+        }
+    });
+  }
+  std::vector<RayDescriptor> spawned;
+  for (bool busy = true; busy;) {
+    busy = false;
+    for (int i = 0; i < n; ++i) {
+      std::vector<RayDescriptor> queue = std::move(queues[i]);
+      queues[i].clear();
+      busy = busy || !queue.empty();
+      timed(i, [&] {
+        for (RayDescriptor& ray : queue) {
+          const RayDescriptor before = ray;
+          spawned.clear();
+          Deposit deposit;
+          TraceCounters counters;
+          const Tracer::Outcome outcome = tracers[i].Trace(ray, spawned, deposit, counters);
+          traced(i, before, ray, spawned, counters, outcome);
+          for (const RayDescriptor& r : spawned) queues[i].push_back(r);
+          if (outcome != Tracer::Outcome::kLeftSlab) continue;
+          const RingLayout::Hop hop = layout.Route(i, ray.cell);
+          if (hop != RingLayout::Hop::kFinished) queues[RingLayout::Neighbour(i, hop)].push_back(ray);
+        }
+      });
+    }
+  }
+}
+
 int Hops(const Options& o) {
   auto setup = Prepare(o);
   if (!setup.ok()) return Fail(setup.status());
@@ -531,43 +600,19 @@ int Hops(const Options& o) {
     for (int n : o.workers) {
       const int planes = whole.dims()[1];
       if (n < 1 || n > planes) continue;
-      std::vector<int> cuts;
-      for (int i = 0; i <= n; ++i) cuts.push_back(static_cast<int>(int64_t{planes} * i / n));
-      const RingLayout layout(cuts, whole.dims(), whole.spacing(), *camera);
-      std::vector<Scene> slabs;
-      std::vector<Tracer> tracers;
-      slabs.reserve(n);
-      for (int i = 0; i < n; ++i) slabs.push_back(whole.Slab(cuts[i], cuts[i + 1]));
-      for (const Scene& sc : slabs) tracers.emplace_back(sc, settings, *camera);
-      std::vector<std::vector<RayDescriptor>> queues(n);
-      for (int i = 0; i < n; ++i)
-        for (int py = 0; py < camera->height(); ++py)
-          for (int px = 0; px < camera->width(); ++px) {
-            RayDescriptor ray;
-            if (layout.Primary(i, px, py, 0, 1, tracers[i], &ray) ==
-                RingLayout::PrimaryRole::kTrace) {
-              queues[i].push_back(ray);
-            }
-          }
+      const EqualRing ring(whole, n, settings, *camera);
+      const RingLayout& layout = ring.layout;
       uint64_t hops = 0, transit = 0, transit_steps = 0, steps = 0;
-      std::vector<RayDescriptor> spawned;
-      for (bool busy = true; busy;) {
-        busy = false;
-        for (int i = 0; i < n; ++i) {
-          std::vector<RayDescriptor> queue = std::move(queues[i]);
-          queues[i].clear();
-          for (RayDescriptor& ray : queue) {
-            busy = true;
-            const RayDescriptor before = ray;
-            spawned.clear();
-            Deposit deposit;
-            TraceCounters counters;
-            const Tracer::Outcome outcome = tracers[i].Trace(ray, spawned, deposit, counters);
+      TraceRing(
+          layout, ring.tracers, *camera, [](int, auto&& share) { share(); },
+          [&](int i, const RayDescriptor& before, const RayDescriptor& ray,
+              const std::vector<RayDescriptor>& spawned, const TraceCounters& counters,
+              Tracer::Outcome outcome) {
             steps += counters.segments;
-            for (const RayDescriptor& r : spawned) queues[i].push_back(r);
-            if (outcome != Tracer::Outcome::kLeftSlab) continue;
-            const RingLayout::Hop hop = layout.Route(i, ray.cell);
-            if (hop == RingLayout::Hop::kFinished) continue;
+            if (outcome != Tracer::Outcome::kLeftSlab ||
+                layout.Route(i, ray.cell) == RingLayout::Hop::kFinished) {
+              return;
+            }
             ++hops;
             if (spawned.empty() && counters.surface_hits == 0 && ray.color == before.color &&
                 ray.transmittance == before.transmittance && ray.material == before.material &&
@@ -575,10 +620,7 @@ int Hops(const Options& o) {
               ++transit;
               transit_steps += counters.segments;
             }
-            queues[RingLayout::Neighbour(i, hop)].push_back(ray);
-          }
-        }
-      }
+          });
       using ull = unsigned long long;
       std::printf("%-8s %7d %10llu %12llu %7.1f%% %14llu %12llu\n",
                   azimuth == 0 ? "frontal" : "45 deg", n, static_cast<ull>(hops),
@@ -683,56 +725,25 @@ int Weights(const Options& o) {
       for (int n : o.workers) {
         const int planes = whole.dims()[1];
         if (n < 1 || n > planes) continue;
-        std::vector<int> cuts;
-        for (int i = 0; i <= n; ++i) cuts.push_back(static_cast<int>(int64_t{planes} * i / n));
-        const RingLayout layout(cuts, whole.dims(), whole.spacing(), *camera);
-        std::vector<Scene> slabs;
-        std::vector<Tracer> tracers;
-        slabs.reserve(n);
-        for (int i = 0; i < n; ++i) slabs.push_back(whole.Slab(cuts[i], cuts[i + 1]));
-        for (const Scene& sc : slabs) tracers.emplace_back(sc, settings, *camera);
+        const EqualRing ring(whole, n, settings, *camera);
         std::vector<SlabWork> work(n);
         std::vector<double> best(n, 1e300);
         for (int rep = 0; rep < o.repeat; ++rep) {
           std::vector<double> ms(n, 0);
           std::vector<TraceCounters> counters(n);
           std::vector<uint64_t> taken(n, 0);
-          std::vector<std::vector<RayDescriptor>> queues(n);
-          for (int i = 0; i < n; ++i) {
-            const double t0 = ThreadCpuMs();
-            for (int py = 0; py < camera->height(); ++py)
-              for (int px = 0; px < camera->width(); ++px) {
-                RayDescriptor ray;
-                if (layout.Primary(i, px, py, 0, 1, tracers[i], &ray) ==
-                    RingLayout::PrimaryRole::kTrace) {
-                  queues[i].push_back(ray);
-                }
-              }
-            ms[i] += ThreadCpuMs() - t0;
-          }
-          std::vector<RayDescriptor> spawned;
-          for (bool busy = true; busy;) {
-            busy = false;
-            for (int i = 0; i < n; ++i) {
-              std::vector<RayDescriptor> queue = std::move(queues[i]);
-              queues[i].clear();
-              const double t0 = ThreadCpuMs();
-              for (RayDescriptor& ray : queue) {
-                busy = true;
+          TraceRing(
+              ring.layout, ring.tracers, *camera,
+              [&](int i, auto&& share) {
+                const double t0 = ThreadCpuMs();
+                share();
+                ms[i] += ThreadCpuMs() - t0;
+              },
+              [&](int i, const RayDescriptor&, const RayDescriptor&,
+                  const std::vector<RayDescriptor>&, const TraceCounters& c, Tracer::Outcome) {
                 ++taken[i];
-                spawned.clear();
-                Deposit deposit;
-                if (tracers[i].Trace(ray, spawned, deposit, counters[i]) == Tracer::Outcome::kLeftSlab) {
-                  const RingLayout::Hop hop = layout.Route(i, ray.cell);
-                  if (hop != RingLayout::Hop::kFinished) {
-                    queues[RingLayout::Neighbour(i, hop)].push_back(ray);
-                  }
-                }
-                for (const RayDescriptor& r : spawned) queues[i].push_back(r);
-              }
-              ms[i] += ThreadCpuMs() - t0;
-            }
-          }
+                counters[i].Add(c);
+              });
           for (int i = 0; i < n; ++i) {
             best[i] = std::min(best[i], ms[i]);
             work[i].counts[0] = static_cast<double>(counters[i].segments);
