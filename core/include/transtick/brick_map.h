@@ -75,13 +75,6 @@ class BrickMap {
                   (static_cast<size_t>(z >> 1) * rows_ + ((y >> 1) - row_begin_)) * cdims_[0] +
                   (x >> 1)];
   }
-  // Cell by the index of the 2^3 cell (CellIndex), for a walk that
-  // computes it once.
-  size_t CellIndex(int x, int y, int z) const {
-    return (static_cast<size_t>(z >> 1) * cdims_[1] + (y >> 1)) * cdims_[0] + (x >> 1);
-  }
-  uint8_t CellAt(size_t index) const { return cells_[index]; }
-
   // The octant a direction with these axis steps (-1, 0, +1) moves into;
   // an axis it does not move along counts as +.
   static int OctantOf(const int step[3]) {
@@ -103,6 +96,9 @@ class BrickMap {
   size_t Index(int x, int y, int z) const {
     return (static_cast<size_t>(z >> kShift) * bdims_[1] + (y >> kShift)) * bdims_[0] +
            (x >> kShift);
+  }
+  size_t CellIndex(int x, int y, int z) const {
+    return (static_cast<size_t>(z >> 1) * cdims_[1] + (y >> 1)) * cdims_[0] + (x >> 1);
   }
   // Sizes the grids of bricks and cells for a volume of `dims`, all void.
   void SetDims(std::array<int, 3> dims);
