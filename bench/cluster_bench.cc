@@ -36,7 +36,8 @@
 //   is a ray handed to a neighbour, a transit hop one the slab it left did
 //   nothing to (no hit, no shadow ray, colour, transmittance, material and
 //   band as they came). Prints hops and transit hops per frame, their
-//   share, and the traversal steps the transits took.
+//   share, the traversal steps the transits took, and the rays that ended
+//   at a slab plane with nothing but their band ahead (field_summary.h).
 // weights: what the work profile's units cost for smooth surfaces (tracer.h,
 //   kFieldWork). For N equal slabs of each view (azimuth 0, 45, 90, 135), of
 //   the volume given and of engine.nrrd beside it, every ray of a frame is
@@ -590,8 +591,8 @@ int Hops(const Options& o) {
   const Scene& whole = *setup->scene;
   std::printf("volume %s, %dx%d, shadows on, equal slabs; per frame\n", o.volume.c_str(), o.width,
               o.height);
-  std::printf("%-8s %7s %10s %12s %8s %14s %12s\n", "view", "slabs", "hops", "transit hops",
-              "share", "transit steps", "all steps");
+  std::printf("%-8s %7s %10s %12s %8s %14s %12s %12s\n", "view", "slabs", "hops", "transit hops",
+              "share", "transit steps", "all steps", "ended early");
   for (double azimuth : {0.0, 45.0}) {
     const v1::View view = MakeView(o, azimuth);
     auto camera = Camera::Create(*ToCameraSpec(view), setup->extent);
@@ -602,13 +603,14 @@ int Hops(const Options& o) {
       if (n < 1 || n > planes) continue;
       const EqualRing ring(whole, n, settings, *camera);
       const RingLayout& layout = ring.layout;
-      uint64_t hops = 0, transit = 0, transit_steps = 0, steps = 0;
+      uint64_t hops = 0, transit = 0, transit_steps = 0, steps = 0, ended = 0;
       TraceRing(
           layout, ring.tracers, *camera, [](int, auto&& share) { share(); },
           [&](int i, const RayDescriptor& before, const RayDescriptor& ray,
               const std::vector<RayDescriptor>& spawned, const TraceCounters& counters,
               Tracer::Outcome outcome) {
             steps += counters.segments;
+            ended += counters.ended_early;
             if (outcome != Tracer::Outcome::kLeftSlab ||
                 layout.Route(i, ray.cell) == RingLayout::Hop::kFinished) {
               return;
@@ -622,10 +624,11 @@ int Hops(const Options& o) {
             }
           });
       using ull = unsigned long long;
-      std::printf("%-8s %7d %10llu %12llu %7.1f%% %14llu %12llu\n",
+      std::printf("%-8s %7d %10llu %12llu %7.1f%% %14llu %12llu %12llu\n",
                   azimuth == 0 ? "frontal" : "45 deg", n, static_cast<ull>(hops),
                   static_cast<ull>(transit), hops ? 100.0 * transit / hops : 0.0,
-                  static_cast<ull>(transit_steps), static_cast<ull>(steps));
+                  static_cast<ull>(transit_steps), static_cast<ull>(steps),
+                  static_cast<ull>(ended));
     }
   }
   return 0;

@@ -1,4 +1,4 @@
-// Hostile ray records over a real stream: a real worker and a real display
+// Hostile ray records and slabs over a real stream: a real worker and a real display
 // on 127.0.0.1, driven the way the root drives them, and a peer that sends
 // the worker a batch of damaged rays on its ring stream. The worker must
 // drop and count them, abort the frame at the display at once with a reason
@@ -141,6 +141,24 @@ TEST_F(HostileRaysTest, EvictNeedsAKey) {
   EXPECT_TRUE(Prepare(40).ok());  // the slab is still here
   EXPECT_TRUE(Evict("phantom-dvr").ok());
   EXPECT_EQ(Evict("phantom-dvr").error_code(), grpc::StatusCode::NOT_FOUND);
+}
+
+// A slab whose field summary is damaged (the wrong size, a band the
+// materials do not have) is refused with the reason; the worker keeps the
+// slabs it has.
+TEST_F(HostileRaysTest, DamagedFieldSummaryIsRefused) {
+  const auto& good = scene_->summary().bytes();
+  ASSERT_FALSE(good.empty());
+  const std::string bytes(good.begin(), good.end());
+  const std::string cases[] = {bytes.substr(1), bytes + "x",
+                               std::string(1, '\x07') + bytes.substr(1)};
+  for (const std::string& bad : cases) {
+    grpc::Status s = SendSlab(*scene_, "damaged", &bad);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << s.error_message();
+    EXPECT_NE(s.error_message().find("field summary"), std::string::npos) << s.error_message();
+  }
+  EXPECT_TRUE(SendSlab(*scene_, "whole", &bytes).ok());
+  EXPECT_TRUE(Prepare(50).ok());  // the first slab is still here
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 #include "gtest/gtest.h"
 #include "transtick/classification.h"
 #include "transtick/field_grid.h"
+#include "transtick/field_summary.h"
 #include "transtick/traversal.h"
 #include "transtick/volume.h"
 
@@ -405,6 +406,133 @@ TEST(IsosurfaceTest, CrossingsDoNotDependOnTheSlabsAGridIsCutInto) {
   EXPECT_GT(crossings, 3000u);
   EXPECT_GT(jumps, 500u);
   EXPECT_GT(pieces, 3000u);
+}
+
+// A brick of the field summary has a band exactly when every cell of the
+// field within one cell of it (as the whole volume's grid labels them)
+// has that band; volumes as small as one voxel and with no band at all
+// among them.
+TEST(IsosurfaceTest, FieldSummaryLabelsABrickByItsCellsAndTheirNeighbours) {
+  std::mt19937_64 rng(21);
+  size_t banded = 0, mixed = 0;
+  for (int trial = 0; trial < 16; ++trial) {
+    Classification c;
+    std::array<int, 3> dims = {1 + static_cast<int>(rng() % 30), 1 + static_cast<int>(rng() % 30),
+                               1 + static_cast<int>(rng() % 30)};
+    if (trial == 0) dims = {1, 1, 1};
+    Volume v = BlobVolume(rng, dims, &c);
+    if (trial == 1) v.values[v.values.size() / 2] = std::nanf("");
+    const Bands bands(c);
+    auto scene = Scene::ForSurfaces(v, c);
+    ASSERT_TRUE(scene.ok()) << scene.status();
+    const FieldGrid& grid = scene->field();
+    const FieldSummary& summary = scene->summary();
+    ASSERT_FALSE(summary.empty());
+    for (int a = 0; a < 3; ++a) ASSERT_EQ(summary.brick_dims()[a], (dims[a] + 8) / 8);
+    for (int bz = 0; bz < summary.brick_dims()[2]; ++bz)
+      for (int by = 0; by < summary.brick_dims()[1]; ++by)
+        for (int bx = 0; bx < summary.brick_dims()[0]; ++bx) {
+          const int b[3] = {bx, by, bz};
+          int lo[3], hi[3];
+          for (int a = 0; a < 3; ++a) {
+            lo[a] = std::max(8 * b[a] - 1, 0);
+            hi[a] = std::min(8 * b[a] + 8, dims[a]);
+          }
+          int want = -1;
+          for (int z = lo[2]; z <= hi[2] && want != FieldGrid::kMixed; ++z)
+            for (int y = lo[1]; y <= hi[1] && want != FieldGrid::kMixed; ++y)
+              for (int x = lo[0]; x <= hi[0]; ++x) {
+                const int label = grid.Label(x, y, z);
+                if (want == -1) want = label;
+                if (label != want) {
+                  want = FieldGrid::kMixed;
+                  break;
+                }
+              }
+          ASSERT_EQ(summary.At(bx, by, bz), want)
+              << "trial " << trial << " brick " << bx << "," << by << "," << bz;
+          (want == FieldGrid::kMixed ? mixed : banded) += 1;
+        }
+  }
+  EXPECT_GT(banded, 50u);
+  EXPECT_GT(mixed, 50u);
+}
+
+// Whenever the summary says a ray's path holds only the ray's band, a walk
+// of the field's cells over that path finds no crossing: random rays from
+// random points, rays along the axes and through the bricks' faces and
+// corners among them. And it says so often enough to matter.
+TEST(IsosurfaceTest, APathTheSummaryClearsHoldsNoCrossing) {
+  std::mt19937_64 rng(22);
+  std::uniform_real_distribution<double> unit(0, 1), dir(-1, 1);
+  size_t cleared = 0, refused = 0;
+  for (int trial = 0; trial < 12; ++trial) {
+    Classification c;
+    const std::array<int, 3> dims = {24 + static_cast<int>(rng() % 20), 40, 17};
+    const Volume v = BlobVolume(rng, dims, &c);
+    const Bands bands(c);
+    auto scene = Scene::ForSurfaces(v, c);
+    ASSERT_TRUE(scene.ok()) << scene.status();
+    const FieldSummary& summary = scene->summary();
+    for (int r = 0; r < 2000; ++r) {
+      Vec3 o{unit(rng) * dims[0], unit(rng) * dims[1], unit(rng) * dims[2]};
+      Vec3 d{dir(rng), dir(rng), dir(rng)};
+      if (r % 5 == 0) o = {8 * std::round(o.x / 8) - 0.5, 8 * std::round(o.y / 8) - 0.5, o.z};
+      if (r % 7 == 0) d = {r % 2 ? 1.0 : -1.0, 0, 0};
+      if (r % 11 == 0) d = {0, r % 2 ? 1.0 : -1.0, 0};
+      if (r % 13 == 0) d = {1, r % 2 ? 1.0 : -1.0, 0};
+      d = d * (1 / Length(d));
+      const auto box = IntersectBox(o, d, dims);
+      if (!box) continue;
+      const double t0 = std::max(0.0, (*box)[0]), t1 = (*box)[1];
+      const RayAxes axes(d);
+      CrossingWalk walk(*scene, bands, o, axes, t0, t1, -1);
+      const auto start = walk.Next();  // the field's band at t0
+      ASSERT_TRUE(start.has_value());
+      ASSERT_FALSE(start->root);
+      if (!summary.Clear(o, axes, t0, t1, start->band)) {
+        ++refused;
+        continue;
+      }
+      ++cleared;
+      const auto next = walk.Next();
+      ASSERT_FALSE(next.has_value()) << "trial " << trial << " ray " << r << ": band "
+                                     << start->band << " cleared, crossing at " << next->t
+                                     << " into band " << next->band;
+      // Any other band is refused on the same path.
+      ASSERT_FALSE(summary.Clear(o, axes, t0, t1, (start->band + 1) % bands.size()));
+    }
+  }
+  EXPECT_GT(cleared, 2000u);
+  EXPECT_GT(refused, 2000u);
+}
+
+// The summary's bytes round-trip; a wrong size or a byte naming no band is
+// refused with the reason, whatever the dimensions claim.
+TEST(IsosurfaceTest, FieldSummaryBytesAreChecked) {
+  std::mt19937_64 rng(23);
+  Classification c;
+  const Volume v = BlobVolume(rng, {20, 9, 33}, &c);
+  const Bands bands(c);
+  auto scene = Scene::ForSurfaces(v, c);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  const std::vector<uint8_t>& bytes = scene->summary().bytes();
+  const std::string wire(bytes.begin(), bytes.end());
+  auto back = FieldSummary::FromBytes(v.dims, bands.size(), wire);
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(back->bytes(), bytes);
+  auto short_by_one = FieldSummary::FromBytes(v.dims, bands.size(), wire.substr(1));
+  ASSERT_FALSE(short_by_one.ok());
+  EXPECT_NE(short_by_one.status().message().find("expected"), std::string::npos);
+  std::string bad = wire;
+  bad[3] = static_cast<char>(bands.size());
+  auto no_band = FieldSummary::FromBytes(v.dims, bands.size(), bad);
+  ASSERT_FALSE(no_band.ok());
+  EXPECT_NE(no_band.status().message().find("band"), std::string::npos);
+  EXPECT_FALSE(FieldSummary::FromBytes({1 << 30, 1 << 30, 1 << 30}, 3, wire).ok());
+  EXPECT_FALSE(FieldSummary::FromBytes({0, 4, 4}, 3, "").ok());
+  // A slab keeps the whole volume's summary.
+  EXPECT_EQ(scene->Slab(3, 5).summary().bytes(), bytes);
 }
 
 // Ties on purpose: the field 100 (x - 0.5) has its roots on the cells'

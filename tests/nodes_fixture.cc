@@ -63,6 +63,12 @@ void NodesTest::TearDown() {
 }
 
 void NodesTest::LoadWholeSlab(const Scene& scene, const std::string& key) {
+  grpc::Status s = SendSlab(scene, key);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+}
+
+grpc::Status NodesTest::SendSlab(const Scene& scene, const std::string& key,
+                                 const std::string* summary) {
   grpc::ClientContext ctx;
   ctx.set_deadline(Deadline(30));
   v1::LoadReply reply;
@@ -93,13 +99,14 @@ void NodesTest::LoadWholeSlab(const Scene& scene, const std::string& key) {
   h->set_y_end(dims_[1]);
   const auto& bricks = scene.bricks().bytes();
   h->set_brick_map(std::string(bricks.begin(), bricks.end()));
+  const auto& own = scene.summary().bytes();
+  h->set_field_summary(summary ? *summary : std::string(own.begin(), own.end()));
   h->set_scalar_count(scene.scalars().size());
   for (std::string& b : scene.sticks().EncodeRows(0, dims_[1])) chunk.add_blocks(std::move(b));
   AppendFloats(scene.scalars().data(), scene.scalars().size(), chunk.mutable_scalars());
-  ASSERT_TRUE(writer->Write(chunk));
+  writer->Write(chunk);
   writer->WritesDone();
-  grpc::Status s = writer->Finish();
-  ASSERT_TRUE(s.ok()) << s.error_message();
+  return writer->Finish();
 }
 
 v1::FrameSpec NodesTest::Spec(uint64_t frame_id) const {

@@ -59,6 +59,11 @@ class NodesTest : public ::testing::Test {
   // the worker's own tracer makes it: what a left neighbour might send.
   RayDescriptor CentreRay() const;
 
+  // The whole volume of `scene` as one slab under `key`, sent as the root
+  // sends it, with `summary` as its field summary (null: the scene's own).
+  grpc::Status SendSlab(const Scene& scene, const std::string& key,
+                        const std::string* summary = nullptr);
+
   const std::array<int, 3> dims_ = {40, 36, 44};
   Classification classification_;
   TransferFunction transfer_;
@@ -72,7 +77,7 @@ class NodesTest : public ::testing::Test {
   std::unique_ptr<v1::Display::Stub> display_stub_;
 
  private:
-  // The whole volume as one slab, sent as the root sends it.
+  // SendSlab, which must succeed.
   void LoadWholeSlab(const Scene& scene, const std::string& key);
 };
 

@@ -33,7 +33,7 @@ std::string TempDir() {
 }
 
 Image RenderSlabs(const Scene& whole, const std::vector<int>& cuts, const Camera& camera,
-                  const RenderSettings& settings, uint64_t* handoffs) {
+                  const RenderSettings& settings, uint64_t* handoffs, uint64_t* ended_early) {
   std::vector<int> bounds = {0};
   bounds.insert(bounds.end(), cuts.begin(), cuts.end());
   bounds.push_back(whole.dims()[1]);
@@ -125,6 +125,7 @@ Image RenderSlabs(const Scene& whole, const std::vector<int>& cuts, const Camera
   }
   EXPECT_TRUE(fb.Complete());
   if (handoffs) *handoffs = moved;
+  if (ended_early) *ended_early = counters.ended_early;
   return fb.Resolve();
 }
 

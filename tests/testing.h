@@ -25,9 +25,12 @@ std::string TempDir();
 // Cuts `whole` into slabs at `cuts` (ascending, exclusive of 0 and ny) and
 // traces every pixel as the cluster does: each slab makes its own primary
 // rays and passes rays that leave it to a neighbour, both by RingLayout.
-// Counts the hand-overs (one per hop) in *handoffs.
+// Counts the hand-overs (one per hop) in *handoffs, and the rays that ended
+// at a slab's plane with nothing ahead (TraceCounters::ended_early) in
+// *ended_early.
 Image RenderSlabs(const Scene& whole, const std::vector<int>& cuts, const Camera& camera,
-                  const RenderSettings& settings, uint64_t* handoffs = nullptr);
+                  const RenderSettings& settings, uint64_t* handoffs = nullptr,
+                  uint64_t* ended_early = nullptr);
 
 // Renders the whole scene on `threads` threads.
 Image RenderWhole(const Scene& scene, const Camera& camera, const RenderSettings& settings,

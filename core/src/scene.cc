@@ -193,6 +193,9 @@ absl::StatusOr<Scene> Scene::ForSurfaces(const Volume& volume,
   scene.scalar_planes_ = volume.dims[1];
   scene.scalars_ = volume.values;
   scene.BuildField();
+  if (classification.surface == SurfaceModel::kSmooth) {
+    scene.summary_ = FieldSummary::Build(volume.values, volume.dims, Bands(classification));
+  }
   return scene;
 }
 
@@ -218,7 +221,8 @@ absl::StatusOr<Scene> Scene::FromParts(RenderMode mode, std::array<int, 3> dims,
                                        std::array<double, 3> spacing,
                                        std::array<float, 2> value_range, Sticks sticks,
                                        std::vector<float> scalars, BrickMap bricks,
-                                       Classification classification, TransferFunction transfer) {
+                                       Classification classification, TransferFunction transfer,
+                                       FieldSummary summary) {
   if (auto s = CheckSpacing(dims, spacing); !s.ok()) return s;
   Scene scene;
   scene.mode_ = mode;
@@ -247,6 +251,11 @@ absl::StatusOr<Scene> Scene::FromParts(RenderMode mode, std::array<int, 3> dims,
     return absl::InvalidArgumentError(
         absl::StrCat("brick map: material ", int{bricks.MaxMaterial()}, " of ", materials));
   }
+  if (!summary.empty() && summary.brick_dims() != std::array<int, 3>{(dims[0] + 8) >> 3,
+                                                                    (dims[1] + 8) >> 3,
+                                                                    (dims[2] + 8) >> 3}) {
+    return absl::InvalidArgumentError("field summary and slab disagree on the volume's dimensions");
+  }
   if (!bricks.ReachCovers(sticks.y_begin(), sticks.y_end())) {
     bricks = bricks.ForSlab(sticks.y_begin(), sticks.y_end());
   }
@@ -256,6 +265,7 @@ absl::StatusOr<Scene> Scene::FromParts(RenderMode mode, std::array<int, 3> dims,
   scene.classification_ = std::move(classification);
   scene.transfer_ = std::move(transfer);
   scene.BuildField();
+  if (!scene.field_.empty()) scene.summary_ = std::move(summary);
   return scene;
 }
 
@@ -294,6 +304,7 @@ absl::StatusOr<Scene> Scene::Reslab(int y_begin, int y_end, const std::vector<st
   s.bricks_ = bricks_.ForSlab(y_begin, y_end);
   s.classification_ = classification_;
   s.transfer_ = transfer_;
+  s.summary_ = summary_;
   s.sticks_ = *std::move(sticks);
   s.scalar_y_begin_ = ScalarBegin(y_begin);
   s.scalar_planes_ = ScalarEnd(y_end) - s.scalar_y_begin_;
@@ -342,7 +353,7 @@ void Scene::BuildField() {
 
 size_t Scene::MemoryBytes() const {
   return sticks_.MemoryBytes() + scalars_.size() * sizeof(float) + bricks_.MemoryBytes() +
-         field_.MemoryBytes();
+         field_.MemoryBytes() + summary_.MemoryBytes();
 }
 
 const char* RenderModeName(RenderMode mode) {

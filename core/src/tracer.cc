@@ -390,6 +390,13 @@ Tracer::Outcome Tracer::TraceSmooth(RayDescriptor& ray, std::vector<RayDescripto
     return Outcome::kFinished;
   }
   if (finished || !leaves_slab) return Outcome::kFinished;
+  // Nothing but its own band between the plane and the volume's face: the
+  // walks on the other slabs would find nothing, and the ray ends here with
+  // the deposit it would make there (field_summary.h).
+  if (scene_.summary().Clear(ray.origin, axes, end, t_volume, ray.band)) {
+    ++counters.ended_early;
+    return Outcome::kFinished;
+  }
   // Resumes on the neighbour at the plane: its walk begins in the cell this
   // one is in there.
   ray.t = end;

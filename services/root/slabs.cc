@@ -92,6 +92,8 @@ absl::Status Slabs::LoadSlab(const LoadedDataset& data, WorkerEntry& worker, con
   h->set_y_end(y1);
   const auto& bricks = scene.bricks().bytes();
   h->set_brick_map(std::string(bricks.begin(), bricks.end()));
+  const auto& summary = scene.summary().bytes();
+  h->set_field_summary(std::string(summary.begin(), summary.end()));
   const int sb = scene.ScalarBegin(y0), se = scene.ScalarEnd(y1);
   h->set_scalar_count(static_cast<uint64_t>(dims[0]) * (se - sb) * dims[2]);
   constexpr size_t kChunkBytes = 1 << 20;

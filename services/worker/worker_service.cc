@@ -53,6 +53,13 @@ absl::StatusOr<std::shared_ptr<const Scene>> AssembleSlab(const v1::SlabHeader& 
       BrickMap::FromBytes(dims, std::vector<uint8_t>(h.brick_map().begin(), h.brick_map().end()),
                           h.y_begin(), h.y_end());
   if (!bricks.ok()) return bricks.status();
+  FieldSummary summary;
+  if (!h.field_summary().empty()) {
+    if (dvr) return absl::InvalidArgumentError("slab header: a field summary in dvr");
+    auto s = FieldSummary::FromBytes(dims, Bands(classification).size(), h.field_summary());
+    if (!s.ok()) return s.status();
+    summary = *std::move(s);
+  }
   if (scalar_bytes.size() % 4 != 0) {
     return absl::InvalidArgumentError("slab scalars: not a whole number of floats");
   }
@@ -62,7 +69,8 @@ absl::StatusOr<std::shared_ptr<const Scene>> AssembleSlab(const v1::SlabHeader& 
       Scene::FromParts(dvr ? RenderMode::kDvr : RenderMode::kSurfaces, dims,
                        {h.spacing(0), h.spacing(1), h.spacing(2)},
                        {h.value_range(0), h.value_range(1)}, *std::move(sticks), std::move(scalars),
-                       *std::move(bricks), std::move(classification), std::move(transfer));
+                       *std::move(bricks), std::move(classification), std::move(transfer),
+                       std::move(summary));
   if (!scene.ok()) return scene.status();
   return std::shared_ptr<const Scene>(std::make_shared<Scene>(*std::move(scene)));
 }

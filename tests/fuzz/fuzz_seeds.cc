@@ -10,8 +10,9 @@
 //                configurations (batch_setup.h), through the codec's Append
 //                functions;
 //   DIR/sticks/  brick maps of a sphere and a shell at the sticks fuzzer's
-//                dims, for surfaces and for dvr (the sticks fuzzer reads
-//                its whole input as a brick map too).
+//                dims, for surfaces and for dvr, and the field summary of
+//                such a volume (the sticks fuzzer reads its whole input as
+//                a brick map and as a field summary too).
 // Usage: fuzz_seeds DIR
 #include <array>
 #include <cmath>
@@ -188,7 +189,20 @@ bool WriteBrickMaps(const std::filesystem::path& dir) {
       return false;
     }
   }
-  return true;
+  // The field summary of a ball whose values fall off outward, with two
+  // materials: 3 edges, 4 bands (kSummaryBands in sticks_fuzzer.cc).
+  std::vector<float> values(labels.size());
+  i = 0;
+  for (int z = 0; z < dims[2]; ++z)
+    for (int y = 0; y < dims[1]; ++y)
+      for (int x = 0; x < dims[0]; ++x, ++i) {
+        values[i] = static_cast<float>(std::max(0.0, 100 - 5 * std::hypot(x - 20.0, y - 35.0, z - 18.0)));
+      }
+  Classification c;
+  c.materials = {Material{.name = "shell", .min = 10, .max = 40},
+                 Material{.name = "core", .min = 40, .max = 200}};
+  const std::vector<uint8_t> summary = FieldSummary::Build(values, dims, Bands(c)).bytes();
+  return Write(dir / "summary-ball", std::string(summary.begin(), summary.end()));
 }
 
 }  // namespace

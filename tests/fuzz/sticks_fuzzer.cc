@@ -7,21 +7,79 @@
 // track is sorted, disjoint and in range, and that encode and decode again
 // to the same bytes; BrickMap::FromBytes must refuse any size but its own,
 // and a map it accepts must encode to the same bytes and keep Reach's
-// promise.
+// promise. The whole input is also read as a field summary
+// (FieldSummary::FromBytes), which must refuse any size but its own and any
+// byte naming no band; of one it accepts, every brick a ray's path passes
+// through must have the band Clear accepted the path for.
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "transtick/check.h"
+#include "transtick/field_summary.h"
+#include "transtick/isosurface.h"
 #include "transtick/scene.h"
 #include "transtick/sticks.h"
+#include "transtick/traversal.h"
 
 namespace transtick::fuzz {
 namespace {
 
 constexpr std::array<int, 3> kDims = {40, 70, 36};
+constexpr int kSummaryBands = 4;  // as fuzz_seeds.cc writes them
+
+// A summary read from the input: as FromBytes says, and the paths Clear
+// accepts lie in bricks of their band (points 1/4 voxel apart, away from
+// the bricks' faces, where the brick walk's rounding may go either way).
+void CheckSummary(const uint8_t* data, size_t size) {
+  const std::string_view bytes(reinterpret_cast<const char*>(data), size);
+  auto summary = FieldSummary::FromBytes(kDims, kSummaryBands, bytes);
+  if (!summary.ok()) {
+    TRANSTICK_CHECK(!summary.status().message().empty());
+    return;
+  }
+  TRANSTICK_CHECK(std::string_view(reinterpret_cast<const char*>(summary->bytes().data()),
+                                   summary->bytes().size()) == bytes);
+  uint32_t state = 7;
+  for (size_t i = 0; i < std::min<size_t>(size, 64); ++i) state = state * 31 + data[i];
+  auto unit = [&] {
+    state = state * 1664525u + 1013904223u;
+    return (state >> 8) / 16777216.0;
+  };
+  for (int r = 0; r < 32; ++r) {
+    const Vec3 o{unit() * kDims[0], unit() * kDims[1], unit() * kDims[2]};
+    Vec3 d{unit() - 0.5, unit() - 0.5, unit() - 0.5};
+    if (r % 4 == 0) d = {0, r % 8 ? 1.0 : -1.0, 0};
+    d = d * (1 / Length(d));
+    const RayAxes axes(d);
+    const auto box = IntersectBox(o, d, kDims);
+    if (!box) continue;
+    const double t0 = std::max(0.0, (*box)[0]), t1 = (*box)[1];
+    const Vec3 p0 = o + d * t0;
+    int b0[3];
+    for (int a = 0; a < 3; ++a) {
+      b0[a] = std::clamp(static_cast<int>(std::floor((p0[a] + 0.5) / 8)), 0,
+                         summary->brick_dims()[a] - 1);
+    }
+    const int band = summary->At(b0[0], b0[1], b0[2]);
+    if (!summary->Clear(o, axes, t0, t1, band)) continue;
+    for (double t = t0; t <= t1; t += 0.25) {
+      const Vec3 p = o + d * t;
+      int b[3];
+      bool near_face = false;
+      for (int a = 0; a < 3; ++a) {
+        const double u = (p[a] + 0.5) / 8;
+        near_face |= std::abs(u - std::round(u)) < 1e-9;
+        b[a] = std::clamp(static_cast<int>(std::floor(u)), 0, summary->brick_dims()[a] - 1);
+      }
+      if (!near_face) TRANSTICK_CHECK_EQ(int{summary->At(b[0], b[1], b[2])}, band);
+    }
+  }
+}
 
 struct Base {
   std::vector<uint8_t> labels;
@@ -77,6 +135,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace transtick;
   using namespace transtick::fuzz;
   const Base& base = GetBase();
+  CheckSummary(data, size);
   if (size < 2) return 0;
   // Byte 0: the slab asked for (inside, or past, the blocks' [10, 60)) and
   // the largest material; byte 1: blocks dropped or truncated.

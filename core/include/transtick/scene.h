@@ -14,6 +14,7 @@
 #include "transtick/brick_map.h"
 #include "transtick/classification.h"
 #include "transtick/field_grid.h"
+#include "transtick/field_summary.h"
 #include "transtick/sticks.h"
 #include "transtick/volume.h"
 
@@ -53,13 +54,15 @@ class Scene {
   // trilinear sample in a void voxel can have opacity.
   static absl::StatusOr<Scene> ForDvr(const Volume& volume, const TransferFunction& transfer);
 
-  // Assembles a slab scene from parts (as a worker receives them).
+  // Assembles a slab scene from parts (as a worker receives them). The
+  // field summary may be empty (then rays leaving the slab always go on).
   // REQUIRES: scalars hold planes [ScalarBegin(y_begin), ScalarEnd(y_end)).
   static absl::StatusOr<Scene> FromParts(RenderMode mode, std::array<int, 3> dims,
                                          std::array<double, 3> spacing,
                                          std::array<float, 2> value_range, Sticks sticks,
                                          std::vector<float> scalars, BrickMap bricks,
-                                         Classification classification, TransferFunction transfer);
+                                         Classification classification, TransferFunction transfer,
+                                         FieldSummary summary = {});
 
   // A copy of the slab [y_begin, y_end) of this scene.
   // REQUIRES: this scene holds the slab and its ghost planes.
@@ -94,6 +97,9 @@ class Scene {
   // Smooth surfaces: the cells of the field the slab's rays walk (rows
   // y_begin() .. y_end() of cells), labelled by band; empty otherwise.
   const FieldGrid& field() const { return field_; }
+  // Smooth surfaces: the whole field's bands a brick at a time, the same on
+  // every node (field_summary.h); empty otherwise.
+  const FieldSummary& summary() const { return summary_; }
   int scalar_y_begin() const { return scalar_y_begin_; }
   // One past the last stored scalar plane.
   int scalar_y_end() const { return scalar_y_begin_ + scalar_planes_; }
@@ -128,7 +134,8 @@ class Scene {
     for (int k = 0; k < 8; ++k) out[k] = Scalar(x + (k & 1), y + ((k >> 1) & 1), z + (k >> 2));
   }
 
-  // Bytes held: sticks, scalars, the brick map and the field's cells.
+  // Bytes held: sticks, scalars, the brick map, the field's cells and its
+  // summary.
   size_t MemoryBytes() const;
 
  private:
@@ -149,6 +156,7 @@ class Scene {
   int scalar_planes_ = 0;
   std::vector<float> scalars_;
   FieldGrid field_;
+  FieldSummary summary_;
 };
 
 // Labels for the dvr empty-space map (see Scene::ForDvr).

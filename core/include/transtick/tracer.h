@@ -41,6 +41,9 @@ struct TraceCounters {
   uint64_t surface_hits = 0;  // shaded surface points (surfaces mode)
   uint64_t cells = 0;         // smooth surfaces: cells of the field whose corners were read
   uint64_t samples = 0;       // shaded samples (dvr)
+  // Smooth surfaces: rays that ended at their slab's plane, the field
+  // summary showing nothing but their band up to the volume's face.
+  uint64_t ended_early = 0;
   // Rays finished early at the hard per-call bound on steps or samples
   // (Tracer::Trace). The termination argument says this never happens; a
   // non-zero count is a defect, reported in the frame's statistics.
@@ -57,6 +60,7 @@ struct TraceCounters {
     surface_hits += o.surface_hits;
     cells += o.cells;
     samples += o.samples;
+    ended_early += o.ended_early;
     truncated += o.truncated;
   }
 };

@@ -1,0 +1,151 @@
+#include "transtick/field_summary.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "absl/strings/str_cat.h"
+#include "transtick/check.h"
+#include "transtick/isosurface.h"
+
+namespace transtick {
+namespace {
+
+// The least and greatest value of a box of voxels, and whether one is NaN.
+struct Range {
+  float lo = std::numeric_limits<float>::infinity();
+  float hi = -std::numeric_limits<float>::infinity();
+  bool nan = false;
+  void Add(const Range& r) {
+    lo = std::min(lo, r.lo);
+    hi = std::max(hi, r.hi);
+    nan |= r.nan;
+  }
+  void Add(float v) {
+    if (v != v) {
+      nan = true;
+    } else {
+      lo = std::min(lo, v);
+      hi = std::max(hi, v);
+    }
+  }
+};
+
+// The voxels whose values the cells of brick b and the cells next to it
+// read, along an axis of n voxels: cells 8b - 1 .. 8b + 8, cell c reading
+// voxels c - 1 and c, clamped to the volume.
+std::pair<int, int> VoxelSpan(int b, int n) {
+  return {std::clamp(8 * b - 2, 0, n - 1), std::clamp(8 * b + 8, 0, n - 1)};
+}
+
+}  // namespace
+
+FieldSummary FieldSummary::Build(const std::vector<float>& values, std::array<int, 3> dims,
+                                 const Bands& bands) {
+  const int nx = dims[0], ny = dims[1], nz = dims[2];
+  TRANSTICK_CHECK(nx > 0 && ny > 0 && nz > 0);
+  TRANSTICK_CHECK_EQ(values.size(), static_cast<size_t>(nx) * ny * nz);
+  FieldSummary s;
+  for (int a = 0; a < 3; ++a) s.bricks_[a] = (dims[a] + 1 + 7) >> kShift;
+  const int bx = s.bricks_[0], by = s.bricks_[1], bz = s.bricks_[2];
+  // Along x first: per voxel row, the range of each brick's span.
+  std::vector<Range> rows(static_cast<size_t>(bx) * ny * nz);
+  for (int z = 0; z < nz; ++z) {
+    for (int y = 0; y < ny; ++y) {
+      const float* row = values.data() + (static_cast<size_t>(z) * ny + y) * nx;
+      for (int b = 0; b < bx; ++b) {
+        const auto [x0, x1] = VoxelSpan(b, nx);
+        Range r;
+        for (int x = x0; x <= x1; ++x) r.Add(row[x]);
+        rows[(static_cast<size_t>(z) * ny + y) * bx + b] = r;
+      }
+    }
+  }
+  s.labels_.resize(static_cast<size_t>(bx) * by * bz);
+  const std::vector<float>& edges = bands.edges();
+  auto band = [&](float v) {
+    return static_cast<int>(std::upper_bound(edges.begin(), edges.end(), v) - edges.begin());
+  };
+  size_t k = 0;
+  for (int cz = 0; cz < bz; ++cz) {
+    const auto [z0, z1] = VoxelSpan(cz, nz);
+    for (int cy = 0; cy < by; ++cy) {
+      const auto [y0, y1] = VoxelSpan(cy, ny);
+      for (int cx = 0; cx < bx; ++cx, ++k) {
+        Range r;
+        for (int z = z0; z <= z1; ++z) {
+          for (int y = y0; y <= y1; ++y) r.Add(rows[(static_cast<size_t>(z) * ny + y) * bx + cx]);
+        }
+        // A NaN corner makes a cell mixed (FieldGrid::Build), so its brick.
+        const int lo = band(r.lo), hi = band(r.hi);
+        s.labels_[k] = r.nan || lo != hi || lo >= kMixed ? kMixed : static_cast<uint8_t>(lo);
+      }
+    }
+  }
+  return s;
+}
+
+absl::StatusOr<FieldSummary> FieldSummary::FromBytes(std::array<int, 3> dims, int bands,
+                                                     std::string_view bytes) {
+  FieldSummary s;
+  size_t want = 1;
+  for (int a = 0; a < 3; ++a) {
+    if (dims[a] <= 0) return absl::InvalidArgumentError("field summary: a volume without voxels");
+    s.bricks_[a] = static_cast<int>((int64_t{dims[a]} + 1 + 7) >> kShift);
+    // Past the bytes given, the product can only grow: no overflow.
+    if (want <= bytes.size()) want *= static_cast<size_t>(s.bricks_[a]);
+  }
+  if (bytes.size() != want) {
+    return absl::InvalidArgumentError(absl::StrCat("field summary: ", bytes.size(),
+                                                   " bytes, expected ", want, " (one per brick of ",
+                                                   s.bricks_[0], "x", s.bricks_[1], "x",
+                                                   s.bricks_[2], ")"));
+  }
+  s.labels_.assign(bytes.begin(), bytes.end());
+  for (size_t i = 0; i < s.labels_.size(); ++i) {
+    const uint8_t b = s.labels_[i];
+    if (b != kMixed && b >= bands) {
+      return absl::InvalidArgumentError(absl::StrCat("field summary: brick ", i, " names band ",
+                                                     int{b}, " of ", bands));
+    }
+  }
+  return s;
+}
+
+bool FieldSummary::Clear(const Vec3& origin, const RayAxes& axes, double t0, double t1,
+                         int band) const {
+  if (labels_.empty() || band < 0 || band >= kMixed || !std::isfinite(t0) || !std::isfinite(t1) ||
+      !(t0 <= t1)) {
+    return false;
+  }
+  // Brick b holds cells 8b .. 8b + 7, spanning [8b - 0.5, 8b + 7.5]: the
+  // brick a point lies in, and the time the ray crosses the face ahead of
+  // it, each from its plane. The brick of a point just outside the
+  // summary's (the ray on a face) is the nearest.
+  int b[3];
+  double next[3];
+  constexpr double kSize = 1 << kShift;
+  for (int a = 0; a < 3; ++a) {
+    const double p = origin[a] + axes.dir[a] * t0;
+    if (!std::isfinite(p)) return false;
+    b[a] = static_cast<int>(std::clamp(std::floor((p + 0.5) / kSize), 0.0, bricks_[a] - 1.0));
+    next[a] = axes.step[a] == 0
+                  ? std::numeric_limits<double>::infinity()
+                  : ((b[a] + (axes.step[a] > 0)) * kSize - 0.5 - origin[a]) * axes.inv[a];
+  }
+  // A ray crosses at most one brick face per brick along each axis.
+  const int limit = bricks_[0] + bricks_[1] + bricks_[2] + 3;
+  for (int i = 0; i < limit; ++i) {
+    if (At(b[0], b[1], b[2]) != band) return false;
+    int a = 0;
+    if (next[1] < next[a]) a = 1;
+    if (next[2] < next[a]) a = 2;
+    if (!(next[a] < t1)) return true;
+    b[a] += axes.step[a];
+    if (b[a] < 0 || b[a] >= bricks_[a]) return true;  // out of the field's cells
+    next[a] = ((b[a] + (axes.step[a] > 0)) * kSize - 0.5 - origin[a]) * axes.inv[a];
+  }
+  return false;
+}
+
+}  // namespace transtick
