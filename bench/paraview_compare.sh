@@ -20,11 +20,14 @@
 # transtick's orbit camera: 30 degree perspective, the volume's bounding
 # sphere framed with 5% margin, +Y up.
 #
-# The transfer functions are alike, not equal: transtick shades threshold
+# Two kinds of work are timed against the one ParaView frame. Surfaces: the
+# transfer functions are alike, not equal: transtick shades threshold
 # surfaces (skin 600..1350 with opacity 0.3 per crossing, bone >= 1350
 # opaque) and casts shadow rays; ParaView composites shaded samples with
-# opacity 0.3 (skin) and 1 (bone) per unit distance. Read the ratios as
-# orders of magnitude, not as a contest between identical images.
+# opacity 0.3 (skin) and 1 (bone) per unit distance. Read those ratios as
+# orders of magnitude. Dvr: transtick's dvr with ParaView's very transfer
+# function (the same points, opacity per unit distance, gradient shading)
+# sampled every world unit, as ParaView's mapper samples: the same work.
 
 set -euo pipefail
 
@@ -162,24 +165,37 @@ pv_min=$(awk '/^PV_MIN_MS/ {print $2}' "$tmp/pv.out")
 
 # --- transtick ----------------------------------------------------------------
 
-# Writes "median_ms min_ms rays_per_frame" for one shadows setting to
-# $tmp/tt_SHADOWS.res and shows what the benchmark printed.
+# ParaView's transfer function (pv_bench.py above) as transtick's.
+cat >"$tmp/transfer.json" <<'EOF'
+{"points": [{"value": 0, "rgba": [0, 0, 0, 0]}, {"value": 599.9, "rgba": [0, 0, 0, 0]},
+            {"value": 600, "rgba": [0.92, 0.72, 0.6, 0.3]},
+            {"value": 1349.9, "rgba": [0.92, 0.72, 0.6, 0.3]},
+            {"value": 1350, "rgba": [0.96, 0.94, 0.86, 1]},
+            {"value": 4000, "rgba": [0.96, 0.94, 0.86, 1]}],
+ "reference_step": 1, "shading": true}
+EOF
+
+# Writes "median_ms min_ms rays_per_frame" for one shadows setting (or dvr)
+# to $tmp/tt_SHADOWS.res and shows what the benchmark printed.
 transtick_ms() {
   local shadows=$1 out=$tmp/tt_$1.out res=$tmp/tt_$1.res
+  local -a work=(--materials "$materials" --shadows "$shadows")
+  [[ $shadows == dvr ]] && work=(--transfer "$tmp/transfer.json" --step 1 --shadows off)
   if [[ -x $render_bench ]]; then
-    "$render_bench" --volume "$volume" --materials "$materials" --size "${size}x${size}" \
-      --repeat "$repeat" --azimuth "$azimuth" --shadows "$shadows" --threads 0 >"$out" ||
+    "$render_bench" --volume "$volume" "${work[@]}" --size "${size}x${size}" \
+      --repeat "$repeat" --azimuth "$azimuth" --threads 0 >"$out" ||
       { cat "$out" >&2; die "render_bench failed (shadows $shadows)"; }
     grep -E '^(view|frontal|az|OK|FAIL)' "$out" | sed 's/^/   /'
-    # The table row: view threads median min rays/s Mrays/s speedup primary + shadow
-    awk '$1 ~ /^(frontal|az)/ && NF >= 10 {print $3, $4, $8 + $10; exit}' "$out" >"$res"
+    # The table row: view threads median min rays/s Mrays/s speedup Mrays/s/c
+    # steps/ray ns/step primary + shadow[, samples]
+    awk '$1 ~ /^(frontal|az)/ && NF >= 13 {print $3, $4, $11 + $13; exit}' "$out" >"$res"
   else
     # Fallback: the CLI, one process per frame; frame_ms excludes load and scene build.
     local i
     local -a frames=()
     for ((i = 0; i <= repeat; i++)); do
-      "$cli" render --volume "$volume" --materials "$materials" --size "${size}x${size}" \
-        --azimuth "$azimuth" --shadows "$shadows" --out "$tmp/tt.png" --stats "$tmp/tt.json" \
+      "$cli" render --volume "$volume" "${work[@]}" --size "${size}x${size}" \
+        --azimuth "$azimuth" --out "$tmp/tt.png" --stats "$tmp/tt.json" \
         2>"$out" || { cat "$out" >&2; die "transtick render failed (shadows $shadows)"; }
       ((i == 0)) && continue
       frames+=("$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["frame_ms"])' \
@@ -198,16 +214,24 @@ note "transtick ($tool): same view, all $(nproc) cores, shadows off"
 transtick_ms off
 note "transtick: shadows on"
 transtick_ms on
+note "transtick: dvr, ParaView's transfer function, step 1"
+transtick_ms dvr
 read -r tt_off tt_off_min tt_off_rays <"$tmp/tt_off.res" || true
 read -r tt_on tt_on_min tt_on_rays <"$tmp/tt_on.res" || true
-[[ -n ${tt_off:-} && -n ${tt_on:-} ]] || die "could not read transtick's timings"
+read -r tt_dvr tt_dvr_min tt_dvr_rays <"$tmp/tt_dvr.res" || true
+[[ -n ${tt_off:-} && -n ${tt_on:-} && -n ${tt_dvr:-} ]] || die "could not read transtick's timings"
 
 echo
 printf '%dx%d, azimuth %s, %d cores, median of %d frames after 1 warm-up\n' \
   "$size" "$size" "$azimuth" "$(nproc)" "$repeat"
-printf '  %-34s %10s %10s %16s\n' renderer "median ms" "min ms" "ParaView/this"
-printf '  %-34s %10.1f %10.1f %16s\n' "ParaView ${pv_version:-?} 'Ray Cast Only'" "$pv_ms" "$pv_min" -
-printf '  %-34s %10.1f %10.1f %15.2fx\n' "transtick, shadows off ($tt_off_rays rays)" \
-  "$tt_off" "$tt_off_min" "$(awk -v a="$pv_ms" -v b="$tt_off" 'BEGIN {print a / b}')"
-printf '  %-34s %10.1f %10.1f %15.2fx\n' "transtick, shadows on ($tt_on_rays rays)" \
-  "$tt_on" "$tt_on_min" "$(awk -v a="$pv_ms" -v b="$tt_on" 'BEGIN {print a / b}')"
+printf '  %-34s %10s %10s %16s %14s\n' renderer "median ms" "min ms" "ParaView/this" "this/ParaView"
+printf '  %-34s %10.1f %10.1f %16s %14s\n' "ParaView ${pv_version:-?} 'Ray Cast Only'" "$pv_ms" "$pv_min" - -
+printf '  %-34s %10.1f %10.1f %15.2fx %13.2fx\n' "transtick, shadows off ($tt_off_rays rays)" \
+  "$tt_off" "$tt_off_min" "$(awk -v a="$pv_ms" -v b="$tt_off" 'BEGIN {print a / b}')" \
+  "$(awk -v a="$pv_ms" -v b="$tt_off" 'BEGIN {print b / a}')"
+printf '  %-34s %10.1f %10.1f %15.2fx %13.2fx\n' "transtick, shadows on ($tt_on_rays rays)" \
+  "$tt_on" "$tt_on_min" "$(awk -v a="$pv_ms" -v b="$tt_on" 'BEGIN {print a / b}')" \
+  "$(awk -v a="$pv_ms" -v b="$tt_on" 'BEGIN {print b / a}')"
+printf '  %-34s %10.1f %10.1f %15.2fx %13.2fx\n' "transtick dvr, step 1 ($tt_dvr_rays rays)" \
+  "$tt_dvr" "$tt_dvr_min" "$(awk -v a="$pv_ms" -v b="$tt_dvr" 'BEGIN {print a / b}')" \
+  "$(awk -v a="$pv_ms" -v b="$tt_dvr" 'BEGIN {print b / a}')"

@@ -1,14 +1,17 @@
 // render_bench: times RenderLocal on a real volume.
 //
-//   render_bench [--volume FILE] [--materials FILE] [--size WxH] [--repeat N]
-//                [--azimuth DEG] [--shadows on|off] [--threads N]
+//   render_bench [--volume FILE] [--materials FILE | --transfer FILE [--step S]]
+//                [--size WxH] [--repeat N] [--azimuth DEG] [--shadows on|off]
+//                [--threads N]
 //
-// Loads the volume and builds the surfaces scene once, then for each view
+// Loads the volume and builds the surfaces scene (or, with --transfer, the
+// dvr scene of that transfer function, sampled every S world units) once, then for each view
 // (frontal = azimuth 0, and azimuth 45; or only --azimuth) and for 1 thread
 // and one per core (or only --threads N), renders once to warm up and then
 // `repeat` timed frames. Prints a table of median and minimum frame times,
 // rays per second (primary + shadow, from the tracer's counters) and the
-// speed-up of all cores over one thread.
+// speed-up of all cores over one thread. In dvr the steps are the walk's
+// segments, and the samples a frame shades are printed too.
 //
 // Every frame of a view must equal the first bit for bit, whatever the
 // thread count: the framebuffer sums in fixed point, so the thread schedule
@@ -44,8 +47,11 @@ using bench::ParseInt;
 using bench::ParseSize;
 
 constexpr char kUsage[] =
-    "usage: render_bench [--volume FILE] [--materials FILE] [--size WxH] [--repeat N]\n"
-    "                    [--azimuth DEG] [--shadows on|off] [--threads N]\n"
+    "usage: render_bench [--volume FILE] [--materials FILE | --transfer FILE [--step S]]\n"
+    "                    [--size WxH] [--repeat N] [--azimuth DEG] [--shadows on|off]\n"
+    "                    [--threads N]\n"
+    "  --transfer FILE dvr with this transfer function (JSON, docs/formats.md)\n"
+    "  --step S        dvr sample step in world units (default half the smallest spacing)\n"
     "  --azimuth DEG   only this view (default: azimuth 0 and 45)\n"
     "  --shadows       shadow rays (default on)\n"
     "  --threads N     only N threads, 0 = one per core (default: 1 and one per core)\n";
@@ -53,6 +59,8 @@ constexpr char kUsage[] =
 struct Options {
   std::string volume;
   std::string materials = TRANSTICK_BENCH_MATERIALS;
+  std::string transfer;  // dvr when set
+  double step = 0;
   int width = 400;
   int height = 400;
   int repeat = 5;
@@ -80,6 +88,14 @@ std::string Parse(int argc, char** argv, Options* o) {
       o->volume = value;
     } else if (flag == "--materials") {
       o->materials = value;
+    } else if (flag == "--transfer") {
+      o->transfer = value;
+    } else if (flag == "--step") {
+      char* end = nullptr;
+      o->step = std::strtod(value.c_str(), &end);
+      if (value.empty() || *end != '\0' || !(o->step > 0 && o->step < 1e6)) {
+        return "--step must be a positive number of world units, got '" + value + "'";
+      }
     } else if (flag == "--size") {
       if (!ParseSize(value, CameraSpec::kMaxImageSize, &o->width, &o->height)) {
         return "--size must be WxH with each in [1, 8192], got '" + value + "'";
@@ -129,9 +145,17 @@ bool SameCounters(const TraceCounters& a, const TraceCounters& b) {
 }
 
 int Run(const Options& o) {
-  auto materials = LoadMaterials(o.materials);
-  if (!materials.ok()) {
-    std::fprintf(stderr, "render_bench: %s\n", std::string(materials.status().message()).c_str());
+  const bool dvr = !o.transfer.empty();
+  absl::StatusOr<Classification> materials = Classification();
+  absl::StatusOr<TransferFunction> transfer = TransferFunction();
+  if (dvr) {
+    transfer = LoadTransferFunction(o.transfer);
+  } else {
+    materials = LoadMaterials(o.materials);
+  }
+  const absl::Status parts = dvr ? transfer.status() : materials.status();
+  if (!parts.ok()) {
+    std::fprintf(stderr, "render_bench: %s\n", std::string(parts.message()).c_str());
     return 1;
   }
   auto t_load = std::chrono::steady_clock::now();
@@ -142,7 +166,7 @@ int Run(const Options& o) {
   }
   const double load_ms = MsSince(t_load);
   auto t_build = std::chrono::steady_clock::now();
-  auto scene = Scene::ForSurfaces(*volume, *materials);
+  auto scene = dvr ? Scene::ForDvr(*volume, *transfer) : Scene::ForSurfaces(*volume, *materials);
   if (!scene.ok()) {
     std::fprintf(stderr, "render_bench: %s\n", std::string(scene.status().message()).c_str());
     return 1;
@@ -161,10 +185,14 @@ int Run(const Options& o) {
               volume->dims[1], volume->dims[2],
               std::string(ScalarTypeName(volume->source_type)).c_str(), volume->spacing[0],
               volume->spacing[1], volume->spacing[2]);
-  std::printf("materials  %s\n", o.materials.c_str());
+  if (dvr) {
+    std::printf("transfer   %s (dvr), step %g\n", o.transfer.c_str(), o.step);
+  } else {
+    std::printf("materials  %s\n", o.materials.c_str());
+  }
   std::printf("load       %.1f ms\n", load_ms);
-  std::printf("scene      built in %.1f ms (surfaces: labels, sticks, occupancy, scalars)\n",
-              build_ms);
+  std::printf("scene      built in %.1f ms (%s: labels, sticks, occupancy, scalars)\n", build_ms,
+              dvr ? "dvr" : "surfaces");
   std::printf(
       "sticks     %zu sticks; encoded %.3f MB = %.2f%% of raw %.3f MB; "
       "in memory %.3f MB = %.2f%% of raw\n",
@@ -181,15 +209,16 @@ int Run(const Options& o) {
   std::printf("frames     %dx%d, shadows %s, %d timed after 1 warm-up, %d cores\n\n", o.width,
               o.height, o.shadows ? "on" : "off", o.repeat, cores);
 
-  std::printf("%-9s %7s %10s %10s %14s %8s %8s %9s %10s %9s  %s\n", "view", "threads",
+  std::printf("%-9s %7s %10s %10s %14s %8s %8s %9s %10s %9s  %s%s\n", "view", "threads",
               "median ms", "min ms", "rays/s", "Mrays/s", "speedup", "Mrays/s/c", "steps/ray",
-              "ns/step", "rays/frame (primary + shadow)");
+              "ns/step", "rays/frame (primary + shadow)", dvr ? ", samples/frame" : "");
   std::fflush(stdout);
 
   Vec3 extent{volume->dims[0] * volume->spacing[0], volume->dims[1] * volume->spacing[1],
               volume->dims[2] * volume->spacing[2]};
   RenderSettings settings;
   settings.shadows = o.shadows;
+  settings.step = o.step;
   bool all_same = true;
   for (double azimuth : o.azimuths) {
     CameraSpec spec;
@@ -263,11 +292,13 @@ int Run(const Options& o) {
       const double steps_per_ray = rays ? static_cast<double>(counters.segments) / rays : 0;
       const double ns_per_step =
           counters.segments ? median * 1e6 * threads / static_cast<double>(counters.segments) : 0;
-      std::printf("%-9s %7d %10.1f %10.1f %14.0f %8.2f %8s %9.2f %10.1f %9.1f  %llu + %llu\n",
+      std::printf("%-9s %7d %10.1f %10.1f %14.0f %8.2f %8s %9.2f %10.1f %9.1f  %llu + %llu",
                   view, threads, median, min, rays_per_s, rays_per_s / 1e6, speedup,
                   per_core / 1e6, steps_per_ray, ns_per_step,
                   static_cast<unsigned long long>(counters.primary),
                   static_cast<unsigned long long>(counters.shadow));
+      if (dvr) std::printf(", %llu", static_cast<unsigned long long>(counters.samples));
+      std::printf("\n");
       std::fflush(stdout);
     }
   }
