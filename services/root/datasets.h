@@ -65,11 +65,15 @@ struct LoadedDataset {
   // into its frame (ToVolumeFrame).
   Direction direction = kIdentityDirection;
   double load_ms = 0;
-  BalanceMemory balance;
+  // Frames of the dataset may overlap (pipelined frames, sessions): one
+  // plans its layout (rings, balancing, slabs) or learns from its result at
+  // a time.
+  absl::Mutex mu;
+  BalanceMemory balance ABSL_GUARDED_BY(mu);
   // What the last frame on the cluster cost, for the model (--rings auto),
   // and its pixels; 0 pixels: none measured yet.
-  FrameCosts costs;
-  double costs_pixels = 0;
+  FrameCosts costs ABSL_GUARDED_BY(mu);
+  double costs_pixels ABSL_GUARDED_BY(mu) = 0;
   // Materials or a transfer function that show nothing of the volume.
   std::vector<std::string> warnings;
   // The volume's smallest and largest finite value, and kHistogramBins

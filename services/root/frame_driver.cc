@@ -43,7 +43,8 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
                                              const Layout& layout,
                                              const std::function<bool()>& cancelled,
                                              const ProgressFn& on_progress,
-                                             const ChunkFn& on_chunk) {
+                                             const ChunkFn& on_chunk,
+                                             const std::function<void()>& on_traced) {
   const uint64_t frame_id = next_frame_id_++;
   const auto t0 = Clock::now();
   const double started_unix =
@@ -219,6 +220,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
       if (p.complete() && !ender.joinable()) {
         complete = true;
         ender = std::thread([&] { end_all(/*cancel=*/false); });
+        if (on_traced) on_traced();
       }
       if (p.has_image()) {
         v1::ImageChunk* c = p.mutable_image();

@@ -45,12 +45,16 @@ class FrameDriver {
               std::chrono::milliseconds stall_timeout = std::chrono::seconds(10));
 
   // Runs one frame of `view`. Without `on_chunk` (a balancing prerender)
-  // the display sends no image, only completion. Fails UNAVAILABLE when a
-  // worker or the display failed (a failed worker is dropped from the
-  // registry), CANCELLED when `cancelled()` turned true.
+  // the display sends no image, only completion. `on_traced`, when set, is
+  // called once, on the calling thread, as soon as the display holds every
+  // deposit (before the image comes and the workers report): the cluster's
+  // tracers are free for the next frame from then on. Fails UNAVAILABLE
+  // when a worker or the display failed (a failed worker is dropped from
+  // the registry), CANCELLED when `cancelled()` turned true.
   absl::StatusOr<FrameResult> Run(const v1::View& view, const LoadedDataset& data,
                                   const Layout& layout, const std::function<bool()>& cancelled,
-                                  const ProgressFn& on_progress, const ChunkFn& on_chunk);
+                                  const ProgressFn& on_progress, const ChunkFn& on_chunk,
+                                  const std::function<void()>& on_traced = nullptr);
 
  private:
   Registry& registry_;

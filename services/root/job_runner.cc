@@ -39,10 +39,10 @@ double PixelsOf(const FrameTask& task) {
 
 // What a frame of the task costs: as the dataset's last frame did, for this
 // frame's pixels, else as assumed.
-FrameCosts CostsFor(const FrameTask& task) {
-  const LoadedDataset& data = *task.data;
-  return data.costs_pixels > 0 ? ScaledCosts(data.costs, data.costs_pixels, PixelsOf(task))
-                               : DefaultFrameCosts(PixelsOf(task));
+FrameCosts CostsFor(const FrameTask& task) ABSL_EXCLUSIVE_LOCKS_REQUIRED(task.data->mu) {
+  return task.data->costs_pixels > 0
+             ? ScaledCosts(task.data->costs, task.data->costs_pixels, PixelsOf(task))
+             : DefaultFrameCosts(PixelsOf(task));
 }
 
 }  // namespace
@@ -108,10 +108,30 @@ absl::Status JobRunner::RunJob(Job& job) {
   std::shared_ptr<LoadedDataset> data;
   int loaded = -1;
   FrameTask::Chosen chosen;  // the automatic rings of the dataset's frames
+  // Frames are pipelined (docs/design.md, "Pipelined frames"): the next
+  // frame starts as soon as the one before has traced, while that one's
+  // image travels and its workers report. At most two are in flight, and
+  // images are published in frame order.
+  std::shared_ptr<Flight> last;
+  // Waits for the frame in flight to end (stopping it first when
+  // `abandon`); its status.
+  auto land = [&](bool abandon) {
+    if (!last) return absl::OkStatus();
+    if (abandon) last->abandon = true;
+    last->thread.join();
+    absl::Status s = last->status;
+    if (s.ok()) job.FrameRendered(last->frame);
+    last.reset();
+    return s;
+  };
   while (std::optional<int> frame = job.NextFrame()) {
-    if (job.cancelled()) return absl::CancelledError("cancelled");
+    if (job.cancelled()) {
+      land(/*abandon=*/true).IgnoreError();  // the job ends cancelled
+      return absl::CancelledError("cancelled");
+    }
     const FrameKey key = job.key(*frame);
     if (key.dataset != loaded) {
+      if (absl::Status s = land(/*abandon=*/false); !s.ok()) return s;
       auto d = datasets_.Load(job.spec().datasets(key.dataset), job.plan().datasets[key.dataset]);
       if (!d.ok()) return d.status();
       data = *std::move(d);
@@ -124,10 +144,27 @@ absl::Status JobRunner::RunJob(Job& job) {
         job.Publish(std::move(e));
       }
     }
-    if (auto s = RunView(job, *frame, *data, chosen); !s.ok()) return s;
-    job.FrameRendered(*frame);
+    // A frame balanced by the one before it plans only once that one has
+    // reported.
+    if (job.plan().datasets[key.dataset].balance[key.view] == v1::PREVIOUS_FRAME) {
+      if (absl::Status s = land(/*abandon=*/false); !s.ok()) return s;
+    }
+    auto next = std::make_shared<Flight>();
+    next->frame = *frame;
+    if (last) last->traced.WaitForNotification();
+    next->thread = std::thread([this, &job, data, &chosen, me = next, before = last] {
+      me->status = RunView(job, *data, chosen, *me, before.get());
+      if (!me->traced.HasBeenNotified()) me->traced.Notify();
+      if (!me->published.HasBeenNotified()) me->published.Notify();
+    });
+    if (absl::Status s = land(/*abandon=*/false); !s.ok()) {
+      last = std::move(next);
+      land(/*abandon=*/true).IgnoreError();  // the job fails with the first error
+      return s;
+    }
+    last = std::move(next);
   }
-  return absl::OkStatus();
+  return land(/*abandon=*/false);
 }
 
 bool FrameTurns::Acquire(bool interactive, const std::function<bool()>& cancelled) {
@@ -202,7 +239,7 @@ int JobRunner::RingsFor(FrameTask& task, const std::vector<std::shared_ptr<Worke
   }
   const RingChoice choice = ChooseRings(costs, volume, shape, task.frames, memory, loaded);
   spdlog::info("{}: rings auto: {} ({} costs)", task.who, choice.why,
-               data.costs_pixels > 0 ? "measured" : "assumed");
+               task.data->costs_pixels > 0 ? "measured" : "assumed");
   chosen = {members, choice.rings};
   return choice.rings;
 }
@@ -226,9 +263,16 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
     if (attempt > 0) SleepUnless(kFirstBackoff * (1 << (attempt - 1)), task.cancelled);
     if (task.cancelled()) return absl::CancelledError("cancelled");
     if (!turns_.Acquire(task.interactive, task.cancelled)) return absl::CancelledError("cancelled");
+    // The cluster's turn, given up as soon as the frame has traced: its
+    // image and the workers' reports then overlap the next frame.
     struct Turn {
       FrameTurns& turns;
-      ~Turn() { turns.Release(); }
+      bool held = true;
+      void Release() {
+        if (held) turns.Release();
+        held = false;
+      }
+      ~Turn() { Release(); }
     } turn{turns_};
     auto workers = registry_.Workers(
         std::chrono::milliseconds(static_cast<int64_t>(options_.worker_wait_s * 1000)),
@@ -239,25 +283,31 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
       continue;
     }
     RenderedFrame out;
-    out.layout = Slabs::FormRings(*workers, RingsFor(task, *workers), planes);
     Layout& layout = out.layout;
-    // Cuts computed for other ring members mean nothing to these.
-    if (const std::string members = layout.Members(); members != data.balance.members) {
-      data.balance = BalanceMemory{};
-      data.balance.members = members;
-    }
     out.report.job_id = task.who;
     const auto balance_start = Clock::now();
     bool prerendered = false;
-    status = task.balancer->Plan(
-        *local_view, data.balance, layout,
-        [&](const v1::View& test, Layout& probe) -> absl::StatusOr<FrameResult> {
-          prerendered = true;
-          if (absl::Status s = slabs_.Distribute(data, probe); !s.ok()) return s;
-          return driver_.Run(test, data, probe, task.cancelled, nullptr, nullptr);
-        },
-        &out.report);
-    if (status.ok()) status = slabs_.Distribute(data, layout);
+    {
+      // The layout: a frame still travelling may learn from its result
+      // meanwhile, but not while this one plans.
+      absl::MutexLock lock(&task.data->mu);
+      layout = Slabs::FormRings(*workers, RingsFor(task, *workers), planes);
+      // Cuts computed for other ring members mean nothing to these.
+      BalanceMemory& memory = task.data->balance;
+      if (const std::string members = layout.Members(); members != memory.members) {
+        memory = BalanceMemory{};
+        memory.members = members;
+      }
+      status = task.balancer->Plan(
+          *local_view, memory, layout,
+          [&](const v1::View& test, Layout& probe) -> absl::StatusOr<FrameResult> {
+            prerendered = true;
+            if (absl::Status s = slabs_.Distribute(data, probe); !s.ok()) return s;
+            return driver_.Run(test, data, probe, task.cancelled, nullptr, nullptr);
+          },
+          &out.report);
+      if (status.ok()) status = slabs_.Distribute(data, layout);
+    }
     if (!status.ok()) {
       if (status.code() == absl::StatusCode::kUnavailable && !task.cancelled()) continue;
       return status;
@@ -265,8 +315,11 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
     // The prerender and the plane moves it caused.
     if (prerendered) out.report.balance_ms = MsSince(balance_start);
     if (task.on_attempt) task.on_attempt();
-    auto result =
-        driver_.Run(*local_view, data, layout, task.cancelled, task.on_progress, task.on_chunk);
+    auto result = driver_.Run(*local_view, data, layout, task.cancelled, task.on_progress,
+                              task.on_chunk, [&] {
+                                turn.Release();
+                                if (task.on_traced) task.on_traced();
+                              });
     if (!result.ok()) {
       status = result.status();
       if (status.code() != absl::StatusCode::kUnavailable || task.cancelled()) return status;
@@ -274,17 +327,21 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
       metrics_.Add("transtick_root_frame_retries_total", 1);
       continue;
     }
-    task.balancer->Learn(*result, layout, data.balance, &out.report);
-    data.costs = FrameCostsFrom(result->workers, CostsFor(task));
-    data.costs_pixels = PixelsOf(task);
+    {
+      absl::MutexLock lock(&task.data->mu);
+      task.balancer->Learn(*result, layout, task.data->balance, &out.report);
+      task.data->costs = FrameCostsFrom(result->workers, CostsFor(task));
+      task.data->costs_pixels = PixelsOf(task);
+    }
     out.result = *std::move(result);
     return out;
   }
   return status;
 }
 
-absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data,
-                                FrameTask::Chosen& chosen) {
+absl::Status JobRunner::RunView(Job& job, LoadedDataset& data, FrameTask::Chosen& chosen,
+                                Flight& me, const Flight* before) {
+  const int frame = me.frame;
   const int d = job.key(frame).dataset, v = job.key(frame).view;
   // The view goes to the workers as the client wrote it; the root's own
   // checks use the plan made when the job was accepted.
@@ -313,9 +370,14 @@ absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data,
   task.rings = job.plan().rings.value_or(options_.rings);
   task.frames = job.spec().datasets(d).views_size();
   task.chosen = &chosen;
-  task.cancelled = [&] { return job.cancelled() || queue_.stopping(); };
+  task.cancelled = [&] { return job.cancelled() || queue_.stopping() || me.abandon.load(); };
   task.on_attempt = [&] { held.reset(); };
+  task.on_traced = [&] {
+    if (!me.traced.HasBeenNotified()) me.traced.Notify();
+  };
   task.on_chunk = [&](v1::ImageChunk chunk) -> absl::Status {
+    // Images go out in frame order: the frame before finishes first.
+    if (before) before->published.WaitForNotification();
     if (held) {
       absl::Status s = job.PublishImage(*std::move(held), queue_options.max_pending_image_bytes,
                                         queue_options.image_wait);
@@ -334,6 +396,9 @@ absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data,
     return absl::OkStatus();
   };
   task.on_progress = [&](uint64_t done, uint64_t total) {
+    // Progress of a frame whose predecessor is still publishing is left
+    // out (the next report comes within 200 ms).
+    if (before && !before->published.HasBeenNotified()) return;
     v1::JobEvent e;
     e.set_frame(frame);
     e.set_dataset(d);
@@ -352,8 +417,10 @@ absl::Status JobRunner::RunView(Job& job, int frame, LoadedDataset& data,
   if (frame == 0) {
     metrics_.Observe("transtick_root_job_start_seconds", held->stats().since_submit_ms() / 1e3);
   }
-  return job.PublishImage(*std::move(held), queue_options.max_pending_image_bytes,
-                          queue_options.image_wait);
+  absl::Status published = job.PublishImage(*std::move(held), queue_options.max_pending_image_bytes,
+                                            queue_options.image_wait);
+  me.published.Notify();
+  return published;
 }
 
 void JobRunner::Describe(const std::string& who, const std::string& label, const v1::View& view,

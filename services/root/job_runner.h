@@ -7,11 +7,13 @@
 #ifndef TRANSTICK_SERVICES_ROOT_JOB_RUNNER_H_
 #define TRANSTICK_SERVICES_ROOT_JOB_RUNNER_H_
 
+#include <atomic>
 #include <memory>
 #include <string>
 #include <thread>
 
 #include "absl/synchronization/mutex.h"
+#include "absl/synchronization/notification.h"
 #include "balancer.h"
 #include "cluster_model.h"
 #include "datasets.h"
@@ -61,6 +63,9 @@ struct FrameTask {
   FrameDriver::ProgressFn on_progress;
   FrameDriver::ChunkFn on_chunk;
   std::function<void()> on_attempt;  // before each attempt (chunks of a failed one are void)
+  // Once the frame has traced (FrameDriver::Run's on_traced), on the
+  // rendering thread; again if a later attempt traces.
+  std::function<void()> on_traced;
   bool interactive = false;
   // Rings (kAutoRings: chosen by the model for `frames` frames, once per
   // set of workers, and kept in `chosen` across the task's frames;
@@ -116,12 +121,24 @@ class JobRunner {
  private:
   void Loop();
   absl::Status RunJob(Job& job);
+  // A frame of a job in flight: RunJob starts the next frame once this one
+  // has traced, and publishes images in frame order.
+  struct Flight {
+    int frame = 0;
+    absl::Status status;
+    absl::Notification traced;     // every deposit is in, or the frame ended
+    absl::Notification published;  // its image is out, or the frame ended
+    std::atomic<bool> abandon{false};  // the job ends: stop it
+    std::thread thread;
+  };
   // Renders the job's frame (on attempt after attempt while workers or the
-  // display fail) and publishes its image.
-  absl::Status RunView(Job& job, int frame, LoadedDataset& data, FrameTask::Chosen& chosen);
+  // display fail) and publishes its image, after `before`'s (null: none).
+  absl::Status RunView(Job& job, LoadedDataset& data, FrameTask::Chosen& chosen, Flight& me,
+                       const Flight* before);
 
   // The task's rings for these workers (the model's choice for kAutoRings).
-  int RingsFor(FrameTask& task, const std::vector<std::shared_ptr<WorkerEntry>>& workers);
+  int RingsFor(FrameTask& task, const std::vector<std::shared_ptr<WorkerEntry>>& workers)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(task.data->mu);
 
   const RunnerOptions options_;
   FrameTurns turns_;
