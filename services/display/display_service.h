@@ -27,7 +27,8 @@ struct DisplayOptions {
   // Frames larger than this are refused.
   uint64_t max_frame_pixels = uint64_t{8192} * 8192;
   // Open framebuffers. Beginning one more evicts (aborts) the least recently
-  // active: the root runs one frame at a time, so that one was abandoned.
+  // active: the root traces one frame at a time (two in flight at most),
+  // so that one was abandoned.
   size_t max_frames = 4;
   // Bytes of open framebuffers. A BeginFrame that would pass it is refused
   // with RESOURCE_EXHAUSTED naming the sizes. Two frames of the largest size.

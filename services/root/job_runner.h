@@ -35,8 +35,9 @@ struct RunnerOptions {
   double worker_wait_s = 120;  // how long a job waits for a first worker
 };
 
-// Who renders on the cluster next: one frame at a time (a frame uses every
-// worker), and an interactive session's frame before any batch job's that
+// Who traces on the cluster next: one frame at a time (a frame uses every
+// worker; it gives up its turn once it has traced, and its image travels
+// while the next one traces), and an interactive session's frame before any batch job's that
 // waits. Batch frames go between session frames, so a session that renders
 // without pause holds the jobs off until it pauses. Thread-safe.
 class FrameTurns {

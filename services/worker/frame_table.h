@@ -30,8 +30,8 @@ namespace transtick {
 // default). A busy frame never expires.
 //
 // At most `max_frames` are held. Preparing one more evicts the least
-// recently active: the root runs one frame at a time on a worker, so that one
-// was abandoned, unless something floods the worker (then a frame is lost,
+// recently active: the root traces one frame at a time on a worker (and
+// ends the last while the next traces), so that one was abandoned, unless something floods the worker (then a frame is lost,
 // and the root retries it). Refusing instead would leave a worker whose root
 // crashed unusable until its leftovers expired.
 struct FrameLimits {
