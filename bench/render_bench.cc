@@ -1,8 +1,8 @@
 // render_bench: times RenderLocal on a real volume.
 //
-//   render_bench [--volume FILE] [--materials FILE | --transfer FILE [--step S]]
-//                [--size WxH] [--repeat N] [--azimuth DEG] [--shadows on|off]
-//                [--threads N]
+//   render_bench [--volume FILE] [--materials FILE | --transfer FILE [--step S]
+//                [--skip on|off]] [--size WxH] [--repeat N] [--azimuth DEG]
+//                [--shadows on|off] [--etr on|off] [--threads N]
 //
 // Loads the volume and builds the surfaces scene (or, with --transfer, the
 // dvr scene of that transfer function, sampled every S world units) once, then for each view
@@ -12,6 +12,12 @@
 // rays per second (primary + shadow, from the tracer's counters) and the
 // speed-up of all cores over one thread. In dvr the steps are the walk's
 // segments, and the samples a frame shades are printed too.
+//
+// What the dvr walk's savings are worth: --skip off renders a scene whose
+// every voxel is labelled visible (no empty space is skipped: the walk
+// samples the whole volume), --etr off lets rays go on however opaque they
+// have become (no early ray termination). Skipping must not change a bit of
+// the image; the bench checks that against the scene that skips.
 //
 // Every frame of a view must equal the first bit for bit, whatever the
 // thread count: the framebuffer sums in fixed point, so the thread schedule
@@ -26,6 +32,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -47,11 +54,13 @@ using bench::ParseInt;
 using bench::ParseSize;
 
 constexpr char kUsage[] =
-    "usage: render_bench [--volume FILE] [--materials FILE | --transfer FILE [--step S]]\n"
-    "                    [--size WxH] [--repeat N] [--azimuth DEG] [--shadows on|off]\n"
-    "                    [--threads N]\n"
+    "usage: render_bench [--volume FILE] [--materials FILE | --transfer FILE [--step S]\n"
+    "                    [--skip on|off]] [--size WxH] [--repeat N] [--azimuth DEG]\n"
+    "                    [--shadows on|off] [--etr on|off] [--threads N]\n"
     "  --transfer FILE dvr with this transfer function (JSON, docs/formats.md)\n"
     "  --step S        dvr sample step in world units (default half the smallest spacing)\n"
+    "  --skip on|off   dvr: skip empty space (default on; off also checks the image)\n"
+    "  --etr on|off    early ray termination (default on)\n"
     "  --azimuth DEG   only this view (default: azimuth 0 and 45)\n"
     "  --shadows       shadow rays (default on)\n"
     "  --threads N     only N threads, 0 = one per core (default: 1 and one per core)\n";
@@ -61,6 +70,8 @@ struct Options {
   std::string materials = TRANSTICK_BENCH_MATERIALS;
   std::string transfer;  // dvr when set
   double step = 0;
+  bool skip = true;
+  bool etr = true;
   int width = 400;
   int height = 400;
   int repeat = 5;
@@ -90,6 +101,9 @@ std::string Parse(int argc, char** argv, Options* o) {
       o->materials = value;
     } else if (flag == "--transfer") {
       o->transfer = value;
+    } else if (flag == "--skip" || flag == "--etr") {
+      if (value != "on" && value != "off") return flag + " must be on or off";
+      (flag == "--skip" ? o->skip : o->etr) = value == "on";
     } else if (flag == "--step") {
       char* end = nullptr;
       o->step = std::strtod(value.c_str(), &end);
@@ -167,6 +181,21 @@ int Run(const Options& o) {
   const double load_ms = MsSince(t_load);
   auto t_build = std::chrono::steady_clock::now();
   auto scene = dvr ? Scene::ForDvr(*volume, *transfer) : Scene::ForSurfaces(*volume, *materials);
+  // Without skipping: the same dvr scene with every voxel visible.
+  std::optional<Scene> skipping;
+  if (dvr && !o.skip && scene.ok()) {
+    const std::vector<uint8_t> visible(volume->values.size(), 1);
+    auto all = Scene::FromParts(RenderMode::kDvr, volume->dims, volume->spacing, volume->Range(),
+                                Sticks::Encode(visible, volume->dims, 0, volume->dims[1]),
+                                volume->values, BrickMap::Build(visible, volume->dims, false),
+                                Classification(), *transfer);
+    if (!all.ok()) {
+      std::fprintf(stderr, "render_bench: %s\n", std::string(all.status().message()).c_str());
+      return 1;
+    }
+    skipping = *std::move(scene);
+    scene = *std::move(all);
+  }
   if (!scene.ok()) {
     std::fprintf(stderr, "render_bench: %s\n", std::string(scene.status().message()).c_str());
     return 1;
@@ -219,6 +248,7 @@ int Run(const Options& o) {
   RenderSettings settings;
   settings.shadows = o.shadows;
   settings.step = o.step;
+  if (!o.etr) settings.min_transmittance = 0;
   bool all_same = true;
   for (double azimuth : o.azimuths) {
     CameraSpec spec;
@@ -254,6 +284,24 @@ int Run(const Options& o) {
           reference = *std::move(image);
           reference_counters = stats.counters;
           have_reference = true;
+          if (skipping) {
+            // Skipping empty space saves work, never changes a pixel.
+            RenderStats skipped;
+            auto want = RenderLocal(*skipping, *camera, settings, threads, &skipped);
+            size_t diff = 0;
+            if (!want.ok() || !SameBits(*want, reference, &diff)) {
+              all_same = false;
+              std::fprintf(stderr, "render_bench: %s: the image without skipping differs from "
+                           "the one with it (value %zu)\n", view, diff);
+            } else {
+              std::printf("%-9s skipping: %llu samples and %llu steps a frame, without: %llu "
+                          "and %llu (the same image)\n", view,
+                          static_cast<unsigned long long>(skipped.counters.samples),
+                          static_cast<unsigned long long>(skipped.counters.segments),
+                          static_cast<unsigned long long>(stats.counters.samples),
+                          static_cast<unsigned long long>(stats.counters.segments));
+            }
+          }
           continue;
         }
         size_t diff = 0;
