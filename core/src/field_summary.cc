@@ -46,7 +46,7 @@ FieldSummary FieldSummary::Build(const std::vector<float>& values, std::array<in
   TRANSTICK_CHECK(nx > 0 && ny > 0 && nz > 0);
   TRANSTICK_CHECK_EQ(values.size(), static_cast<size_t>(nx) * ny * nz);
   FieldSummary s;
-  for (int a = 0; a < 3; ++a) s.bricks_[a] = (dims[a] + 1 + 7) >> kShift;
+  s.bricks_ = BricksOf(dims);
   const int bx = s.bricks_[0], by = s.bricks_[1], bz = s.bricks_[2];
   // Along x first: per voxel row, the range of each brick's span.
   std::vector<Range> rows(static_cast<size_t>(bx) * ny * nz);
@@ -88,10 +88,12 @@ FieldSummary FieldSummary::Build(const std::vector<float>& values, std::array<in
 absl::StatusOr<FieldSummary> FieldSummary::FromBytes(std::array<int, 3> dims, int bands,
                                                      std::string_view bytes) {
   FieldSummary s;
-  size_t want = 1;
   for (int a = 0; a < 3; ++a) {
     if (dims[a] <= 0) return absl::InvalidArgumentError("field summary: a volume without voxels");
-    s.bricks_[a] = static_cast<int>((int64_t{dims[a]} + 1 + 7) >> kShift);
+  }
+  s.bricks_ = BricksOf(dims);
+  size_t want = 1;
+  for (int a = 0; a < 3; ++a) {
     // Past the bytes given, the product can only grow: no overflow.
     if (want <= bytes.size()) want *= static_cast<size_t>(s.bricks_[a]);
   }

@@ -251,9 +251,7 @@ absl::StatusOr<Scene> Scene::FromParts(RenderMode mode, std::array<int, 3> dims,
     return absl::InvalidArgumentError(
         absl::StrCat("brick map: material ", int{bricks.MaxMaterial()}, " of ", materials));
   }
-  if (!summary.empty() && summary.brick_dims() != std::array<int, 3>{(dims[0] + 8) >> 3,
-                                                                    (dims[1] + 8) >> 3,
-                                                                    (dims[2] + 8) >> 3}) {
+  if (!summary.empty() && summary.brick_dims() != FieldSummary::BricksOf(dims)) {
     return absl::InvalidArgumentError("field summary and slab disagree on the volume's dimensions");
   }
   if (!bricks.ReachCovers(sticks.y_begin(), sticks.y_end())) {

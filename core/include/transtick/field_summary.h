@@ -50,8 +50,16 @@ class FieldSummary {
   static absl::StatusOr<FieldSummary> FromBytes(std::array<int, 3> dims, int bands,
                                                 std::string_view bytes);
 
+  // Bricks per axis of a volume of `dims`: ceil((dims + 1) / 8), the field
+  // having dims + 1 cells. REQUIRES: dims >= 0.
+  static std::array<int, 3> BricksOf(std::array<int, 3> dims) {
+    std::array<int, 3> b;
+    for (int a = 0; a < 3; ++a) b[a] = static_cast<int>((int64_t{dims[a]} + 1 + 7) >> kShift);
+    return b;
+  }
+
   bool empty() const { return labels_.empty(); }
-  // Bricks per axis: ceil((dims + 1) / 8), the field having dims + 1 cells.
+  // BricksOf the volume's dims.
   const std::array<int, 3>& brick_dims() const { return bricks_; }
   // One byte per brick, x fastest, then y, then z.
   const std::vector<uint8_t>& bytes() const { return labels_; }
