@@ -134,7 +134,7 @@ const CommandDoc kRenderDoc = {
                   {"rings", "R", "rings of the embedded cluster, or auto (default 1)"},
                   {"balance", "off|test-rays|previous-frame",
                    "static load balancing of the slabs on a cluster (default off)"},
-                  {"balance-grid", "N", "test rays per side of the image for test-rays (default 32)"},
+                  {"balance-grid", "N", "test rays per side of the image for test-rays (default 64)"},
                   {"balance-rule", "cost|paper", "how cuts follow from costs (default cost)"},
                   {"root", "HOST:PORT",
                    "render on a running cluster; --volume is then relative to the\n"
@@ -794,7 +794,7 @@ int Render(int argc, char** argv) {
   auto balance = ParseEnum<v1::BalanceMode>(flags->Get("balance", "off"), "--balance");
   if (!balance.ok()) return fail(balance.status());
   job.set_balance(*balance);
-  auto grid = flags->GetInt("balance-grid", 32);
+  auto grid = flags->GetInt("balance-grid", 0);  // 0: the root's default
   if (!grid.ok()) return fail(grid.status());
   job.set_balance_grid(*grid);
   auto rule = ParseEnum<v1::BalanceRule>(flags->Get("balance-rule", "cost"), "--balance-rule");

@@ -364,7 +364,7 @@ TEST_F(ClusterTest, BalancingEvensOutConcentratedContent) {
     job.mutable_datasets(0)->set_volume(file);
     *job.mutable_datasets(0)->mutable_materials() = FaintMaterials();
     job.set_balance(*ParseEnum<v1::BalanceMode>(balance, "balance"));
-    // The view's own 160x160 rays as test rays: the default 32x32 measure
+    // The view's own 160x160 rays as test rays: the default grid measures
     // too little CPU time to place the cuts reliably on a loaded machine
     // (a cut at 36 was seen under a parallel build).
     job.set_balance_grid(160);

@@ -15,8 +15,12 @@ namespace {
 // Test rays per side of the image for a balancing prerender. 16 (the
 // paper's order) measures too few rays for stable cuts: on bonsai with 8
 // workers the tracer CPU max/mean after balancing was 1.22-1.25 with 16,
-// 1.09-1.13 with 32 and 48; 32x32 rays cost about 0.6% of a 400x400 frame.
-constexpr int kDefaultBalanceGrid = 32;
+// 1.09-1.13 with 32 and 48. With smooth surfaces 32 was too few at 8
+// workers: at 45 degrees, 1.15-1.17 on cthead and 1.21-1.24 on engine
+// against 1.08-1.10 and 1.09-1.11 with 64 (cluster_bench tables, runs
+// interleaved, 4 December 2026). 64x64 rays cost about 2.5% of a 400x400
+// frame, once per view.
+constexpr int kDefaultBalanceGrid = 64;
 
 std::string FormatCuts(const std::vector<std::vector<int>>& cuts) {
   std::string out;
