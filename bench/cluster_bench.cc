@@ -60,6 +60,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <initializer_list>
 #include <map>
 #include <string>
 #include <thread>
@@ -538,6 +539,27 @@ struct EqualRing {
   std::vector<Tracer> tracers;
 };
 
+// Calls f(azimuth, camera, ring) for each view of `azimuths` and each
+// number of slabs in o.workers that the volume's planes allow, the slabs
+// equal. Fails when a view's camera cannot be made.
+template <typename F>
+absl::Status ForEachEqualRing(const Options& o, const Setup& setup,
+                              std::initializer_list<double> azimuths, F f) {
+  const Scene& whole = *setup.scene;
+  for (double azimuth : azimuths) {
+    const v1::View view = MakeView(o, azimuth);
+    auto camera = Camera::Create(*ToCameraSpec(view), setup.extent);
+    if (!camera.ok()) return camera.status();
+    const RenderSettings settings = ToRenderSettings(view);
+    for (int n : o.workers) {
+      if (n < 1 || n > whole.dims()[1]) continue;
+      const EqualRing ring(whole, n, settings, *camera);
+      f(azimuth, *camera, ring);
+    }
+  }
+  return absl::OkStatus();
+}
+
 // Traces every ray of one frame in this process, slab by slab as the ring
 // routes it (RingLayout): each slab makes its primary rays, then each slab
 // in turn traces the rays queued for it, until none are left. `timed(i,
@@ -554,7 +576,8 @@ void TraceRing(const RingLayout& layout, const std::vector<Tracer>& tracers, con
       for (int py = 0; py < camera.height(); ++py)
         for (int px = 0; px < camera.width(); ++px) {
           RayDescriptor ray;
-          if (layout.Primary(i, px, py, 0, 1, tracers[i], &ray) == RingLayout::PrimaryRole::kTrace) {
+          if (layout.Primary(i, px, py, 0, 1, tracers[i], &ray) ==
+              RingLayout::PrimaryRole::kTrace) {
             queues[i].push_back(ray);
           }
         }
@@ -578,7 +601,8 @@ void TraceRing(const RingLayout& layout, const std::vector<Tracer>& tracers, con
           for (const RayDescriptor& r : spawned) queues[i].push_back(r);
           if (outcome != Tracer::Outcome::kLeftSlab) continue;
           const RingLayout::Hop hop = layout.Route(i, ray.cell);
-          if (hop != RingLayout::Hop::kFinished) queues[RingLayout::Neighbour(i, hop)].push_back(ray);
+          if (hop != RingLayout::Hop::kFinished)
+            queues[RingLayout::Neighbour(i, hop)].push_back(ray);
         }
       });
     }
@@ -588,50 +612,42 @@ void TraceRing(const RingLayout& layout, const std::vector<Tracer>& tracers, con
 int Hops(const Options& o) {
   auto setup = Prepare(o);
   if (!setup.ok()) return Fail(setup.status());
-  const Scene& whole = *setup->scene;
   std::printf("volume %s, %dx%d, shadows on, equal slabs; per frame\n", o.volume.c_str(), o.width,
               o.height);
   std::printf("%-8s %7s %10s %12s %8s %14s %12s %12s\n", "view", "slabs", "hops", "transit hops",
               "share", "transit steps", "all steps", "ended early");
-  for (double azimuth : {0.0, 45.0}) {
-    const v1::View view = MakeView(o, azimuth);
-    auto camera = Camera::Create(*ToCameraSpec(view), setup->extent);
-    if (!camera.ok()) return Fail(camera.status());
-    const RenderSettings settings = ToRenderSettings(view);
-    for (int n : o.workers) {
-      const int planes = whole.dims()[1];
-      if (n < 1 || n > planes) continue;
-      const EqualRing ring(whole, n, settings, *camera);
-      const RingLayout& layout = ring.layout;
-      uint64_t hops = 0, transit = 0, transit_steps = 0, steps = 0, ended = 0;
-      TraceRing(
-          layout, ring.tracers, *camera, [](int, auto&& share) { share(); },
-          [&](int i, const RayDescriptor& before, const RayDescriptor& ray,
-              const std::vector<RayDescriptor>& spawned, const TraceCounters& counters,
-              Tracer::Outcome outcome) {
-            steps += counters.segments;
-            ended += counters.ended_early;
-            if (outcome != Tracer::Outcome::kLeftSlab ||
-                layout.Route(i, ray.cell) == RingLayout::Hop::kFinished) {
-              return;
-            }
-            ++hops;
-            if (spawned.empty() && counters.surface_hits == 0 && ray.color == before.color &&
-                ray.transmittance == before.transmittance && ray.material == before.material &&
-                ray.band == before.band) {
-              ++transit;
-              transit_steps += counters.segments;
-            }
-          });
-      using ull = unsigned long long;
-      std::printf("%-8s %7d %10llu %12llu %7.1f%% %14llu %12llu %12llu\n",
-                  azimuth == 0 ? "frontal" : "45 deg", n, static_cast<ull>(hops),
-                  static_cast<ull>(transit), hops ? 100.0 * transit / hops : 0.0,
-                  static_cast<ull>(transit_steps), static_cast<ull>(steps),
-                  static_cast<ull>(ended));
-    }
-  }
-  return 0;
+  const absl::Status status = ForEachEqualRing(
+      o, *setup, {0.0, 45.0}, [&](double azimuth, const Camera& camera, const EqualRing& ring) {
+        const int n = static_cast<int>(ring.tracers.size());
+        const RingLayout& layout = ring.layout;
+        uint64_t hops = 0, transit = 0, transit_steps = 0, steps = 0, ended = 0;
+        TraceRing(
+            layout, ring.tracers, camera, [](int, auto&& share) { share(); },
+            [&](int i, const RayDescriptor& before, const RayDescriptor& ray,
+                const std::vector<RayDescriptor>& spawned, const TraceCounters& counters,
+                Tracer::Outcome outcome) {
+              steps += counters.segments;
+              ended += counters.ended_early;
+              if (outcome != Tracer::Outcome::kLeftSlab ||
+                  layout.Route(i, ray.cell) == RingLayout::Hop::kFinished) {
+                return;
+              }
+              ++hops;
+              if (spawned.empty() && counters.surface_hits == 0 && ray.color == before.color &&
+                  ray.transmittance == before.transmittance && ray.material == before.material &&
+                  ray.band == before.band) {
+                ++transit;
+                transit_steps += counters.segments;
+              }
+            });
+        using ull = unsigned long long;
+        std::printf("%-8s %7d %10llu %12llu %7.1f%% %14llu %12llu %12llu\n",
+                    azimuth == 0 ? "frontal" : "45 deg", n, static_cast<ull>(hops),
+                    static_cast<ull>(transit), hops ? 100.0 * transit / hops : 0.0,
+                    static_cast<ull>(transit_steps), static_cast<ull>(steps),
+                    static_cast<ull>(ended));
+      });
+  return status.ok() ? 0 : Fail(status);
 }
 
 // ---------------------------------------------------------------- weights
@@ -719,50 +735,44 @@ int Weights(const Options& o) {
     vo.materials = materials;
     auto setup = Prepare(vo);
     if (!setup.ok()) return Fail(setup.status());
-    const Scene& whole = *setup->scene;
-    for (double azimuth : {0.0, 45.0, 90.0, 135.0}) {
-      const v1::View view = MakeView(o, azimuth);
-      auto camera = Camera::Create(*ToCameraSpec(view), setup->extent);
-      if (!camera.ok()) return Fail(camera.status());
-      const RenderSettings settings = ToRenderSettings(view);
-      for (int n : o.workers) {
-        const int planes = whole.dims()[1];
-        if (n < 1 || n > planes) continue;
-        const EqualRing ring(whole, n, settings, *camera);
-        std::vector<SlabWork> work(n);
-        std::vector<double> best(n, 1e300);
-        for (int rep = 0; rep < o.repeat; ++rep) {
-          std::vector<double> ms(n, 0);
-          std::vector<TraceCounters> counters(n);
-          std::vector<uint64_t> taken(n, 0);
-          TraceRing(
-              ring.layout, ring.tracers, *camera,
-              [&](int i, auto&& share) {
-                const double t0 = ThreadCpuMs();
-                share();
-                ms[i] += ThreadCpuMs() - t0;
-              },
-              [&](int i, const RayDescriptor&, const RayDescriptor&,
-                  const std::vector<RayDescriptor>&, const TraceCounters& c, Tracer::Outcome) {
-                ++taken[i];
-                counters[i].Add(c);
-              });
-          for (int i = 0; i < n; ++i) {
-            best[i] = std::min(best[i], ms[i]);
-            work[i].counts[0] = static_cast<double>(counters[i].segments);
-            work[i].counts[1] = static_cast<double>(counters[i].cells);
-            work[i].counts[2] = static_cast<double>(counters[i].surface_hits);
-            work[i].counts[3] = static_cast<double>(taken[i]);
+    const absl::Status status = ForEachEqualRing(
+        o, *setup, {0.0, 45.0, 90.0, 135.0},
+        [&](double azimuth, const Camera& camera, const EqualRing& ring) {
+          const int n = static_cast<int>(ring.tracers.size());
+          std::vector<SlabWork> work(n);
+          std::vector<double> best(n, 1e300);
+          for (int rep = 0; rep < o.repeat; ++rep) {
+            std::vector<double> ms(n, 0);
+            std::vector<TraceCounters> counters(n);
+            std::vector<uint64_t> taken(n, 0);
+            TraceRing(
+                ring.layout, ring.tracers, camera,
+                [&](int i, auto&& share) {
+                  const double t0 = ThreadCpuMs();
+                  share();
+                  ms[i] += ThreadCpuMs() - t0;
+                },
+                [&](int i, const RayDescriptor&, const RayDescriptor&,
+                    const std::vector<RayDescriptor>&, const TraceCounters& c, Tracer::Outcome) {
+                  ++taken[i];
+                  counters[i].Add(c);
+                });
+            for (int i = 0; i < n; ++i) {
+              best[i] = std::min(best[i], ms[i]);
+              work[i].counts[0] = static_cast<double>(counters[i].segments);
+              work[i].counts[1] = static_cast<double>(counters[i].cells);
+              work[i].counts[2] = static_cast<double>(counters[i].surface_hits);
+              work[i].counts[3] = static_cast<double>(taken[i]);
+            }
           }
-        }
-        for (int i = 0; i < n; ++i) {
-          work[i].ms = best[i];
-          work[i].what = absl::StrCat(fs::path(volume).filename().string(), " az ", azimuth, " ",
-                                      n, " slabs, slab ", i);
-          if (work[i].ms > 0.5) rows.push_back(work[i]);
-        }
-      }
-    }
+          for (int i = 0; i < n; ++i) {
+            work[i].ms = best[i];
+            work[i].what = absl::StrCat(fs::path(volume).filename().string(), " az ", azimuth, " ",
+                                        n, " slabs, slab ", i);
+            if (work[i].ms > 0.5) rows.push_back(work[i]);
+          }
+        });
+    if (!status.ok()) return Fail(status);
   }
   if (rows.size() < 4) return Fail(absl::FailedPreconditionError("too few slabs to fit"));
   const std::array<double, 4> w = FitNonNegative(rows);
