@@ -888,6 +888,9 @@ int StatusCommand(int argc, char** argv) {
   }
   for (const auto& w : reply.workers()) {
     std::printf("  worker %s at %s, %d threads", w.id().c_str(), w.address().c_str(), w.threads());
+    if (w.cpus() > 0 && w.machine_cpus() > 0) {
+      std::printf(" on %.4g of its machine's %d CPUs", w.cpus(), w.machine_cpus());
+    }
     if (w.memory_bytes() > 0) {
       std::printf(", %.0f MB%s", w.memory_bytes() / 1048576.0,
                   w.memory_shared() ? " of its host's" : "");

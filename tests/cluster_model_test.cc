@@ -6,7 +6,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
+#include <limits>
 #include <random>
+#include <string>
 
 namespace transtick {
 namespace {
@@ -194,6 +198,93 @@ TEST(ChooseRings, LongJobsTakeMoreRingsOneFrameOnASlowLinkFewer) {
   // Memory for a quarter of the volume: at most 2 rings.
   const RingChoice tight = ChooseRings(c, v, s, 100000, 2 * (2e9 / 4 + 2 * 2e9 / 500) + 64e6);
   EXPECT_LE(tight.rings, 2);
+}
+
+// The cores the model gives each worker of `sites`.
+double ModelCores(const Sites& sites) {
+  const ClusterShape& s = sites.shape;
+  const int per_host = (s.workers + s.hosts - 1) / s.hosts;
+  return std::min<double>(s.threads, s.cores_per_host / per_host);
+}
+
+TEST(SitesOf, KnownAnswers) {
+  // Four workers of one thread, each in a network namespace of its own on
+  // one machine of 2 CPUs (bench/emulated_hosts.sh): 4 hosts, half a core
+  // each.
+  std::vector<WorkerSite> ns;
+  for (int i = 0; i < 4; ++i) {
+    ns.push_back({"10.9.0." + std::to_string(i + 2) + ":7001", "boot-a", 1, 2, 2, 0, false});
+  }
+  Sites a = SitesOf(ns);
+  EXPECT_EQ(a.shape.workers, 4);
+  EXPECT_EQ(a.shape.hosts, 4);
+  EXPECT_EQ(a.machines, 1);
+  EXPECT_DOUBLE_EQ(ModelCores(a), 0.5);
+  EXPECT_EQ(a.memory_per_worker, std::numeric_limits<double>::infinity());
+  EXPECT_NE(a.why.find("4 worker(s) on 4 host(s) and 1 machine(s), 0.5 core(s)"),
+            std::string::npos) << a.why;
+  // Without boot ids, each address is its own machine: a core each.
+  for (auto& w : ns) w.machine.clear();
+  EXPECT_DOUBLE_EQ(ModelCores(SitesOf(ns)), 1);
+  // Two workers of 8 threads at one address on an 8-CPU machine: 4 each;
+  // one limited to 1.5 CPUs by its cgroup sets the ring's pace.
+  std::vector<WorkerSite> pair = {{"h:7001", "", 8, 8, 8, uint64_t{16} << 30, true},
+                                  {"h:7002", "", 8, 8, 8, uint64_t{16} << 30, true}};
+  Sites b = SitesOf(pair);
+  EXPECT_EQ(b.shape.hosts, 1);
+  EXPECT_DOUBLE_EQ(ModelCores(b), 4);
+  EXPECT_DOUBLE_EQ(b.memory_per_worker, double(uint64_t{8} << 30))
+      << "the machine's memory, halved";
+  pair[1].cpus = 1.5;
+  pair[1].memory_shared = false;
+  pair[1].memory_bytes = uint64_t{3} << 30;
+  b = SitesOf(pair);
+  EXPECT_DOUBLE_EQ(ModelCores(b), 1.5);
+  EXPECT_DOUBLE_EQ(b.memory_per_worker, double(uint64_t{3} << 30));
+  // Unknown CPUs: the threads.
+  EXPECT_DOUBLE_EQ(ModelCores(SitesOf({{"x:1", "", 3, 0, 0, 0, false}})), 3);
+}
+
+TEST(SitesOf, NoMachineIsOverbooked) {
+  // Random clusters: the model never gives the workers of a machine more
+  // cores together than it has, nor a worker more than its threads or CPUs,
+  // and some worker gets exactly what the model assumes.
+  std::mt19937 rng(5);
+  for (int i = 0; i < 2000; ++i) {
+    const int machines = 1 + rng() % 4, workers = 1 + rng() % 12;
+    std::vector<int> machine_cpus(machines);
+    for (int& c : machine_cpus) c = 1 + rng() % 16;
+    std::vector<WorkerSite> sites;
+    for (int w = 0; w < workers; ++w) {
+      const int m = rng() % machines;
+      WorkerSite s;
+      s.address = "m" + std::to_string(m) + "-" + std::to_string(rng() % 3) + ":" +
+                  std::to_string(7000 + w);
+      s.machine = "boot-" + std::to_string(m);
+      s.threads = 1 + rng() % 8;
+      s.cpus = rng() % 3 == 0 ? 0 : 0.25 * (1 + rng() % 64);
+      s.machine_cpus = machine_cpus[m];
+      sites.push_back(s);
+    }
+    const Sites got = SitesOf(sites);
+    const double cores = ModelCores(got);
+    ASSERT_GT(cores, 0);
+    std::vector<int> on(machines);
+    for (const auto& s : sites) ++on[s.machine[5] - '0'];
+    bool someone_exact = false;
+    for (const auto& s : sites) {
+      const int m = s.machine[5] - '0';
+      ASSERT_LE(cores * on[m], machine_cpus[m] + 1e-9);
+      ASSERT_LE(cores, s.threads);
+      if (s.cpus > 0) {
+        ASSERT_LE(cores, s.cpus);
+      }
+      const double own = std::min({double(s.threads), s.cpus > 0 ? s.cpus : 1e9,
+                                   double(machine_cpus[m]) / on[m]});
+      someone_exact = someone_exact || std::abs(own - cores) < 1e-12;
+    }
+    ASSERT_TRUE(someone_exact);
+  }
 }
 
 }  // namespace

@@ -77,6 +77,9 @@ sed -n 's/.* at 127.0.0.1:\([0-9]*\),.*/\1/p' "$dir/status.log" >"$dir/ports"
 # Each worker offers its host's memory (no --memory-mb, no cgroup limit
 # here unless the machine has one), shown with it.
 [[ $(grep -c " MB" "$dir/status.log") == 3 ]] || fail "status shows no worker memory: $(cat "$dir/status.log")"
+# And where it runs: the CPUs it may use, of this machine's.
+[[ $(grep -c "of its machine's $(getconf _NPROCESSORS_ONLN) CPUs" "$dir/status.log") == 3 ]] ||
+  fail "status shows no worker CPUs: $(cat "$dir/status.log")"
 [[ $( (cat "$dir/ports"; echo $rport; echo $dport) | sort -u | wc -l) == 5 ]] ||
   fail "daemons share ports: workers on $(tr '\n' ' ' <"$dir/ports"), root $rport, display $dport"
 
@@ -116,6 +119,9 @@ for rings in '"auto"' 3; do
   cmp -s "$dir/out/a.png" "$dir/ref.png" || fail "image with rings $rings differs"
 done
 grep -q "rings auto: .* ring(s) of 3 workers" "$dir/root.log" || fail "no rings auto line in the root's log"
+# The three workers share this machine (one boot id): its CPUs are divided.
+grep -q "3 worker(s) on 1 host(s) and 1 machine(s)" "$dir/root.log" ||
+  fail "the root did not see the workers share a machine: $(grep 'rings auto' "$dir/root.log")"
 sed 's/"name":"t",/"name":"t","rings":"many",/' "$dir/job.json" >"$dir/rings.json"
 "$T" submit "$dir/rings.json" --root 127.0.0.1:$rport >"$dir/rings.log" 2>&1 &&
   fail "a job with rings \"many\" was accepted"

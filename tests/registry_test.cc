@@ -3,6 +3,8 @@
 #include "registry.h"
 
 #include <chrono>
+#include <cmath>
+#include <string>
 #include <thread>
 
 #include "gtest/gtest.h"
@@ -51,6 +53,46 @@ TEST(RegistryTest, HeartbeatsKeepAWorkerAndSilenceDropsIt) {
   // worker that came back).
   EXPECT_TRUE(registry.Register(Request("a", "127.0.0.1:1")).ok());
   EXPECT_TRUE(registry.Alive("a"));
+}
+
+TEST(RegistryTest, WhereAWorkerRunsIsCheckedAndKept) {
+  Registry registry(std::chrono::milliseconds(5000));
+  // Hostile claims are refused by name, and register nothing.
+  struct Bad {
+    double cpus;
+    int machine_cpus;
+    std::string machine;
+    const char* says;
+  };
+  const Bad bad[] = {{-1, 2, "m", "CPU count"},
+                     {std::nan(""), 2, "m", "CPU count"},
+                     {1e300, 2, "m", "CPU count"},
+                     {1, -4, "m", "CPU count"},
+                     {1, 1 << 30, "m", "CPU count"},
+                     {1, 2, std::string(65, 'a'), "machine id"},
+                     {1, 2, "boot id", "machine id"},
+                     {1, 2, std::string("m\0x", 3), "machine id"}};
+  for (const Bad& b : bad) {
+    v1::RegisterRequest r = Request("w", "127.0.0.1:5");
+    r.set_cpus(b.cpus);
+    r.set_machine_cpus(b.machine_cpus);
+    r.set_machine(b.machine);
+    const absl::Status s = registry.Register(r);
+    EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << s;
+    EXPECT_NE(s.message().find(b.says), std::string::npos) << s;
+    EXPECT_EQ(registry.size(), 0);
+  }
+  v1::RegisterRequest r = Request("w", "127.0.0.1:5");
+  r.set_cpus(1.5);
+  r.set_machine_cpus(8);
+  r.set_machine("0b9e0c7a-6c1f-4a55-9d7e-2f1c3b5a7d90");
+  ASSERT_TRUE(registry.Register(r).ok());
+  v1::StatusReply status;
+  registry.Describe(&status);
+  ASSERT_EQ(status.workers_size(), 1);
+  EXPECT_EQ(status.workers(0).cpus(), 1.5);
+  EXPECT_EQ(status.workers(0).machine_cpus(), 8);
+  EXPECT_EQ(status.workers(0).machine(), r.machine());
 }
 
 TEST(RegistryTest, WorkersWaitsForAFirstWorkerAndHonoursCancel) {

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <map>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -201,6 +203,48 @@ RingChoice ChooseRings(const FrameCosts& costs, const VolumeSize& volume, Cluste
       "Considered: %s",
       best.rings, shape.workers, std::max(1, frames), memory_per_worker / (1 << 20), considered);
   return best;
+}
+
+Sites SitesOf(const std::vector<WorkerSite>& workers) {
+  auto host_of = [](const std::string& address) { return address.substr(0, address.rfind(':')); };
+  std::map<std::string, int> on_host, on_machine, machine_cpus;
+  std::vector<std::string> machine_of;
+  for (const WorkerSite& w : workers) {
+    ++on_host[host_of(w.address)];
+    const std::string& m =
+        machine_of.emplace_back(w.machine.empty() ? "host " + host_of(w.address) : w.machine);
+    ++on_machine[m];
+    machine_cpus[m] = std::max(machine_cpus[m], w.machine_cpus);
+  }
+  Sites out;
+  out.machines = static_cast<int>(on_machine.size());
+  out.memory_per_worker = std::numeric_limits<double>::infinity();
+  double cores = std::numeric_limits<double>::infinity();
+  int threads = 1 << 20;
+  for (size_t i = 0; i < workers.size(); ++i) {
+    const WorkerSite& w = workers[i];
+    const int sharing = on_machine[machine_of[i]];
+    double c = std::max(1, w.threads);
+    if (w.cpus > 0) c = std::min(c, w.cpus);
+    if (const int m = machine_cpus[machine_of[i]]; m > 0) c = std::min(c, double(m) / sharing);
+    cores = std::min(cores, c);
+    threads = std::min(threads, std::max(1, w.threads));
+    if (w.memory_bytes > 0) {
+      out.memory_per_worker = std::min(
+          out.memory_per_worker, double(w.memory_bytes) / (w.memory_shared ? sharing : 1));
+    }
+  }
+  ClusterShape& shape = out.shape;
+  shape.workers = static_cast<int>(workers.size());
+  shape.hosts = static_cast<int>(on_host.size());
+  shape.threads = threads;
+  // PredictFrame gives a worker cores_per_host / (workers a host): so that
+  // it gets `cores`.
+  const int per_host = (shape.workers + shape.hosts - 1) / shape.hosts;
+  shape.cores_per_host = cores * per_host;
+  out.why = absl::StrFormat("%d worker(s) on %d host(s) and %d machine(s), %.3g core(s) a worker",
+                            shape.workers, shape.hosts, out.machines, cores);
+  return out;
 }
 
 }  // namespace transtick

@@ -24,9 +24,9 @@ struct FrameCosts {
   double rays = 0;               // rays traced, all kinds
   double crossings_per_cut = 0;  // rays crossing one slab plane, both ways, whole image
   double bytes_per_ray = 106;    // on the wire: the record and its framing
-  double forward_cpu_us = 0.5;   // CPU to send and to receive one ray, both ends summed
+  double forward_cpu_us = 0.25;  // CPU to send and to receive one ray, both ends summed
   double imbalance = 1.1;        // a ring's slowest worker's tracing over its mean
-  double fixed_ms = 38;          // a frame's start, end and image at no latency
+  double fixed_ms = 34;          // a frame's start, end and image at no latency
   double rounds = 3;             // root-worker and worker-display round trips in series
   double deposit_bytes = 0;      // to the display while the frame runs (20 a deposit)
   double image_bytes = 0;        // the image on to the root, after the last deposit
@@ -108,6 +108,33 @@ struct RingChoice {
 // says so.
 RingChoice ChooseRings(const FrameCosts& costs, const VolumeSize& volume, ClusterShape shape,
                        int frames, double memory_per_worker, int loaded_rings = 0);
+
+// Where a registered worker runs, as it told the root (RegisterRequest).
+struct WorkerSite {
+  std::string address;     // host:port, as the ring dials it
+  std::string machine;     // its kernel's boot id; "" unknown
+  int threads = 1;         // tracer threads
+  double cpus = 0;         // CPUs it may run on; 0 unknown
+  int machine_cpus = 0;    // its machine's online CPUs; 0 unknown
+  uint64_t memory_bytes = 0;   // 0 unknown
+  bool memory_shared = false;  // memory_bytes is its machine's, shared
+};
+
+struct Sites {
+  ClusterShape shape;  // workers, hosts, cores and threads; rings and network left as made
+  double memory_per_worker = 0;  // the least any worker can fill; infinity when unknown
+  int machines = 0;
+  std::string why;  // the shape in words, for the log
+};
+
+// The cluster's shape for the model from its workers. A host is an address's
+// host part: a link of its own. A machine is a boot id (the address's host
+// when unknown): its CPUs and, when shared, its memory are divided among the
+// workers on it, in any container or network namespace. A worker gets the
+// least of its threads, its CPUs and its share of its machine's CPUs; the
+// model takes the least any worker gets (a ring waits for its slowest).
+// REQUIRES: !workers.empty().
+Sites SitesOf(const std::vector<WorkerSite>& workers);
 
 }  // namespace transtick
 

@@ -198,31 +198,13 @@ int JobRunner::RingsFor(FrameTask& task, const std::vector<std::shared_ptr<Worke
   if (chosen.members == members) return chosen.rings;
   const LoadedDataset& data = *task.data;
   const FrameCosts costs = CostsFor(task);
-  // Hosts by the workers' addresses; a worker offering its host's memory
-  // shares it with the others there.
-  std::vector<std::string> host_of;  // by worker
-  std::map<std::string, int> on_host, host_threads;
-  int threads = 1 << 20;
+  std::vector<WorkerSite> sites;
   for (const auto& w : workers) {
-    const std::string& host = host_of.emplace_back(w->address.substr(0, w->address.rfind(':')));
-    ++on_host[host];
-    host_threads[host] = std::max(host_threads[host], w->threads);
-    threads = std::min(threads, w->threads);
+    sites.push_back({w->address, w->machine, w->threads, w->cpus, w->machine_cpus,
+                     w->memory_bytes, w->memory_shared});
   }
-  double memory = std::numeric_limits<double>::infinity();
-  for (size_t i = 0; i < workers.size(); ++i) {
-    const WorkerEntry& w = *workers[i];
-    if (w.memory_bytes == 0) continue;
-    memory = std::min(memory, double(w.memory_bytes) / (w.memory_shared ? on_host[host_of[i]] : 1));
-  }
-  ClusterShape shape;
-  shape.workers = static_cast<int>(workers.size());
-  shape.hosts = static_cast<int>(on_host.size());
-  shape.threads = threads;
-  shape.cores_per_host = 1;
-  for (const auto& [host, t] : host_threads) {
-    shape.cores_per_host = std::max(shape.cores_per_host, double(t));
-  }
+  const Sites where = SitesOf(sites);
+  ClusterShape shape = where.shape;
   shape.network = options_.network;
   const VolumeSize volume{double(data.scene.MemoryBytes()), data.scene.dims()[1]};
   // The rings whose slabs of this dataset the workers hold now: keeping
@@ -237,9 +219,10 @@ int JobRunner::RingsFor(FrameTask& task, const std::vector<std::shared_ptr<Worke
     }
     loaded = std::max(loaded, it->second.ring + 1);
   }
-  const RingChoice choice = ChooseRings(costs, volume, shape, task.frames, memory, loaded);
-  spdlog::info("{}: rings auto: {} ({} costs)", task.who, choice.why,
-               task.data->costs_pixels > 0 ? "measured" : "assumed");
+  const RingChoice choice =
+      ChooseRings(costs, volume, shape, task.frames, where.memory_per_worker, loaded);
+  spdlog::info("{}: rings auto: {} ({} costs; {})", task.who, choice.why,
+               task.data->costs_pixels > 0 ? "measured" : "assumed", where.why);
   chosen = {members, choice.rings};
   return choice.rings;
 }

@@ -22,6 +22,16 @@ absl::Status Registry::Register(const v1::RegisterRequest& req) {
   if (req.threads() < 0 || req.threads() > 4096) {
     return absl::InvalidArgumentError("Register: absurd thread count");
   }
+  if (!(req.cpus() >= 0 && req.cpus() <= 65536) || req.machine_cpus() < 0 ||
+      req.machine_cpus() > 65536) {
+    return absl::InvalidArgumentError("Register: absurd CPU count");
+  }
+  if (req.machine().size() > 64 ||
+      !std::all_of(req.machine().begin(), req.machine().end(),
+                   [](char c) { return c > ' ' && c < 127; })) {
+    return absl::InvalidArgumentError(
+        "Register: the machine id is at most 64 printable characters");
+  }
   absl::MutexLock lock(&mu_);
   ExpireLocked();
   if (auto it = workers_.find(req.id()); it != workers_.end()) {
@@ -48,6 +58,9 @@ absl::Status Registry::Register(const v1::RegisterRequest& req) {
   w->threads = std::max(1, req.threads());
   w->memory_bytes = req.memory_bytes();
   w->memory_shared = req.memory_shared();
+  w->machine = req.machine();
+  w->cpus = req.cpus();
+  w->machine_cpus = req.machine_cpus();
   w->order = next_order_++;
   w->stub = v1::Worker::NewStub(MakeChannel(w->address, Role::kWorker));
   workers_[w->id] = w;
@@ -160,6 +173,9 @@ void Registry::Describe(v1::StatusReply* reply) {
     info->set_threads(w->threads);
     info->set_memory_bytes(w->memory_bytes);
     info->set_memory_shared(w->memory_shared);
+    info->set_machine(w->machine);
+    info->set_cpus(w->cpus);
+    info->set_machine_cpus(w->machine_cpus);
     auto held = held_.find(w->id);
     info->set_ring(held == held_.end() ? -1 : held->second.ring);
     if (held != held_.end()) {

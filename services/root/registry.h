@@ -26,6 +26,11 @@ struct WorkerEntry {
   int threads = 1;
   uint64_t memory_bytes = 0;  // 0: unknown
   bool memory_shared = false;  // memory_bytes is its host's, shared
+  // Where it runs (RegisterRequest): boot id ("" unknown), the CPUs it may
+  // use and its machine's (0 unknown).
+  std::string machine;
+  double cpus = 0;
+  int machine_cpus = 0;
   uint64_t order = 0;  // registration order: rings are formed in it
   std::unique_ptr<v1::Worker::Stub> stub;
 };

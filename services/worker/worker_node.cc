@@ -1,6 +1,7 @@
 #include "worker_node.h"
 
 #include <spdlog/spdlog.h>
+#include <sched.h>
 #include <unistd.h>
 
 #include <fstream>
@@ -43,6 +44,35 @@ uint64_t HostMemory() {
   return 0;
 }
 
+// The kernel's boot id: the same for every process of one machine, in any
+// container or network namespace; empty when unreadable.
+std::string MachineId() {
+  std::ifstream in("/proc/sys/kernel/random/boot_id");
+  std::string id;
+  if (!std::getline(in, id) || id.size() > 64) return "";
+  return id;
+}
+
+// The CPUs this process may run on: its affinity mask, capped by its
+// cgroup's CPU quota (cgroup v2 cpu.max "QUOTA PERIOD", a container's
+// --cpus). 0 when unknown.
+double ProcessCpus() {
+  double cpus = 0;
+  cpu_set_t set;
+  if (sched_getaffinity(0, sizeof(set), &set) == 0) cpus = CPU_COUNT(&set);
+  std::ifstream in("/sys/fs/cgroup/cpu.max");
+  std::string quota;
+  double period = 0;
+  if (in >> quota >> period && quota != "max" && period > 0) {
+    try {
+      const double q = std::stod(quota) / period;
+      if (q > 0 && (cpus == 0 || q < cpus)) cpus = q;
+    } catch (const std::exception&) {
+    }
+  }
+  return cpus;
+}
+
 }  // namespace
 
 absl::StatusOr<std::unique_ptr<WorkerNode>> WorkerNode::Start(const WorkerNodeOptions& options) {
@@ -63,6 +93,9 @@ absl::StatusOr<std::unique_ptr<WorkerNode>> WorkerNode::Start(const WorkerNodeOp
   } else {
     node->memory_ = {HostMemory(), true};
   }
+  node->machine_ = MachineId();
+  node->cpus_ = ProcessCpus();
+  node->machine_cpus_ = static_cast<int>(std::max(0L, sysconf(_SC_NPROCESSORS_ONLN)));
   WorkerOptions wo;
   wo.id = node->id_;
   wo.threads = node->threads_;
@@ -89,9 +122,10 @@ absl::StatusOr<std::unique_ptr<WorkerNode>> WorkerNode::Start(const WorkerNodeOp
   node->service_->set_address(node->address_);
   node->registrar_ = std::thread([n = node.get()] { n->RegisterLoop(); });
   spdlog::info(
-      "worker {} serving on {} ({} tracer threads, {:.0f} MB{}, metrics on {}), registering with {}",
-      node->id_, node->address_, node->threads_, node->memory_.bytes / 1048576.0,
-      node->memory_.shared ? " of the host's" : "",
+      "worker {} serving on {} ({} tracer threads on {:.4g} of the machine's {} CPUs, {:.0f} MB{}, "
+      "metrics on {}), registering with {}",
+      node->id_, node->address_, node->threads_, node->cpus_, node->machine_cpus_,
+      node->memory_.bytes / 1048576.0, node->memory_.shared ? " of the host's" : "",
       node->metrics_ ? std::to_string(node->metrics_->port()) : "no port", options.root);
   return node;
 }
@@ -115,6 +149,9 @@ void WorkerNode::RegisterLoop() {
     req.set_threads(threads_);
     req.set_memory_bytes(memory_.bytes);
     req.set_memory_shared(memory_.shared);
+    req.set_machine(machine_);
+    req.set_cpus(cpus_);
+    req.set_machine_cpus(machine_cpus_);
     v1::RegisterReply reply;
     grpc::Status s = stub->Register(&ctx, req, &reply);
     // ALREADY_EXISTS: the root knows this worker; the call renewed it.

@@ -59,6 +59,11 @@ class WorkerNode {
     uint64_t bytes = 0;
     bool shared = false;  // the host's, not this worker's own
   } memory_;
+  // Where it runs (RegisterRequest): the machine's boot id, the CPUs this
+  // process may use, the machine's online CPUs.
+  std::string machine_;
+  double cpus_ = 0;
+  int machine_cpus_ = 0;
   std::unique_ptr<WorkerService> service_;
   std::unique_ptr<Server> server_;
   std::unique_ptr<MetricsServer> metrics_;
