@@ -4,8 +4,12 @@
 // is missed, and every root reported is a root.
 #include "transtick/isosurface.h"
 
-#include <cmath>
 #include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <iterator>
+#include <limits>
 #include <optional>
 #include <random>
 #include <vector>
@@ -62,6 +66,38 @@ TEST(IsosurfaceTest, TheCubicIsTheTrilinearFieldAlongTheRay) {
                                        c.o[2] + t * c.d[2]};
       EXPECT_NEAR(g(t), Trilinear(c.corners, p) - c.iso, 1e-9) << i;
     }
+  }
+}
+
+TEST(IsosurfaceTest, TheVectorCubicIsBitForBitThePortableOne) {
+  // Nodes built for different processors must solve a cell alike: the
+  // cubic the walk uses (SSE2 where there is one) against the plain double
+  // form, over corners and rays of every scale, the odd values included.
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-1, 1);
+  const float odd[] = {0.0f, -0.0f, 1e-40f, -3e38f, 3e38f, std::numeric_limits<float>::infinity(),
+                       std::nanf("")};
+  // Any NaN is every other (it compares false either way; which one an
+  // operation returns depends on its operands' order, which the compiler
+  // may swap); every other value bit for bit.
+  auto bits = [](double v) { return std::isnan(v) ? uint64_t{1} : std::bit_cast<uint64_t>(v); };
+  for (int i = 0; i < 200000; ++i) {
+    CellCorners corners;
+    const double scale = std::pow(10.0, static_cast<int>(rng() % 12) - 3);
+    for (float& v : corners) {
+      v = rng() % 50 == 0 ? odd[rng() % std::size(odd)] : static_cast<float>(u(rng) * scale);
+    }
+    std::array<double, 3> o, d;
+    for (int a = 0; a < 3; ++a) {
+      o[a] = u(rng) * (rng() % 4 == 0 ? 1e6 : 1.5);
+      d[a] = rng() % 8 == 0 ? 0.0 : u(rng);
+    }
+    const double iso = u(rng) * scale;
+    const RayCubic v = CellCubic(corners, o, d, iso), p = PortableCellCubic(corners, o, d, iso);
+    ASSERT_EQ(bits(v.a), bits(p.a)) << i;
+    ASSERT_EQ(bits(v.b), bits(p.b)) << i;
+    ASSERT_EQ(bits(v.c), bits(p.c)) << i;
+    ASSERT_EQ(bits(v.d), bits(p.d)) << i;
   }
 }
 

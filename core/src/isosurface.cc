@@ -80,9 +80,10 @@ double RefineRoot(const RayCubic& g, double lo, double glo, double hi, double gh
 
 namespace {
 
-// CellCubic, inlined where the walk solves a cell.
-TRANSTICK_INLINE RayCubic Cubic(const CellCorners& c, const std::array<double, 3>& o,
-                                const std::array<double, 3>& d, double iso) {
+// The cubic, in plain double arithmetic: what every build computes, the
+// vector form below included.
+TRANSTICK_INLINE RayCubic PortableCubic(const CellCorners& c, const std::array<double, 3>& o,
+                                        const std::array<double, 3>& d, double iso) {
   // The interpolant along the ray, one axis at a time (Marmitt et al.):
   // along x each of the four edges (j, k) is linear in t, e = e0 + e1 t;
   // between the two edges of each z face it is quadratic, q = q0 + q1 t +
@@ -112,11 +113,57 @@ TRANSTICK_INLINE RayCubic Cubic(const CellCorners& c, const std::array<double, 3
   return g;
 }
 
+// CellCubic, inlined where the walk solves a cell.
+TRANSTICK_INLINE RayCubic Cubic(const CellCorners& c, const std::array<double, 3>& o,
+                                const std::array<double, 3>& d, double iso) {
+#if defined(__SSE2__)
+  // The same operations in the same order, the two faces k in the two
+  // lanes of a register: the same bits as PortableCubic, in about
+  // half the instructions. Edge (j, k) runs from corner 2j + 4k to the next.
+  const __m128 lo4 = _mm_loadu_ps(c.data()), hi4 = _mm_loadu_ps(c.data() + 4);
+  const __m128 j0 = _mm_unpacklo_ps(lo4, hi4);  // c0 c4 c1 c5: edges j = 0
+  const __m128 j1 = _mm_unpackhi_ps(lo4, hi4);  // c2 c6 c3 c7: edges j = 1
+  const __m128d o0 = _mm_set1_pd(o[0]), d0 = _mm_set1_pd(d[0]);
+  const __m128d o1 = _mm_set1_pd(o[1]), d1 = _mm_set1_pd(d[1]);
+  const __m128d a_lo = _mm_cvtps_pd(j0),
+                a_delta = _mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(j0, j0)), a_lo);
+  const __m128d b_lo = _mm_cvtps_pd(j1),
+                b_delta = _mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(j1, j1)), b_lo);
+  const __m128d a0 = _mm_add_pd(a_lo, _mm_mul_pd(a_delta, o0)), a1 = _mm_mul_pd(a_delta, d0);
+  const __m128d b0 = _mm_add_pd(b_lo, _mm_mul_pd(b_delta, o0)), b1 = _mm_mul_pd(b_delta, d0);
+  const __m128d u0 = _mm_sub_pd(b0, a0), u1 = _mm_sub_pd(b1, a1);
+  const __m128d q0 = _mm_add_pd(a0, _mm_mul_pd(u0, o1));  // q[k][0], lane k
+  const __m128d q1 = _mm_add_pd(a1, _mm_add_pd(_mm_mul_pd(u0, d1), _mm_mul_pd(u1, o1)));
+  const __m128d q2 = _mm_mul_pd(u1, d1);
+  const __m128d face0 = _mm_unpacklo_pd(q0, q1);                   // q00 q01
+  const __m128d w01 = _mm_sub_pd(_mm_unpackhi_pd(q0, q1), face0);  // w0 w1
+  const __m128d w2 = _mm_sub_pd(_mm_shuffle_pd(q2, q2, 1), q2);    // w2 in lane 0
+  const __m128d o2 = _mm_set1_pd(o[2]), d2 = _mm_set1_pd(d[2]);
+  // g.c and g.b: q + (w d2 + w' o2), lanes (c, b).
+  const __m128d cb =
+      _mm_add_pd(_mm_shuffle_pd(face0, q2, 1),
+                 _mm_add_pd(_mm_mul_pd(w01, d2), _mm_mul_pd(_mm_shuffle_pd(w01, w2, 1), o2)));
+  RayCubic g;
+  g.a = _mm_cvtsd_f64(w2) * d[2];
+  g.b = _mm_cvtsd_f64(_mm_unpackhi_pd(cb, cb));
+  g.c = _mm_cvtsd_f64(cb);
+  g.d = _mm_cvtsd_f64(face0) + _mm_cvtsd_f64(w01) * o[2] - iso;
+  return g;
+#else
+  return PortableCubic(c, o, d, iso);
+#endif
+}
+
 }  // namespace
 
 RayCubic CellCubic(const CellCorners& c, const std::array<double, 3>& o,
                    const std::array<double, 3>& d, double iso) {
   return Cubic(c, o, d, iso);
+}
+
+RayCubic PortableCellCubic(const CellCorners& c, const std::array<double, 3>& o,
+                           const std::array<double, 3>& d, double iso) {
+  return PortableCubic(c, o, d, iso);
 }
 
 double FieldAt(const Scene& scene, const Vec3& p) {
@@ -383,7 +430,19 @@ TRANSTICK_INLINE CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
     // far the ray's origin lies; and its Bernstein coefficients on
     // [0, span], whose hull holds the cubic there.
     std::array<double, 3> entry;
+#if defined(__SSE2__)
+    // x and y in the two lanes, the same operations as z's.
+    const __m128d corner = _mm_sub_pd(
+        _mm_cvtepi32_pd(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(c_.data()))),
+        _mm_set1_pd(0.5));
+    _mm_storeu_pd(entry.data(),
+                  _mm_sub_pd(_mm_add_pd(_mm_loadu_pd(origin_.data()),
+                                        _mm_mul_pd(_mm_loadu_pd(dir_.data()), _mm_set1_pd(t_in_))),
+                             corner));
+    entry[2] = origin_[2] + dir_[2] * t_in_ - (c_[2] - 0.5);
+#else
     for (int a = 0; a < 3; ++a) entry[a] = origin_[a] + dir_[a] * t_in_ - (c_[a] - 0.5);
+#endif
     cubic_ = Cubic(corners_, entry, dir_, 0);
     const double p1 = cubic_.c * span, p2 = cubic_.b * span * span,
                  p3 = cubic_.a * span * span * span;

@@ -41,6 +41,11 @@ using CellCorners = std::array<float, 8>;
 // coordinates (o need not lie in the cell).
 RayCubic CellCubic(const CellCorners& corners, const std::array<double, 3>& o,
                    const std::array<double, 3>& d, double iso);
+// The same in plain double arithmetic, without the vector instructions
+// CellCubic may use: bit for bit the same (the nodes of one cluster may be
+// built for different processors). For tests.
+RayCubic PortableCellCubic(const CellCorners& corners, const std::array<double, 3>& o,
+                           const std::array<double, 3>& d, double iso);
 
 // The trilinear field of `scene`'s scalars at index-space point p, in
 // double: samples at voxel centres, indices clamped at the faces (what
