@@ -42,6 +42,7 @@ struct Point {
   double frame_ms = 0;       // measured, median
   double tracer_cpu_ms = 0;  // per frame, summed over workers
   double rays = 0;           // per frame
+  double deposit_bytes = 0;  // per frame, packed, to the display
   double crossings = 0;      // rays over one slab plane of a ring, per frame, mean
   double imbalance = 0;
   double pixels = 0;
@@ -74,6 +75,10 @@ std::vector<Point> Read(const std::string& path) {
     p.tracer_cpu_ms = Number(s, "tracer_cpu_ms");
     const double frames = std::max(1.0, Number(s, "frames"));
     p.rays = Number(s, "rays_traced") / frames;
+    // Points of a sweep from before packed deposits have no bytes: those
+    // assumed.
+    p.deposit_bytes = Number(s, "deposit_bytes") / frames;
+    if (!(p.deposit_bytes > 0)) p.deposit_bytes = p.rays * kAssumedDepositBytes;
     p.imbalance = Number(s, "active_imbalance");
     p.pixels = Number(s, "pixels");
     const auto& links = s.fields().find("links");
@@ -110,10 +115,11 @@ double Median(std::vector<double> v) {
 
 // What the points share: a frame's work and rays, whatever the cluster.
 FrameCosts SharedCosts(const std::vector<Point>& points) {
-  std::vector<double> cpu, rays, crossings, imbalance;
+  std::vector<double> cpu, rays, deposit_bytes, crossings, imbalance;
   for (const Point& p : points) {
     cpu.push_back(p.tracer_cpu_ms);
     rays.push_back(p.rays);
+    deposit_bytes.push_back(p.deposit_bytes);
     // Per plane of one ring, for the whole image: a ring of R traces 1/R.
     if (p.crossings > 0) crossings.push_back(p.crossings * p.rings);
     if (p.workers > 1) imbalance.push_back(p.imbalance);
@@ -123,7 +129,7 @@ FrameCosts SharedCosts(const std::vector<Point>& points) {
   c.rays = Median(rays);
   c.crossings_per_cut = Median(crossings);
   c.imbalance = imbalance.empty() ? 1 : Median(imbalance);
-  c.deposit_bytes = c.rays * 20;
+  c.deposit_bytes = Median(deposit_bytes);
   c.image_bytes = points[0].pixels * 4;
   return c;
 }
@@ -134,7 +140,7 @@ FrameCosts CostsOf(const Point& p, const FrameCosts& shared) {
   FrameCosts c = shared;
   c.tracer_cpu_ms = p.tracer_cpu_ms;
   c.rays = p.rays;
-  c.deposit_bytes = p.rays * 20;
+  c.deposit_bytes = p.deposit_bytes;
   if (p.crossings > 0) c.crossings_per_cut = p.crossings * p.rings;
   c.imbalance = p.workers > 1 && p.imbalance > 0 ? p.imbalance : 1;
   return c;

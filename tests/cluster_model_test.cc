@@ -126,6 +126,11 @@ TEST(ClusterModel, CostsFromAFrame) {
   EXPECT_DOUBLE_EQ(c.bytes_per_ray, 104);
   // Within ring 1: 30 against a mean of 20.
   EXPECT_DOUBLE_EQ(c.imbalance, 1.5);
+  // Workers that did not say what their deposits took: assumed per ray.
+  EXPECT_DOUBLE_EQ(c.deposit_bytes, 4000 * kAssumedDepositBytes);
+  // Those that did: their packed bytes, summed.
+  for (int i = 0; i < 4; ++i) f[i].set_deposit_bytes(700 + i);
+  EXPECT_DOUBLE_EQ(FrameCostsFrom(f, FrameCosts{}).deposit_bytes, 2806);
   // A ring of one worker that takes twice as long as a ring of two: the
   // layout's doing, not the slabs'.
   std::vector<v1::WorkerFrameStats> uneven(3);

@@ -17,6 +17,7 @@
 #include "testing.h"
 #include "transtick/image_io.h"
 #include "transtick/orientation.h"
+#include "transtick/ray_codec.h"
 #include "transtick/render.h"
 #include "transtick/synthetic.h"
 #include "transtick/volume_io.h"
@@ -651,9 +652,18 @@ TEST_F(ClusterTest, StressEveryRayCrossesEverySlab) {
   for (int frame = 0; frame < 4; ++frame) {
     auto stats = SubmitAndWatch((*cluster)->root_address(), MakeJob({v}), WatchOptions{});
     ASSERT_TRUE(stats.ok()) << stats.status();
-    uint64_t sent = 0;
-    for (const auto& w : stats->front().workers()) sent += w.rays_sent();
+    uint64_t sent = 0, deposits = 0, deposit_bytes = 0;
+    for (const auto& w : stats->front().workers()) {
+      sent += w.rays_sent();
+      deposits += w.deposits();
+      deposit_bytes += w.deposit_bytes();
+    }
     EXPECT_GT(sent, 96u * 96u / 4);
+    // Every pixel's primary ends in a deposit; packed, they take less
+    // than their 20-byte records.
+    EXPECT_GE(deposits, 96u * 96u);
+    EXPECT_GT(deposit_bytes, 0u);
+    EXPECT_LT(deposit_bytes, deposits * kDepositRecordBytes);
     EXPECT_EQ(ReadImage(v.output())->rgb, want.rgb);
   }
 }

@@ -40,6 +40,23 @@ inline void PutVarint32(std::string* out, uint32_t v) {
   out->push_back(static_cast<char>(v));
 }
 
+inline void PutVarint64(std::string* out, uint64_t v) {
+  while (v >= 0x80) {
+    out->push_back(static_cast<char>((v & 0x7f) | 0x80));
+    v >>= 7;
+  }
+  out->push_back(static_cast<char>(v));
+}
+// Zigzag (protobuf's sint): small magnitudes of either sign, short varints.
+inline uint32_t ZigZag32(int32_t v) {
+  return (static_cast<uint32_t>(v) << 1) ^ (0u - (static_cast<uint32_t>(v) >> 31));
+}
+inline int32_t UnZigZag32(uint32_t v) { return static_cast<int32_t>((v >> 1) ^ (0u - (v & 1))); }
+inline uint64_t ZigZag64(int64_t v) {
+  return (static_cast<uint64_t>(v) << 1) ^ (0ull - (static_cast<uint64_t>(v) >> 63));
+}
+inline int64_t UnZigZag64(uint64_t v) { return static_cast<int64_t>((v >> 1) ^ (0ull - (v & 1))); }
+
 // Reads from a borrowed byte range; every Get returns false instead of
 // reading past the end. The viewed bytes must outlive the decoder.
 class Decoder {
@@ -72,6 +89,19 @@ class Decoder {
     for (int shift = 0; shift <= 28 && p_ < end_; shift += 7) {
       uint32_t byte = static_cast<uint8_t>(*p_++);
       if (shift == 28 && byte > 0x0f) return false;  // more than 32 bits
+      result |= (byte & 0x7f) << shift;
+      if ((byte & 0x80) == 0) {
+        *v = result;
+        return true;
+      }
+    }
+    return false;
+  }
+  bool GetVarint64(uint64_t* v) {
+    uint64_t result = 0;
+    for (int shift = 0; shift <= 63 && p_ < end_; shift += 7) {
+      const uint64_t byte = static_cast<uint8_t>(*p_++);
+      if (shift == 63 && byte > 0x01) return false;  // more than 64 bits
       result |= (byte & 0x7f) << shift;
       if ((byte & 0x80) == 0) {
         *v = result;

@@ -12,7 +12,7 @@ namespace {
 // round(c * 2^32), halves away from zero: what std::llround gives, without
 // the library call. Exact: a float times 2^32 has 24 significant bits, so
 // adding 0.5 is exact while |c| < 2^20, and truncation then rounds.
-inline int64_t ToFixed(float c) {
+inline int64_t Fixed(float c) {
   const double v = static_cast<double>(c) * Framebuffer::kScale;
   if (!(std::fabs(v) < 0x1p52)) {
     // Huge or NaN: the slow path, which saturates what no int64 holds.
@@ -52,13 +52,30 @@ void Framebuffer::Clear(int samples) {
 bool Framebuffer::Add(const Deposit& d) {
   TRANSTICK_DCHECK_LT(d.pixel, pixels_.size());
   Pixel& p = pixels_[d.pixel];
-  for (int c = 0; c < 3; ++c) p.sum[c] = WrappingAdd(p.sum[c], ToFixed(d.color[c]));
+  for (int c = 0; c < 3; ++c) p.sum[c] = WrappingAdd(p.sum[c], Fixed(d.color[c]));
   if (d.kind == RayKind::kPrimary) {
     if (p.primary_seen < 255) ++p.primary_seen;
     p.owed = WrappingAdd(p.owed, int32_t{d.spawned});
   } else {
     p.owed = WrappingAdd(p.owed, int32_t{-1});
   }
+  return Counted(p);
+}
+
+bool Framebuffer::Add(const PixelDeposits& d) {
+  TRANSTICK_DCHECK_LT(d.pixel, pixels_.size());
+  Pixel& p = pixels_[d.pixel];
+  for (int c = 0; c < 3; ++c) p.sum[c] = WrappingAdd(p.sum[c], d.sum[c]);
+  // As one at a time: the count saturates at 255, the debt wraps.
+  p.primary_seen =
+      static_cast<uint8_t>(std::min<uint32_t>(255, p.primary_seen + std::min<uint32_t>(d.primaries, 255)));
+  p.owed = WrappingAdd(p.owed, static_cast<int32_t>(d.spawned - d.shadows));
+  return Counted(p);
+}
+
+int64_t Framebuffer::ToFixed(float c) { return Fixed(c); }
+
+bool Framebuffer::Counted(Pixel& p) {
   // A pixel is counted once: deposits after its last one (which no
   // renderer sends) must not count it again, or complete_pixels() could
   // reach the image's size with pixels still missing.

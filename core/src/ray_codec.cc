@@ -6,6 +6,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "coding.h"
+#include "transtick/framebuffer.h"
 
 namespace transtick {
 namespace {
@@ -100,27 +101,86 @@ absl::StatusOr<std::vector<RayDescriptor>> DecodeRays(std::string_view bytes,
   return rays;
 }
 
-absl::StatusOr<std::vector<Deposit>> DecodeDeposits(std::string_view bytes, uint32_t pixel_limit) {
-  if (auto s = CheckSize(bytes, kDepositRecordBytes, "deposit"); !s.ok()) return s;
-  std::vector<Deposit> deposits(bytes.size() / kDepositRecordBytes);
-  Decoder in(bytes);
-  for (size_t i = 0; i < deposits.size(); ++i) {
-    Deposit& d = deposits[i];
-    uint8_t kind, pad;
-    bool ok = in.GetFixed32(&d.pixel) && in.GetByte(&kind) && in.GetByte(&pad) &&
-              in.GetFixed16(&d.spawned);
-    for (int c = 0; c < 3; ++c) ok = ok && GetF32(in, &d.color[c]);
-    if (!ok) return absl::InternalError("deposit batch: decoder ran short");
-    bool finite =
-        std::isfinite(d.color[0]) && std::isfinite(d.color[1]) && std::isfinite(d.color[2]);
-    if (kind > 1 || d.pixel >= pixel_limit || !finite || (kind == 1 && d.spawned != 0)) {
-      return absl::InvalidArgumentError(absl::StrCat("deposit batch: record ", i,
-                                                     " is invalid (kind ", int{kind}, ", pixel ",
-                                                     d.pixel, " of ", pixel_limit, ")"));
+size_t PackDeposits(std::string_view records, std::string* out) {
+  PixelDeposits run;
+  bool open = false;
+  uint32_t previous = 0;
+  size_t count = 0;
+  auto emit = [&] {
+    PutVarint32(out, ZigZag32(static_cast<int32_t>(run.pixel - previous)));
+    PutVarint32(out, run.primaries);
+    PutVarint32(out, run.spawned);
+    PutVarint32(out, run.shadows);
+    for (int64_t v : run.sum) PutVarint64(out, ZigZag64(v));
+    previous = run.pixel;
+    ++count;
+  };
+  for (size_t at = 0; at + kDepositRecordBytes <= records.size(); at += kDepositRecordBytes) {
+    Decoder in(records.substr(at, kDepositRecordBytes));
+    uint32_t pixel = 0, bits[3] = {0, 0, 0};
+    uint8_t kind = 0, pad = 0;
+    uint16_t spawned = 0;
+    in.GetFixed32(&pixel);
+    in.GetByte(&kind);
+    in.GetByte(&pad);
+    in.GetFixed16(&spawned);
+    for (uint32_t& b : bits) in.GetFixed32(&b);
+    if (open && pixel != run.pixel) {
+      emit();
+      open = false;
     }
-    d.kind = static_cast<RayKind>(kind);
+    if (!open) {
+      run = PixelDeposits{};
+      run.pixel = pixel;
+      open = true;
+    }
+    if (kind == static_cast<uint8_t>(RayKind::kPrimary)) {
+      ++run.primaries;
+      run.spawned += spawned;
+    } else {
+      ++run.shadows;
+    }
+    for (int c = 0; c < 3; ++c) {
+      run.sum[c] = static_cast<int64_t>(static_cast<uint64_t>(run.sum[c]) +
+                                        static_cast<uint64_t>(Framebuffer::ToFixed(
+                                            std::bit_cast<float>(bits[c]))));
+    }
   }
-  return deposits;
+  if (open) emit();
+  return count;
+}
+
+absl::StatusOr<std::vector<PixelDeposits>> DecodePackedDeposits(std::string_view bytes,
+                                                                 uint32_t pixel_limit) {
+  std::vector<PixelDeposits> out;
+  Decoder in(bytes);
+  uint32_t previous = 0;
+  while (in.remaining() > 0) {
+    PixelDeposits d;
+    uint32_t step;
+    uint64_t sum[3];
+    const bool whole = in.GetVarint32(&step) && in.GetVarint32(&d.primaries) &&
+                       in.GetVarint32(&d.spawned) && in.GetVarint32(&d.shadows) &&
+                       in.GetVarint64(&sum[0]) && in.GetVarint64(&sum[1]) &&
+                       in.GetVarint64(&sum[2]);
+    const size_t i = out.size();
+    if (!whole) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "deposit batch: pixel record ", i, " is cut short or has a varint too long"));
+    }
+    d.pixel = previous + static_cast<uint32_t>(UnZigZag32(step));
+    for (int c = 0; c < 3; ++c) d.sum[c] = UnZigZag64(sum[c]);
+    if (d.pixel >= pixel_limit || (d.primaries == 0 && d.shadows == 0) ||
+        (d.primaries == 0 && d.spawned != 0)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "deposit batch: pixel record ", i, " is invalid (pixel ", d.pixel, " of ", pixel_limit,
+          ", ", d.primaries, " primary and ", d.shadows, " shadow deposits, ", d.spawned,
+          " spawned)"));
+    }
+    previous = d.pixel;
+    out.push_back(d);
+  }
+  return out;
 }
 
 void AppendFloats(const float* values, size_t n, std::string* out) {

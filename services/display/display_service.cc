@@ -40,6 +40,8 @@ DisplayService::DisplayService(DisplayOptions options)
             "From BeginFrame to the deposit that completed the frame.",
             {0.005, 0.01, 0.02, 0.033, 0.05, 0.1, 0.2, 0.5, 1, 2, 5, 10, 30, 60, 300});
   m.Declare("transtick_display_deposits_total", T::kCounter, "Pixel deposits received.");
+  m.Declare("transtick_display_pixel_records_total", T::kCounter,
+            "Packed pixel records received (consecutive deposits of a pixel, merged).");
   m.Declare("transtick_display_deposit_bytes_total", T::kCounter,
             "Bytes of deposit batches received.");
   m.Declare("transtick_display_deposits_refused_total", T::kCounter,
@@ -243,15 +245,20 @@ grpc::Status DisplayService::AddDeposits(const v1::DepositBatch& batch, FrameSta
   f.last_activity = Clock::now();
   const uint32_t limit =
       static_cast<uint32_t>(f.fb->width()) * static_cast<uint32_t>(f.fb->height());
-  auto deposits = DecodeDeposits(batch.deposits(), limit);
-  if (!deposits.ok()) {
+  auto records = DecodePackedDeposits(batch.deposits(), limit);
+  if (!records.ok()) {
     metrics_->Add("transtick_display_deposits_refused_total", 1);
     return ToGrpc(
-        absl::InvalidArgumentError(absl::StrCat("display: ", deposits.status().message())));
+        absl::InvalidArgumentError(absl::StrCat("display: ", records.status().message())));
   }
-  for (const Deposit& d : *deposits) f.fb->Add(d);
-  f.deposits += deposits->size();
-  metrics_->Add("transtick_display_deposits_total", static_cast<double>(deposits->size()));
+  uint64_t deposits = 0;
+  for (const PixelDeposits& d : *records) {
+    f.fb->Add(d);
+    deposits += uint64_t{d.primaries} + d.shadows;
+  }
+  f.deposits += deposits;
+  metrics_->Add("transtick_display_deposits_total", static_cast<double>(deposits));
+  metrics_->Add("transtick_display_pixel_records_total", static_cast<double>(records->size()));
   metrics_->Add("transtick_display_deposit_bytes_total", static_cast<double>(batch.deposits().size()));
   *completed = f.fb->Complete();
   if (*completed) {

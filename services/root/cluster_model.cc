@@ -22,6 +22,7 @@ constexpr double kFrameBytes = 32.0 * (1 << 20);
 // As the root's --rings.
 constexpr int kMaxRings = 64;
 
+
 double TransferMs(double bytes, double gbits) { return bytes * 8 / (gbits * 1e6); }
 
 // The frame on `shape`, without the efficiency.
@@ -93,7 +94,7 @@ Prediction Predict(const FrameCosts& costs, const VolumeSize& volume, const Clus
 FrameCosts FrameCostsFrom(const std::vector<v1::WorkerFrameStats>& workers,
                           const FrameCosts& fallback) {
   FrameCosts c = fallback;
-  double cpu = 0, rays = 0, sent = 0, bytes = 0;
+  double cpu = 0, rays = 0, sent = 0, bytes = 0, deposit_bytes = 0;
   // Per ring: workers, slowest and summed active time. Rings of unequal
   // sizes finish apart by their layout, which the model sees itself; the
   // imbalance is the slabs' within a ring.
@@ -104,6 +105,7 @@ FrameCosts FrameCostsFrom(const std::vector<v1::WorkerFrameStats>& workers,
     rays += w.rays_traced();
     sent += w.rays_sent();
     bytes += w.bytes_sent();
+    deposit_bytes += w.deposit_bytes();
     const size_t ring = static_cast<size_t>(std::max(0, w.ring()));
     if (ring_size.size() <= ring) {
       ring_size.resize(ring + 1);
@@ -119,7 +121,7 @@ FrameCosts FrameCostsFrom(const std::vector<v1::WorkerFrameStats>& workers,
   if (cpu > 0) c.tracer_cpu_ms = cpu;
   if (rays > 0) {
     c.rays = rays;
-    c.deposit_bytes = rays * 20;  // a deposit a ray, at most
+    c.deposit_bytes = deposit_bytes > 0 ? deposit_bytes : rays * kAssumedDepositBytes;
   }
   // Rays crossing one plane of one ring, scaled to the whole image.
   if (planes > 0 && sent > 0) {
@@ -141,7 +143,7 @@ FrameCosts DefaultFrameCosts(double pixels) {
   c.tracer_cpu_ms = pixels * 1e-3;  // 1 us a pixel
   c.rays = pixels * 3;
   c.crossings_per_cut = pixels * 0.6;
-  c.deposit_bytes = pixels * 20;
+  c.deposit_bytes = c.rays * kAssumedDepositBytes;
   c.image_bytes = pixels * 4;
   return c;
 }

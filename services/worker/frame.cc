@@ -348,7 +348,14 @@ class Frame::DisplayStream : public grpc::ClientWriteReactor<v1::DepositBatch>,
     StartWrite(&out_);
     frame_->deposits_.Attach(
         [this](std::string batch) {
-          out_.set_deposits(std::move(batch));
+          // Packed per pixel for the wire (docs/formats.md, "Packed
+          // deposits"); the records' buffer goes back to the outbox.
+          std::string* packed = out_.mutable_deposits();
+          packed->clear();
+          PackDeposits(batch, packed);
+          frame_->deposits_sent_ += batch.size() / kDepositRecordBytes;
+          frame_->deposit_bytes_sent_ += packed->size();
+          records_ = std::move(batch);
           StartWrite(&out_);
         },
         [this] {
@@ -359,15 +366,14 @@ class Frame::DisplayStream : public grpc::ClientWriteReactor<v1::DepositBatch>,
     StartCall();
   }
 
-  void OnWriteDone(bool ok) override {
-    frame_->deposits_.WriteDone(ok, std::move(*out_.mutable_deposits()));
-  }
+  void OnWriteDone(bool ok) override { frame_->deposits_.WriteDone(ok, std::move(records_)); }
   void OnDone(const grpc::Status& s) override { Done(s, "deposit", frame_->spec_.display()); }
 
  private:
   const std::unique_ptr<v1::Display::Stub> stub_;
   v1::FrameAck ack_;
   v1::DepositBatch out_;
+  std::string records_;  // the batch being written, as the outbox made it
 };
 
 // The server side of the stream from the left neighbour: its rays are read
@@ -802,6 +808,8 @@ v1::WorkerFrameStats Frame::Finish(bool cancel) {
   stats.set_bytes_sent(left_->bytes_sent + right_->bytes_sent);
   stats.set_bytes_received(left_->bytes_received + right_->bytes_received);
   stats.set_buffer_high_water(inbox_.high_water());
+  stats.set_deposits(deposits_sent_);
+  stats.set_deposit_bytes(deposit_bytes_sent_);
   return stats;
 }
 

@@ -251,6 +251,8 @@ class Frame : public std::enable_shared_from_this<Frame> {
   Inbox inbox_;
   std::unique_ptr<Link> left_, right_;
   Outbox deposits_;
+  // Deposits packed for the display, and their bytes on the wire.
+  std::atomic<uint64_t> deposits_sent_{0}, deposit_bytes_sent_{0};
   std::atomic<int64_t> next_pixel_{0};
   std::atomic<bool> stop_{false};
   std::atomic<bool> started_{false};

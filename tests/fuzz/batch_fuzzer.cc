@@ -87,15 +87,19 @@ void Deposits(std::string_view bytes) {
   const int width = (static_cast<uint8_t>(bytes[0]) & 63) + 1;
   const int height = (static_cast<uint8_t>(bytes[1]) & 63) + 1;
   const uint32_t pixels = static_cast<uint32_t>(width * height);
-  auto deposits = DecodeDeposits(bytes.substr(2), pixels);
-  if (!deposits.ok()) {
-    TRANSTICK_CHECK(!deposits.status().message().empty());
+  auto records = DecodePackedDeposits(bytes.substr(2), pixels);
+  if (!records.ok()) {
+    TRANSTICK_CHECK(!records.status().message().empty());
     return;
   }
   ++tally.deposit_batches;
-  tally.deposits += deposits->size();
+  tally.deposits += records->size();
   Framebuffer fb(width, height);
-  for (const Deposit& d : *deposits) (void)fb.Add(d);
+  for (const PixelDeposits& d : *records) {
+    TRANSTICK_CHECK_LT(d.pixel, pixels);
+    TRANSTICK_CHECK(d.primaries > 0 || (d.shadows > 0 && d.spawned == 0));
+    (void)fb.Add(d);
+  }
   TRANSTICK_CHECK_LE(fb.complete_pixels(), uint64_t{pixels});
   const Image image = fb.Resolve();
   TRANSTICK_CHECK_EQ(image.rgb.size(), size_t{pixels} * 3);

@@ -6,7 +6,7 @@
 //   bit 0      0: the rest is a ray batch (104-byte records) that arrives at
 //                 a worker from a neighbour;
 //              1: the rest is two bytes, the image's width - 1 and height - 1
-//                 (each taken mod 64), then a deposit batch (20-byte records)
+//                 (each taken mod 64), then a deposit batch (packed pixel records)
 //                 that arrives at the display.
 //   rays only:
 //   bits 1-3   the configuration, 0 .. kBatchConfigs - 1;

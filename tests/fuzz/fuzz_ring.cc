@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "transtick/check.h"
+#include "transtick/framebuffer.h"
 #include "transtick/ray_codec.h"
 #include "transtick/traversal.h"
 
@@ -27,18 +28,28 @@ RayDescriptor OverWire(const RayDescriptor& ray, uint32_t pixel_limit) {
   return decoded->front();
 }
 
-// Through the wire form, as a deposit goes to the display.
+// Through the wire form, as a deposit goes to the display: queued as a
+// record, packed, decoded; the display adds what the record says, which
+// must be this deposit.
 Deposit DepositOverWire(const Deposit& deposit, uint32_t pixel_limit) {
-  std::string wire;
-  AppendDeposit(deposit, &wire);
-  auto decoded = DecodeDeposits(wire, pixel_limit);
+  std::string record, wire;
+  AppendDeposit(deposit, &record);
+  PackDeposits(record, &wire);
+  auto decoded = DecodePackedDeposits(wire, pixel_limit);
   if (!decoded.ok()) {
     std::fprintf(stderr, "fuzz_ring: deposit colour (%g, %g, %g)\n", deposit.color[0],
                  deposit.color[1], deposit.color[2]);
     Fail("the display refuses a deposit", decoded.status());
   }
   TRANSTICK_CHECK_EQ(decoded->size(), size_t{1});
-  return decoded->front();
+  const PixelDeposits& d = decoded->front();
+  const bool primary = deposit.kind == RayKind::kPrimary;
+  TRANSTICK_CHECK_EQ(d.pixel, deposit.pixel);
+  TRANSTICK_CHECK_EQ(d.primaries, primary ? 1u : 0u);
+  TRANSTICK_CHECK_EQ(d.shadows, primary ? 0u : 1u);
+  TRANSTICK_CHECK_EQ(d.spawned, uint32_t{deposit.spawned});
+  for (int c = 0; c < 3; ++c) TRANSTICK_CHECK_EQ(d.sum[c], Framebuffer::ToFixed(deposit.color[c]));
+  return deposit;
 }
 
 }  // namespace

@@ -160,7 +160,9 @@ bool WriteBatches(const fs::path& dir) {
     if (deposits.size() > 180) deposits.resize(180);
     std::string batch = {static_cast<char>(kDepositBatch), static_cast<char>(camera.width() - 1),
                          static_cast<char>(camera.height() - 1)};
-    for (const Deposit& d : deposits) AppendDeposit(d, &batch);
+    std::string records;
+    for (const Deposit& d : deposits) AppendDeposit(d, &records);
+    PackDeposits(records, &batch);
     ok &= Write(dir / (name + "-deposits"), batch);
   }
   return ok;

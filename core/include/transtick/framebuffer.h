@@ -47,6 +47,14 @@ class Framebuffer {
   // REQUIRES: deposit.pixel < width * height (decoders check pixels from
   // the network against the image before they get here).
   bool Add(const Deposit& deposit);
+  // Adds deposits of one pixel merged (PixelDeposits, ray.h): the same
+  // state as adding each of them. Returns true when they completed it.
+  // REQUIRES: deposits.pixel < width * height.
+  bool Add(const PixelDeposits& deposits);
+
+  // A colour in the sums' fixed point: round(c * kScale), halves away from
+  // zero, saturated beyond what an int64 holds, 0 for NaN.
+  static int64_t ToFixed(float c);
 
   uint64_t complete_pixels() const { return complete_.load(std::memory_order_relaxed); }
   bool Complete() const { return complete_pixels() == static_cast<uint64_t>(width_) * height_; }
@@ -73,6 +81,7 @@ class Framebuffer {
     uint8_t primary_seen;  // primary deposits, up to 255
     uint8_t counted;  // in complete_ already
   };
+  bool Counted(Pixel& p);  // completion, once per pixel
   std::vector<Pixel> pixels_;
   std::atomic<uint64_t> complete_{0};
 };

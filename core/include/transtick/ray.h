@@ -54,6 +54,18 @@ struct Deposit {
   std::array<float, 3> color = {0, 0, 0};
 };
 
+// Consecutive deposits of one pixel merged, as a worker packs them for the
+// display (docs/formats.md, "Packed deposits"): the counts, and the colours
+// summed in the framebuffer's fixed point (Framebuffer::ToFixed) modulo
+// 2^64, which adds in any order to the same bits.
+struct PixelDeposits {
+  uint32_t pixel = 0;
+  uint32_t primaries = 0;
+  uint32_t spawned = 0;  // by those primaries, summed
+  uint32_t shadows = 0;
+  std::array<int64_t, 3> sum = {0, 0, 0};
+};
+
 }  // namespace transtick
 
 #endif  // TRANSTICK_RAY_H_
