@@ -106,7 +106,7 @@ def point(pdir, w, r, lat, gbit, frames, identical, rnd, rows_path):
         "rays_traced": traced, "rays_forwarded": forwarded,
         "hops_per_ray": forwarded / distinct if distinct else 0.0,
         "rays_sent": count("rays_sent"), "ray_bytes_sent": count("bytes_sent"),
-        "deposit_bytes": count("deposit_bytes"),
+        "deposits": count("deposits"), "deposit_bytes": count("deposit_bytes"),
         "assembly_ms_mean": assembly_ms, "tail_ms": statistics.mean(frame_ms) - assembly_ms,
         # For the cluster model (bench/cluster_model): a frame's summed
         # tracer CPU, slowest over mean active time, and pixels.

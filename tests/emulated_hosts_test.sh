@@ -73,6 +73,11 @@ check(link["wire_bytes"] >= p["ray_bytes_sent"],
 check(link["wire_bytes"] <= p["ray_bytes_sent"] * 1.05 + 8192 * p["frames"],
       f"wire bytes {link['wire_bytes']} for batch bytes {p['ray_bytes_sent']}")
 check(0 < p["hops_per_ray"] <= 1, f"hops per ray {p['hops_per_ray']}")
+# Every pixel of every frame ends in a deposit at least; packed for the
+# display, they take fewer bytes than their 20-byte records.
+check(p["deposits"] >= p["pixels"] * p["frames"], f"{p['deposits']} deposits")
+check(0 < p["deposit_bytes"] < 20 * p["deposits"],
+      f"{p['deposit_bytes']} packed bytes for {p['deposits']} deposits")
 # Each frame waits for: PrepareFrame and RunFrame (a round trip each), the
 # deposits (one way), the display's "complete" (one way) and EndFrame (a
 # round trip): 8 one-way latencies at least.
