@@ -93,6 +93,62 @@ TEST_F(HostileRaysTest, DamagedRecordsAreDroppedCountedAndAbortTheFrame) {
 // A dvr frame whose step would take unbounded samples is refused when it is
 // prepared, with the reason; a step at the bound is accepted, and so is any
 // step for surfaces, which take no samples.
+// A deposit stream to the display that carries `batch` after the first
+// message naming the frame; returns how the display ended it.
+grpc::Status SendDeposits(v1::Display::Stub& display, uint64_t frame, const v1::DepositBatch& batch) {
+  grpc::ClientContext ctx;
+  ctx.set_deadline(Deadline(10));
+  v1::FrameAck ack;
+  auto writer = display.Deposits(&ctx, &ack);
+  v1::DepositBatch first;
+  first.set_frame_id(frame);
+  writer->Write(first);
+  writer->Write(batch);
+  writer->WritesDone();
+  return writer->Finish();
+}
+
+TEST_F(HostileRaysTest, HostileDepositsAreRefusedByNameAndTheDisplayGoesOn) {
+  constexpr uint64_t kFrame = 21;
+  ASSERT_TRUE(Begin(kFrame, 4, 2).ok());
+  v1::DepositBatch batch;
+  batch.set_frame_id(kFrame);
+  // 20-byte records, as a worker older than the display sent them.
+  std::string records;
+  AppendDeposit(Deposit{0, RayKind::kPrimary, 0, {1, 1, 1}}, &records);
+  batch.set_records(records);
+  grpc::Status s = SendDeposits(*display_stub_, kFrame, batch);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(s.error_message().find("from a worker older than this display"), std::string::npos)
+      << s.error_message();
+  // Packed, but for a pixel beyond the 4x2 image, and cut short.
+  batch.clear_records();
+  std::string packed;
+  AppendDeposit(Deposit{8, RayKind::kPrimary, 0, {1, 1, 1}}, &records);
+  PackDeposits(records.substr(20), &packed);
+  batch.set_packed(packed);
+  s = SendDeposits(*display_stub_, kFrame, batch);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(s.error_message().find("pixel 8 of 8"), std::string::npos) << s.error_message();
+  batch.set_packed(packed.substr(0, 3));
+  s = SendDeposits(*display_stub_, kFrame, batch);
+  EXPECT_NE(s.error_message().find("cut short"), std::string::npos) << s.error_message();
+  // The frame is still the display's to complete: every pixel, packed.
+  records.clear();
+  for (uint32_t p = 0; p < 8; ++p) {
+    AppendDeposit(Deposit{p, RayKind::kPrimary, 1, {0.5f, 0, 0}}, &records);
+    AppendDeposit(Deposit{p, RayKind::kShadow, 0, {0.25f, 0, 0}}, &records);
+  }
+  packed.clear();
+  EXPECT_EQ(PackDeposits(records, &packed), 8u);
+  batch.set_packed(packed);
+  EXPECT_TRUE(SendDeposits(*display_stub_, kFrame, batch).ok());
+  int rows = 0;
+  s = Await(kFrame, &rows);
+  EXPECT_TRUE(s.ok()) << s.error_message();
+  EXPECT_EQ(rows, 2);
+}
+
 TEST_F(HostileRaysTest, AbsurdStepIsRefusedAtPrepare) {
   auto prepare = [&](uint64_t id, const std::string& key, double step) {
     v1::FrameSpec spec = Spec(id);

@@ -211,7 +211,13 @@ grpc::Status DisplayService::Accumulate(const v1::DepositBatch& batch,
   if (!frame || batch.frame_id() != frame->id) frame = Find(batch.frame_id());
   // A worker's first message names its frame and carries nothing: it may
   // come after the other workers have completed the frame.
-  if (batch.deposits().empty()) {
+  if (!batch.records().empty()) {
+    metrics_->Add("transtick_display_deposits_refused_total", 1);
+    return ToGrpc(absl::InvalidArgumentError(
+        "display: deposits as 20-byte records, from a worker older than this display; it takes "
+        "them packed (docs/formats.md, \"Packed deposits\"): run workers of this version"));
+  }
+  if (batch.packed().empty()) {
     if (frame) {
       absl::MutexLock lock(&frame->mu);
       frame->last_activity = Clock::now();
@@ -245,7 +251,7 @@ grpc::Status DisplayService::AddDeposits(const v1::DepositBatch& batch, FrameSta
   f.last_activity = Clock::now();
   const uint32_t limit =
       static_cast<uint32_t>(f.fb->width()) * static_cast<uint32_t>(f.fb->height());
-  auto records = DecodePackedDeposits(batch.deposits(), limit);
+  auto records = DecodePackedDeposits(batch.packed(), limit);
   if (!records.ok()) {
     metrics_->Add("transtick_display_deposits_refused_total", 1);
     return ToGrpc(
@@ -259,7 +265,7 @@ grpc::Status DisplayService::AddDeposits(const v1::DepositBatch& batch, FrameSta
   f.deposits += deposits;
   metrics_->Add("transtick_display_deposits_total", static_cast<double>(deposits));
   metrics_->Add("transtick_display_pixel_records_total", static_cast<double>(records->size()));
-  metrics_->Add("transtick_display_deposit_bytes_total", static_cast<double>(batch.deposits().size()));
+  metrics_->Add("transtick_display_deposit_bytes_total", static_cast<double>(batch.packed().size()));
   *completed = f.fb->Complete();
   if (*completed) {
     metrics_->Add("transtick_display_frames_total", 1, {{"result", "complete"}});

@@ -350,7 +350,7 @@ class Frame::DisplayStream : public grpc::ClientWriteReactor<v1::DepositBatch>,
         [this](std::string batch) {
           // Packed per pixel for the wire (docs/formats.md, "Packed
           // deposits"); the records' buffer goes back to the outbox.
-          std::string* packed = out_.mutable_deposits();
+          std::string* packed = out_.mutable_packed();
           packed->clear();
           PackDeposits(batch, packed);
           frame_->deposits_sent_ += batch.size() / kDepositRecordBytes;
