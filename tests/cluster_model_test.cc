@@ -226,8 +226,8 @@ TEST(SitesOf, KnownAnswers) {
   EXPECT_EQ(a.machines, 1);
   EXPECT_DOUBLE_EQ(ModelCores(a), 0.5);
   EXPECT_EQ(a.memory_per_worker, std::numeric_limits<double>::infinity());
-  EXPECT_NE(a.why.find("4 worker(s) on 4 host(s) and 1 machine(s), 0.5 core(s)"),
-            std::string::npos) << a.why;
+  EXPECT_NE(a.why.find("4 worker(s) on 4 host(s) and 1 machine(s), 0.5 core(s)"), std::string::npos)
+      << a.why;
   // Without boot ids, each address is its own machine: a core each.
   for (auto& w : ns) w.machine.clear();
   EXPECT_DOUBLE_EQ(ModelCores(SitesOf(ns)), 1);
@@ -284,8 +284,8 @@ TEST(SitesOf, NoMachineIsOverbooked) {
       if (s.cpus > 0) {
         ASSERT_LE(cores, s.cpus);
       }
-      const double own = std::min({double(s.threads), s.cpus > 0 ? s.cpus : 1e9,
-                                   double(machine_cpus[m]) / on[m]});
+      const double own =
+          std::min({double(s.threads), s.cpus > 0 ? s.cpus : 1e9, double(machine_cpus[m]) / on[m]});
       someone_exact = someone_exact || std::abs(own - cores) < 1e-12;
     }
     ASSERT_TRUE(someone_exact);

@@ -95,7 +95,8 @@ TEST_F(HostileRaysTest, DamagedRecordsAreDroppedCountedAndAbortTheFrame) {
 // step for surfaces, which take no samples.
 // A deposit stream to the display that carries `batch` after the first
 // message naming the frame; returns how the display ended it.
-grpc::Status SendDeposits(v1::Display::Stub& display, uint64_t frame, const v1::DepositBatch& batch) {
+grpc::Status SendDeposits(v1::Display::Stub& display, uint64_t frame,
+                          const v1::DepositBatch& batch) {
   grpc::ClientContext ctx;
   ctx.set_deadline(Deadline(10));
   v1::FrameAck ack;

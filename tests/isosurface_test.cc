@@ -75,8 +75,8 @@ TEST(IsosurfaceTest, TheVectorCubicIsBitForBitThePortableOne) {
   // form, over corners and rays of every scale, the odd values included.
   std::mt19937_64 rng(11);
   std::uniform_real_distribution<double> u(-1, 1);
-  const float odd[] = {0.0f, -0.0f, 1e-40f, -3e38f, 3e38f, std::numeric_limits<float>::infinity(),
-                       std::nanf("")};
+  const float odd[] = {
+      0.0f, -0.0f, 1e-40f, -3e38f, 3e38f, std::numeric_limits<float>::infinity(), std::nanf("")};
   // Any NaN is every other (it compares false either way; which one an
   // operation returns depends on its operands' order, which the compiler
   // may swap); every other value bit for bit.

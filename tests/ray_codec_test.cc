@@ -144,8 +144,8 @@ TEST(RayCodecTest, PackedDepositsAddUpToTheDepositsBitForBit) {
   // and pixels as adding every deposit, in far fewer bytes.
   std::mt19937 rng(3);
   std::uniform_real_distribution<float> u(0, 1);
-  const float odd[] = {0.0f, -0.0f, 1e-30f, -2.5f, 3e38f, -3e38f, std::nanf(""),
-                       std::numeric_limits<float>::infinity()};
+  const float odd[] = {0.0f,  -0.0f,  1e-30f,        -2.5f,
+                       3e38f, -3e38f, std::nanf(""), std::numeric_limits<float>::infinity()};
   size_t records_bytes = 0, packed_bytes = 0;
   for (int frame = 0; frame < 300; ++frame) {
     const int width = 1 + rng() % 40, height = 1 + rng() % 40, samples = 1 + rng() % 3;
@@ -197,11 +197,10 @@ TEST(RayCodecTest, PackedDepositsKnownBytes) {
   // Pixel 7 (step +7: zigzag 14), 1 primary, 1 spawned, 1 shadow, red
   // 0.625 * 2^32 (zigzag 0x140000000: 5 bytes), green 2^30, blue 2^32;
   // then pixel 5 (step -2: zigzag 3), 1 primary, nothing else.
-  const std::string expected = std::string("\x0e\x01\x01\x01", 4) +
-                               std::string("\x80\x80\x80\x80\x14", 5) +
-                               std::string("\x80\x80\x80\x80\x08", 5) +
-                               std::string("\x80\x80\x80\x80\x20", 5) +
-                               std::string("\x03\x01\x00\x00\x00\x00\x00", 7);
+  const std::string expected =
+      std::string("\x0e\x01\x01\x01", 4) + std::string("\x80\x80\x80\x80\x14", 5) +
+      std::string("\x80\x80\x80\x80\x08", 5) + std::string("\x80\x80\x80\x80\x20", 5) +
+      std::string("\x03\x01\x00\x00\x00\x00\x00", 7);
   EXPECT_EQ(wire, expected);
   auto d = DecodePackedDeposits(wire, 8);
   ASSERT_TRUE(d.ok()) << d.status();
@@ -231,12 +230,13 @@ TEST(RayCodecTest, PackedDepositsRefuseBadRecordsByName) {
   EXPECT_NE(message(std::string("\x02\x00\x01\x01\x00\x00\x00", 7), 8).find("invalid"),
             std::string::npos);
   EXPECT_NE(message(std::string("\x02\x01\x00\x00", 4) + std::string(10, '\xff') + "\x01" +
-                        std::string("\x00\x00", 2), 8)
+                        std::string("\x00\x00", 2),
+                    8)
                 .find("too long"),
             std::string::npos);
-  EXPECT_NE(message(std::string("\x02\xff\xff\xff\xff\x1f\x00\x00\x00\x00\x00", 11), 8)
-                .find("too long"),
-            std::string::npos);
+  EXPECT_NE(
+      message(std::string("\x02\xff\xff\xff\xff\x1f\x00\x00\x00\x00\x00", 11), 8).find("too long"),
+      std::string::npos);
   EXPECT_NE(message(std::string("\x01\x01\x00\x00\x00\x00\x00", 7), 8).find("pixel 4294967295"),
             std::string::npos);
   EXPECT_EQ(message("", 8), "ok");

@@ -64,14 +64,10 @@ TEST(RegistryTest, WhereAWorkerRunsIsCheckedAndKept) {
     std::string machine;
     const char* says;
   };
-  const Bad bad[] = {{-1, 2, "m", "CPU count"},
-                     {std::nan(""), 2, "m", "CPU count"},
-                     {1e300, 2, "m", "CPU count"},
-                     {1, -4, "m", "CPU count"},
-                     {1, 1 << 30, "m", "CPU count"},
-                     {1, 2, std::string(65, 'a'), "machine id"},
-                     {1, 2, "boot id", "machine id"},
-                     {1, 2, std::string("m\0x", 3), "machine id"}};
+  const Bad bad[] = {{-1, 2, "m", "CPU count"},       {std::nan(""), 2, "m", "CPU count"},
+                     {1e300, 2, "m", "CPU count"},    {1, -4, "m", "CPU count"},
+                     {1, 1 << 30, "m", "CPU count"},  {1, 2, std::string(65, 'a'), "machine id"},
+                     {1, 2, "boot id", "machine id"}, {1, 2, std::string("m\0x", 3), "machine id"}};
   for (const Bad& b : bad) {
     v1::RegisterRequest r = Request("w", "127.0.0.1:5");
     r.set_cpus(b.cpus);

@@ -67,8 +67,8 @@ bool Framebuffer::Add(const PixelDeposits& d) {
   Pixel& p = pixels_[d.pixel];
   for (int c = 0; c < 3; ++c) p.sum[c] = WrappingAdd(p.sum[c], d.sum[c]);
   // As one at a time: the count saturates at 255, the debt wraps.
-  p.primary_seen =
-      static_cast<uint8_t>(std::min<uint32_t>(255, p.primary_seen + std::min<uint32_t>(d.primaries, 255)));
+  p.primary_seen = static_cast<uint8_t>(
+      std::min<uint32_t>(255, p.primary_seen + std::min<uint32_t>(d.primaries, 255)));
   p.owed = WrappingAdd(p.owed, static_cast<int32_t>(d.spawned - d.shadows));
   return Counted(p);
 }

@@ -432,9 +432,9 @@ TRANSTICK_INLINE CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
     std::array<double, 3> entry;
 #if defined(__SSE2__)
     // x and y in the two lanes, the same operations as z's.
-    const __m128d corner = _mm_sub_pd(
-        _mm_cvtepi32_pd(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(c_.data()))),
-        _mm_set1_pd(0.5));
+    const __m128d corner =
+        _mm_sub_pd(_mm_cvtepi32_pd(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(c_.data()))),
+                   _mm_set1_pd(0.5));
     _mm_storeu_pd(entry.data(),
                   _mm_sub_pd(_mm_add_pd(_mm_loadu_pd(origin_.data()),
                                         _mm_mul_pd(_mm_loadu_pd(dir_.data()), _mm_set1_pd(t_in_))),

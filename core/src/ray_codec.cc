@@ -141,9 +141,9 @@ size_t PackDeposits(std::string_view records, std::string* out) {
       ++run.shadows;
     }
     for (int c = 0; c < 3; ++c) {
-      run.sum[c] = static_cast<int64_t>(static_cast<uint64_t>(run.sum[c]) +
-                                        static_cast<uint64_t>(Framebuffer::ToFixed(
-                                            std::bit_cast<float>(bits[c]))));
+      run.sum[c] = static_cast<int64_t>(
+          static_cast<uint64_t>(run.sum[c]) +
+          static_cast<uint64_t>(Framebuffer::ToFixed(std::bit_cast<float>(bits[c]))));
     }
   }
   if (open) emit();
@@ -151,7 +151,7 @@ size_t PackDeposits(std::string_view records, std::string* out) {
 }
 
 absl::StatusOr<std::vector<PixelDeposits>> DecodePackedDeposits(std::string_view bytes,
-                                                                 uint32_t pixel_limit) {
+                                                                uint32_t pixel_limit) {
   std::vector<PixelDeposits> out;
   Decoder in(bytes);
   uint32_t previous = 0;
@@ -165,17 +165,17 @@ absl::StatusOr<std::vector<PixelDeposits>> DecodePackedDeposits(std::string_view
                        in.GetVarint64(&sum[2]);
     const size_t i = out.size();
     if (!whole) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "deposit batch: pixel record ", i, " is cut short or has a varint too long"));
+      return absl::InvalidArgumentError(absl::StrCat("deposit batch: pixel record ", i,
+                                                     " is cut short or has a varint too long"));
     }
     d.pixel = previous + static_cast<uint32_t>(UnZigZag32(step));
     for (int c = 0; c < 3; ++c) d.sum[c] = UnZigZag64(sum[c]);
     if (d.pixel >= pixel_limit || (d.primaries == 0 && d.shadows == 0) ||
         (d.primaries == 0 && d.spawned != 0)) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "deposit batch: pixel record ", i, " is invalid (pixel ", d.pixel, " of ", pixel_limit,
-          ", ", d.primaries, " primary and ", d.shadows, " shadow deposits, ", d.spawned,
-          " spawned)"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("deposit batch: pixel record ", i, " is invalid (pixel ", d.pixel, " of ",
+                       pixel_limit, ", ", d.primaries, " primary and ", d.shadows,
+                       " shadow deposits, ", d.spawned, " spawned)"));
     }
     previous = d.pixel;
     out.push_back(d);

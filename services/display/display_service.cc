@@ -265,7 +265,8 @@ grpc::Status DisplayService::AddDeposits(const v1::DepositBatch& batch, FrameSta
   f.deposits += deposits;
   metrics_->Add("transtick_display_deposits_total", static_cast<double>(deposits));
   metrics_->Add("transtick_display_pixel_records_total", static_cast<double>(records->size()));
-  metrics_->Add("transtick_display_deposit_bytes_total", static_cast<double>(batch.packed().size()));
+  metrics_->Add("transtick_display_deposit_bytes_total",
+                static_cast<double>(batch.packed().size()));
   *completed = f.fb->Complete();
   if (*completed) {
     metrics_->Add("transtick_display_frames_total", 1, {{"result", "complete"}});

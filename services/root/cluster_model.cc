@@ -22,7 +22,6 @@ constexpr double kFrameBytes = 32.0 * (1 << 20);
 // As the root's --rings.
 constexpr int kMaxRings = 64;
 
-
 double TransferMs(double bytes, double gbits) { return bytes * 8 / (gbits * 1e6); }
 
 // The frame on `shape`, without the efficiency.
@@ -232,8 +231,8 @@ Sites SitesOf(const std::vector<WorkerSite>& workers) {
     cores = std::min(cores, c);
     threads = std::min(threads, std::max(1, w.threads));
     if (w.memory_bytes > 0) {
-      out.memory_per_worker = std::min(
-          out.memory_per_worker, double(w.memory_bytes) / (w.memory_shared ? sharing : 1));
+      out.memory_per_worker =
+          std::min(out.memory_per_worker, double(w.memory_bytes) / (w.memory_shared ? sharing : 1));
     }
   }
   ClusterShape& shape = out.shape;

@@ -26,9 +26,8 @@ absl::Status Registry::Register(const v1::RegisterRequest& req) {
       req.machine_cpus() > 65536) {
     return absl::InvalidArgumentError("Register: absurd CPU count");
   }
-  if (req.machine().size() > 64 ||
-      !std::all_of(req.machine().begin(), req.machine().end(),
-                   [](char c) { return c > ' ' && c < 127; })) {
+  if (req.machine().size() > 64 || !std::all_of(req.machine().begin(), req.machine().end(),
+                                                [](char c) { return c > ' ' && c < 127; })) {
     return absl::InvalidArgumentError(
         "Register: the machine id is at most 64 printable characters");
   }

@@ -1,7 +1,7 @@
 #include "worker_node.h"
 
-#include <spdlog/spdlog.h>
 #include <sched.h>
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <fstream>
