@@ -40,12 +40,14 @@ inline void PutVarint32(std::string* out, uint32_t v) {
   out->push_back(static_cast<char>(v));
 }
 
-inline void PutVarint64(std::string* out, uint64_t v) {
+// Writes v as a varint at dst (at most 10 bytes); returns the end.
+inline char* EncodeVarint64(char* dst, uint64_t v) {
   while (v >= 0x80) {
-    out->push_back(static_cast<char>((v & 0x7f) | 0x80));
+    *dst++ = static_cast<char>((v & 0x7f) | 0x80);
     v >>= 7;
   }
-  out->push_back(static_cast<char>(v));
+  *dst++ = static_cast<char>(v);
+  return dst;
 }
 // Zigzag (protobuf's sint): small magnitudes of either sign, short varints.
 inline uint32_t ZigZag32(int32_t v) {

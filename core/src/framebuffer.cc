@@ -9,20 +9,6 @@
 namespace transtick {
 namespace {
 
-// round(c * 2^32), halves away from zero: what std::llround gives, without
-// the library call. Exact: a float times 2^32 has 24 significant bits, so
-// adding 0.5 is exact while |c| < 2^20, and truncation then rounds.
-inline int64_t Fixed(float c) {
-  const double v = static_cast<double>(c) * Framebuffer::kScale;
-  if (!(std::fabs(v) < 0x1p52)) {
-    // Huge or NaN: the slow path, which saturates what no int64 holds.
-    if (std::isnan(v)) return 0;
-    if (!(std::fabs(v) < 0x1p63)) return v < 0 ? INT64_MIN : INT64_MAX;
-    return std::llround(v);
-  }
-  return static_cast<int64_t>(v < 0 ? v - 0.5 : v + 0.5);
-}
-
 // Sums wrap modulo 2^64 (and counts modulo 2^32) instead of overflowing,
 // which is undefined: deposits no renderer makes (a hostile peer's huge
 // colours, a pixel's primary sent again and again) can otherwise reach it.
@@ -52,7 +38,7 @@ void Framebuffer::Clear(int samples) {
 bool Framebuffer::Add(const Deposit& d) {
   TRANSTICK_DCHECK_LT(d.pixel, pixels_.size());
   Pixel& p = pixels_[d.pixel];
-  for (int c = 0; c < 3; ++c) p.sum[c] = WrappingAdd(p.sum[c], Fixed(d.color[c]));
+  for (int c = 0; c < 3; ++c) p.sum[c] = WrappingAdd(p.sum[c], ToFixed(d.color[c]));
   if (d.kind == RayKind::kPrimary) {
     if (p.primary_seen < 255) ++p.primary_seen;
     p.owed = WrappingAdd(p.owed, int32_t{d.spawned});
@@ -72,8 +58,6 @@ bool Framebuffer::Add(const PixelDeposits& d) {
   p.owed = WrappingAdd(p.owed, static_cast<int32_t>(d.spawned - d.shadows));
   return Counted(p);
 }
-
-int64_t Framebuffer::ToFixed(float c) { return Fixed(c); }
 
 bool Framebuffer::Counted(Pixel& p) {
   // A pixel is counted once: deposits after its last one (which no

@@ -107,24 +107,30 @@ size_t PackDeposits(std::string_view records, std::string* out) {
   uint32_t previous = 0;
   size_t count = 0;
   auto emit = [&] {
-    PutVarint32(out, ZigZag32(static_cast<int32_t>(run.pixel - previous)));
-    PutVarint32(out, run.primaries);
-    PutVarint32(out, run.spawned);
-    PutVarint32(out, run.shadows);
-    for (int64_t v : run.sum) PutVarint64(out, ZigZag64(v));
+    // One record on the stack, appended at once: 4 varints of 32 bits and
+    // 3 of 64 take at most 50 bytes.
+    char b[4 * 5 + 3 * 10];
+    char* p = EncodeVarint64(b, ZigZag32(static_cast<int32_t>(run.pixel - previous)));
+    p = EncodeVarint64(p, run.primaries);
+    p = EncodeVarint64(p, run.spawned);
+    p = EncodeVarint64(p, run.shadows);
+    for (int64_t v : run.sum) p = EncodeVarint64(p, ZigZag64(v));
+    out->append(b, p - b);
     previous = run.pixel;
     ++count;
   };
+  // The record's little-endian fields (docs/formats.md, "Deposit").
+  auto u32 = [](const char* p) {
+    return uint32_t{static_cast<uint8_t>(p[0])} | uint32_t{static_cast<uint8_t>(p[1])} << 8 |
+           uint32_t{static_cast<uint8_t>(p[2])} << 16 | uint32_t{static_cast<uint8_t>(p[3])} << 24;
+  };
   for (size_t at = 0; at + kDepositRecordBytes <= records.size(); at += kDepositRecordBytes) {
-    Decoder in(records.substr(at, kDepositRecordBytes));
-    uint32_t pixel = 0, bits[3] = {0, 0, 0};
-    uint8_t kind = 0, pad = 0;
-    uint16_t spawned = 0;
-    in.GetFixed32(&pixel);
-    in.GetByte(&kind);
-    in.GetByte(&pad);
-    in.GetFixed16(&spawned);
-    for (uint32_t& b : bits) in.GetFixed32(&b);
+    const char* r = records.data() + at;
+    const uint32_t pixel = u32(r);
+    const uint8_t kind = static_cast<uint8_t>(r[4]);
+    const uint16_t spawned =
+        static_cast<uint16_t>(static_cast<uint8_t>(r[6]) | static_cast<uint8_t>(r[7]) << 8);
+    const uint32_t bits[3] = {u32(r + 8), u32(r + 12), u32(r + 16)};
     if (open && pixel != run.pixel) {
       emit();
       open = false;

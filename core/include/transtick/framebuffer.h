@@ -6,6 +6,7 @@
 
 #include <array>
 #include <atomic>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -53,8 +54,20 @@ class Framebuffer {
   bool Add(const PixelDeposits& deposits);
 
   // A colour in the sums' fixed point: round(c * kScale), halves away from
-  // zero, saturated beyond what an int64 holds, 0 for NaN.
-  static int64_t ToFixed(float c);
+  // zero, saturated beyond what an int64 holds, 0 for NaN. What
+  // std::llround gives, without the library call: a float times 2^32 has 24
+  // significant bits, so adding 0.5 is exact while |c| < 2^20, and
+  // truncation then rounds.
+  static int64_t ToFixed(float c) {
+    const double v = static_cast<double>(c) * kScale;
+    if (!(std::fabs(v) < 0x1p52)) {
+      // Huge or NaN: the slow path, which saturates what no int64 holds.
+      if (std::isnan(v)) return 0;
+      if (!(std::fabs(v) < 0x1p63)) return v < 0 ? INT64_MIN : INT64_MAX;
+      return std::llround(v);
+    }
+    return static_cast<int64_t>(v < 0 ? v - 0.5 : v + 0.5);
+  }
 
   uint64_t complete_pixels() const { return complete_.load(std::memory_order_relaxed); }
   bool Complete() const { return complete_pixels() == static_cast<uint64_t>(width_) * height_; }
