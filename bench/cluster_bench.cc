@@ -10,6 +10,8 @@
 //                         [--workers 2,4,8]
 //   cluster_bench weights [--volume FILE] [--materials FILE] [--size WxH]
 //                         [--workers 2,4] [--repeat N]
+//   cluster_bench deposits [--volume FILE] [--materials FILE] [--size WxH]
+//                          [--azimuth DEG] [--workers 1,2,4] [--repeat N]
 //
 // scaling: the in-process render on all cores, then an embedded cluster
 //   (root, display and N workers, real gRPC on 127.0.0.1) for each N. Each
@@ -47,6 +49,17 @@
 //   cells of the field read, shaded points, rays taken. Prints the fitted
 //   cost of each in ns, the fit's error per slab, and the error of the
 //   weights in use.
+// deposits: what a frame's deposits cost on their way to the display. For
+//   N equal slabs, every ray of a frame is traced in this process as the
+//   ring routes it, each slab's deposits recorded as its worker queues them
+//   and cut into batches of a worker's size (FrameOptions::deposit_batch).
+//   Then, `repeat` times, each batch is packed as a worker packs it
+//   (PackDeposits) and added to a framebuffer as the display adds it
+//   (AddPackedDeposits). Prints the deposits, pixel records and bytes, and
+//   ns per deposit of packing and of the display's ingest (the least and
+//   the median over the repeats). The framebuffer must complete every
+//   pixel and equal, bit for bit, one that took the deposits one at a
+//   time, else the exit status is 1.
 //
 // Defaults: cthead.nrrd in $TRANSTICK_DATA_DIR (else ../shared/data),
 // examples/cthead_materials.json, 400x400, azimuth 45, shadows on, 5 repeats.
@@ -73,14 +86,15 @@
 #include "cluster.grpc.pb.h"
 #include "convert.h"
 #include "daemon.h"
+#include "frame.h"
 #include "local_cluster.h"
 #include "transtick/camera.h"
 #include "transtick/image_io.h"
 #include "transtick/ray_codec.h"
-#include "transtick/ring_layout.h"
-#include "transtick/tracer.h"
 #include "transtick/render.h"
+#include "transtick/ring_layout.h"
 #include "transtick/scene.h"
+#include "transtick/tracer.h"
 #include "transtick/volume_io.h"
 #include "worker_service.h"
 
@@ -96,7 +110,8 @@ namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
 constexpr char kUsage[] =
-    "usage: cluster_bench scaling|forward|tables|hops|weights [--volume FILE] [--materials FILE]\n"
+    "usage: cluster_bench scaling|forward|tables|hops|weights|deposits [--volume FILE]\n"
+    "                     [--materials FILE]"
     "                     [--size WxH] [--azimuth DEG] [--repeat N] [--workers 1,2,4]\n"
     "                     [--rays N] [--grid N] [--threads N] [--balance MODE]\n";
 
@@ -129,7 +144,7 @@ std::string Parse(int argc, char** argv, Options* o) {
   o->mode = argv[1];
   if (o->mode == "--help" || o->mode == "-h") return "help";
   if (o->mode != "scaling" && o->mode != "forward" && o->mode != "tables" && o->mode != "hops" &&
-      o->mode != "weights") {
+      o->mode != "weights" && o->mode != "deposits") {
     return "unknown mode '" + o->mode + "'";
   }
   for (int i = 2; i < argc; ++i) {
@@ -819,6 +834,127 @@ int Weights(const Options& o) {
   return 0;
 }
 
+// ---------------------------------------------------------------- deposits
+
+int Deposits(const Options& o) {
+  auto setup = Prepare(o);
+  if (!setup.ok()) return Fail(setup.status());
+  const size_t batch_records = FrameOptions{}.deposit_batch;
+  std::printf(
+      "volume %s, %dx%d, azimuth %g, shadows on, equal slabs, batches of %zu deposits; %d "
+      "repeats\n",
+      o.volume.c_str(), o.width, o.height, o.azimuth, batch_records, o.repeat);
+  std::printf("%-6s %9s %9s %10s %9s %14s %14s %16s %16s\n", "slabs", "deposits", "records",
+              "bytes", "batches", "pack ns/dep", "(median)", "ingest ns/dep", "(median)");
+  bool ok = true;
+  const absl::Status status = ForEachEqualRing(
+      o, *setup, {o.azimuth}, [&](double, const Camera& camera, const EqualRing& ring) {
+        // Each slab's deposit records in the order its tracer makes them.
+        const int n = static_cast<int>(ring.tracers.size());
+        std::vector<std::string> records(n);
+        std::vector<std::vector<RayDescriptor>> queues(n);
+        for (int i = 0; i < n; ++i) {
+          for (int py = 0; py < camera.height(); ++py) {
+            for (int px = 0; px < camera.width(); ++px) {
+              RayDescriptor ray;
+              const auto role = ring.layout.Primary(i, px, py, 0, 1, ring.tracers[i], &ray);
+              if (role == RingLayout::PrimaryRole::kTrace) queues[i].push_back(ray);
+              if (role == RingLayout::PrimaryRole::kMiss) {
+                AppendDeposit(
+                    ring.tracers[i].MissDeposit(static_cast<uint32_t>(py) * camera.width() + px),
+                    &records[i]);
+              }
+            }
+          }
+        }
+        for (bool busy = true; busy;) {
+          busy = false;
+          for (int i = 0; i < n; ++i) {
+            std::vector<RayDescriptor> work = std::move(queues[i]);
+            queues[i].clear();
+            busy = busy || !work.empty();
+            Deposit deposit;
+            TraceCounters counters;
+            while (!work.empty()) {
+              RayDescriptor ray = work.back();
+              work.pop_back();
+              if (ring.tracers[i].Trace(ray, work, deposit, counters) ==
+                  Tracer::Outcome::kFinished) {
+                AppendDeposit(deposit, &records[i]);
+              } else {
+                const RingLayout::Hop hop = ring.layout.Route(i, ray.cell);
+                if (hop != RingLayout::Hop::kFinished)
+                  queues[RingLayout::Neighbour(i, hop)].push_back(ray);
+              }
+            }
+          }
+        }
+        std::vector<std::string_view> batches;
+        Framebuffer one_by_one(camera.width(), camera.height());
+        uint64_t deposits = 0;
+        for (const std::string& r : records) {
+          const size_t step = batch_records * kDepositRecordBytes;
+          for (size_t at = 0; at < r.size(); at += step) {
+            batches.push_back(std::string_view(r).substr(at, step));
+          }
+          for (size_t at = 0; at < r.size(); at += kDepositRecordBytes, ++deposits) {
+            // The record's fields back (docs/formats.md, "Deposit").
+            Deposit d;
+            std::memcpy(&d.pixel, r.data() + at, 4);
+            d.kind = static_cast<RayKind>(r[at + 4]);
+            std::memcpy(&d.spawned, r.data() + at + 6, 2);
+            std::memcpy(d.color.data(), r.data() + at + 8, 12);
+            one_by_one.Add(d);
+          }
+        }
+        // Packing and ingest, alternated `repeat` times.
+        std::vector<std::string> packed(batches.size());
+        Framebuffer fb(camera.width(), camera.height());
+        std::vector<double> pack_ms, ingest_ms;
+        uint64_t pixel_records = 0, bytes = 0;
+        for (int rep = 0; rep < o.repeat; ++rep) {
+          auto t0 = Clock::now();
+          pixel_records = 0;
+          for (size_t b = 0; b < batches.size(); ++b) {
+            packed[b].clear();
+            pixel_records += PackDeposits(batches[b], &packed[b]);
+          }
+          pack_ms.push_back(MsSince(t0));
+          fb.Clear();
+          t0 = Clock::now();
+          bytes = 0;
+          for (const std::string& p : packed) {
+            auto added = AddPackedDeposits(p, fb);
+            if (!added.ok()) {
+              std::fprintf(stderr, "cluster_bench: %s\n", added.status().ToString().c_str());
+              ok = false;
+              return;
+            }
+            bytes += p.size();
+          }
+          ingest_ms.push_back(MsSince(t0));
+        }
+        if (!fb.Complete() || fb.Resolve().rgb != one_by_one.Resolve().rgb) {
+          std::fprintf(stderr, "cluster_bench: %d slabs: the packed deposits give another image\n",
+                       n);
+          ok = false;
+        }
+        const double per = 1e6 / static_cast<double>(std::max<uint64_t>(1, deposits));
+        std::printf("%-6d %9llu %9llu %10llu %9zu %14.2f %14.2f %16.2f %16.2f\n", n,
+                    static_cast<unsigned long long>(deposits),
+                    static_cast<unsigned long long>(pixel_records),
+                    static_cast<unsigned long long>(bytes), batches.size(),
+                    *std::min_element(pack_ms.begin(), pack_ms.end()) * per, Median(pack_ms) * per,
+                    *std::min_element(ingest_ms.begin(), ingest_ms.end()) * per,
+                    Median(ingest_ms) * per);
+      });
+  if (!status.ok()) return Fail(status);
+  std::printf("\n%s\n",
+              ok ? "OK: every framebuffer complete and equal to the deposits added one by one"
+                 : "FAIL: see stderr");
+  return ok ? 0 : 1;
+}
+
 int Tables(const Options& o) {
   auto setup = Prepare(o);
   if (!setup.ok()) return Fail(setup.status());
@@ -933,6 +1069,7 @@ int main(int argc, char** argv) {
   if (options.mode == "forward") return transtick::Forward(options);
   if (options.mode == "hops") return transtick::Hops(options);
   if (options.mode == "weights") return transtick::Weights(options);
+  if (options.mode == "deposits") return transtick::Deposits(options);
   if (options.mode == "scaling") return transtick::Scaling(options);
   return transtick::Tables(options);
 }

@@ -188,6 +188,187 @@ TEST(RayCodecTest, PackedDepositsAddUpToTheDepositsBitForBit) {
   EXPECT_LT(packed_bytes, records_bytes * 6 / 10) << packed_bytes << " of " << records_bytes;
 }
 
+// Packed deposits as docs/formats.md reads them, a byte at a time: the
+// reference the display's decoder must agree with on any bytes.
+absl::StatusOr<std::vector<PixelDeposits>> ReferenceDecode(std::string_view bytes, uint32_t limit) {
+  std::vector<PixelDeposits> out;
+  size_t at = 0;
+  // A varint of at most `bits` bits; false when cut short or longer.
+  auto varint = [&](int bits, uint64_t* v) {
+    *v = 0;
+    for (int shift = 0; at < bytes.size(); shift += 7) {
+      const uint64_t b = static_cast<uint8_t>(bytes[at++]);
+      if (shift >= bits || (shift + 7 > bits && (b & 0x7f) >> (bits - shift) != 0)) return false;
+      *v |= (b & 0x7f) << shift;
+      if (b < 0x80) return true;
+    }
+    return false;
+  };
+  uint32_t previous = 0;
+  while (at < bytes.size()) {
+    uint64_t f[7];
+    bool whole = true;
+    for (int k = 0; k < 7 && whole; ++k) whole = varint(k < 4 ? 32 : 64, &f[k]);
+    if (!whole) {
+      return absl::InvalidArgumentError(absl::StrCat("deposit batch: pixel record ", out.size(),
+                                                     " is cut short or has a varint too long"));
+    }
+    PixelDeposits d;
+    const uint32_t z = static_cast<uint32_t>(f[0]);
+    d.pixel = previous + static_cast<uint32_t>((z >> 1) ^ (0u - (z & 1)));
+    d.primaries = static_cast<uint32_t>(f[1]);
+    d.spawned = static_cast<uint32_t>(f[2]);
+    d.shadows = static_cast<uint32_t>(f[3]);
+    for (int c = 0; c < 3; ++c) {
+      d.sum[c] = static_cast<int64_t>((f[4 + c] >> 1) ^ (0ull - (f[4 + c] & 1)));
+    }
+    if (d.pixel >= limit || (d.primaries == 0 && d.shadows == 0) ||
+        (d.primaries == 0 && d.spawned != 0)) {
+      return absl::InvalidArgumentError(absl::StrCat("deposit batch: pixel record ", out.size(),
+                                                     " is invalid (pixel ", d.pixel, " of ", limit,
+                                                     ", ", d.primaries, " primary and ", d.shadows,
+                                                     " shadow deposits, ", d.spawned, " spawned)"));
+    }
+    previous = d.pixel;
+    out.push_back(d);
+  }
+  return out;
+}
+
+// A varint of v in `extra` more bytes than it needs (zero groups with the
+// continuation bit: still a valid varint when it stays within its width).
+void PutVarintPadded(uint64_t v, int extra, std::string* out) {
+  do {
+    const bool more = (v >> 7) != 0 || extra > 0;
+    out->push_back(static_cast<char>((v & 0x7f) | (more ? 0x80 : 0)));
+    v >>= 7;
+  } while (v != 0);
+  for (int k = 0; k < extra; ++k) out->push_back(static_cast<char>(k + 1 < extra ? 0x80 : 0));
+}
+
+TEST(RayCodecTest, PackedDepositsDecodeAsTheFormatReadsOnAnyBytes) {
+  // The display's decoder reads most records without bounds checks, eight
+  // bytes at a time. On 30,000 batches of records whose fields take every
+  // length (padded varints, 32-bit fields of 5 bytes, sums of 10, some too
+  // long), cut anywhere and with bytes changed, it must give what the
+  // format's byte-at-a-time reading gives: the same records, or the same
+  // error naming the same record.
+  std::mt19937_64 rng(11);
+  const uint32_t limit = 1000;
+  int ok = 0, failed = 0;
+  for (int batch = 0; batch < 30000; ++batch) {
+    std::string bytes;
+    const int records = static_cast<int>(rng() % 40);
+    uint32_t previous = 0;
+    for (int r = 0; r < records; ++r) {
+      const uint32_t pixel = static_cast<uint32_t>(rng() % (limit + 2));
+      const int32_t step = static_cast<int32_t>(pixel - previous);
+      previous = pixel;
+      uint64_t f[7] = {
+          (static_cast<uint32_t>(step) << 1) ^ (0u - (static_cast<uint32_t>(step) >> 31)),
+          1 + rng() % 3,
+          rng() % 4,
+          rng() % 4,
+          0,
+          0,
+          0};
+      for (int c = 4; c < 7; ++c) {
+        switch (rng() % 4) {
+          case 0:
+            f[c] = 0;
+            break;
+          case 1:
+            f[c] = rng() % (uint64_t{1} << 34);
+            break;
+          case 2:
+            f[c] = rng() >> (rng() % 64);
+            break;
+          default:
+            f[c] = rng();
+            break;
+        }
+      }
+      if (rng() % 50 == 0) f[rng() % 4] = rng() >> 32;  // a 32-bit field of 5 bytes
+      for (int k = 0; k < 7; ++k) {
+        // Mostly minimal; sometimes padded, within the width or past it.
+        const int extra = rng() % 10 == 0 ? static_cast<int>(rng() % 6) : 0;
+        PutVarintPadded(f[k], extra, &bytes);
+      }
+    }
+    for (int k = rng() % 3 == 0 ? static_cast<int>(rng() % 4) : 0; k > 0 && !bytes.empty(); --k) {
+      bytes[rng() % bytes.size()] = static_cast<char>(rng());
+    }
+    if (rng() % 4 == 0) bytes.resize(rng() % (bytes.size() + 1));
+    const auto want = ReferenceDecode(bytes, limit);
+    const auto got = DecodePackedDeposits(bytes, limit);
+    ASSERT_EQ(got.ok(), want.ok()) << batch << ": " << got.status() << " / " << want.status();
+    if (!want.ok()) {
+      ASSERT_EQ(got.status().message(), want.status().message()) << batch;
+      ++failed;
+      continue;
+    }
+    ++ok;
+    ASSERT_EQ(got->size(), want->size()) << batch;
+    for (size_t i = 0; i < want->size(); ++i) {
+      const PixelDeposits &a = (*got)[i], &b = (*want)[i];
+      ASSERT_TRUE(a.pixel == b.pixel && a.primaries == b.primaries && a.spawned == b.spawned &&
+                  a.shadows == b.shadows && a.sum == b.sum)
+          << batch << " record " << i;
+    }
+  }
+  // Both outcomes were tried many times.
+  EXPECT_GT(ok, 3000);
+  EXPECT_GT(failed, 3000);
+}
+
+TEST(RayCodecTest, AddPackedDepositsAddsAWholeBatchOrNothing) {
+  // A batch added by AddPackedDeposits gives the framebuffer (sums,
+  // completions) of its records added one at a time; a batch with a bad
+  // record anywhere leaves the framebuffer as it was.
+  std::mt19937 rng(12);
+  for (int round = 0; round < 200; ++round) {
+    const int width = 1 + rng() % 30, height = 1 + rng() % 30;
+    const uint32_t pixels = static_cast<uint32_t>(width * height);
+    Framebuffer one(width, height), batched(width, height);
+    uint64_t completed_one = 0;
+    for (int b = 0; b < 4; ++b) {
+      std::string records, wire;
+      for (uint32_t p = 0; p < pixels; ++p) {
+        if (rng() % 2) continue;
+        AppendDeposit(Deposit{p, RayKind::kPrimary, 0, {0.25f * (rng() % 5), 0.5f, 1.0f}},
+                      &records);
+      }
+      PackDeposits(records, &wire);
+      if (rng() % 3 == 0 && !wire.empty()) {
+        // A bad record at the end: a pixel past the image.
+        PutVarintPadded(uint64_t{pixels} * 4, 0, &wire);
+        wire += std::string("\x01\x00\x00\x00\x00\x00", 6);
+        const Image before = batched.Resolve();
+        const uint64_t complete = batched.complete_pixels();
+        auto added = AddPackedDeposits(wire, batched);
+        ASSERT_FALSE(added.ok());
+        EXPECT_NE(added.status().message().find("invalid"), std::string::npos);
+        ASSERT_EQ(batched.complete_pixels(), complete);
+        ASSERT_EQ(batched.Resolve().rgb, before.rgb);
+        continue;
+      }
+      auto decoded = DecodePackedDeposits(wire, pixels);
+      ASSERT_TRUE(decoded.ok());
+      uint64_t deposits = 0;
+      for (const PixelDeposits& d : *decoded) {
+        completed_one += one.Add(d);
+        deposits += d.primaries + d.shadows;
+      }
+      auto added = AddPackedDeposits(wire, batched);
+      ASSERT_TRUE(added.ok()) << added.status();
+      EXPECT_EQ(added->records, decoded->size());
+      EXPECT_EQ(added->deposits, deposits);
+    }
+    EXPECT_EQ(one.complete_pixels(), completed_one);
+    ExpectSameFramebuffers(one, batched);
+  }
+}
+
 TEST(RayCodecTest, PackedDepositsKnownBytes) {
   std::string records, wire;
   AppendDeposit(Deposit{7, RayKind::kPrimary, 1, {0.5f, 0.25f, 1}}, &records);

@@ -48,27 +48,41 @@ bool Framebuffer::Add(const Deposit& d) {
   return Counted(p);
 }
 
-bool Framebuffer::Add(const PixelDeposits& d) {
-  TRANSTICK_DCHECK_LT(d.pixel, pixels_.size());
-  Pixel& p = pixels_[d.pixel];
+inline void Framebuffer::Merge(Pixel& p, const PixelDeposits& d) {
   for (int c = 0; c < 3; ++c) p.sum[c] = WrappingAdd(p.sum[c], d.sum[c]);
   // As one at a time: the count saturates at 255, the debt wraps.
   p.primary_seen = static_cast<uint8_t>(
       std::min<uint32_t>(255, p.primary_seen + std::min<uint32_t>(d.primaries, 255)));
   p.owed = WrappingAdd(p.owed, static_cast<int32_t>(d.spawned - d.shadows));
+}
+
+bool Framebuffer::Add(const PixelDeposits& d) {
+  TRANSTICK_DCHECK_LT(d.pixel, pixels_.size());
+  Pixel& p = pixels_[d.pixel];
+  Merge(p, d);
   return Counted(p);
+}
+
+uint64_t Framebuffer::Add(std::span<const PixelDeposits> batch) {
+  // One atomic addition for the batch, not one per pixel completed.
+  uint64_t completed = 0;
+  for (const PixelDeposits& d : batch) {
+    TRANSTICK_DCHECK_LT(d.pixel, pixels_.size());
+    Pixel& p = pixels_[d.pixel];
+    Merge(p, d);
+    completed += Completes(p);
+  }
+  if (completed > 0) complete_.fetch_add(completed, std::memory_order_relaxed);
+  return completed;
 }
 
 bool Framebuffer::Counted(Pixel& p) {
   // A pixel is counted once: deposits after its last one (which no
   // renderer sends) must not count it again, or complete_pixels() could
   // reach the image's size with pixels still missing.
-  if (p.primary_seen == samples_ && p.owed == 0 && !p.counted) {
-    p.counted = 1;
-    complete_.fetch_add(1, std::memory_order_relaxed);
-    return true;
-  }
-  return false;
+  if (!Completes(p)) return false;
+  complete_.fetch_add(1, std::memory_order_relaxed);
+  return true;
 }
 
 Image Framebuffer::Resolve() const {

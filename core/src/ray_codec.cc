@@ -101,6 +101,9 @@ absl::StatusOr<std::vector<RayDescriptor>> DecodeRays(std::string_view bytes,
   return rays;
 }
 
+// The widest pixel record: four varints of 32 bits and three of 64.
+constexpr size_t kMaxPixelRecordBytes = 4 * 5 + 3 * 10;
+
 size_t PackDeposits(std::string_view records, std::string* out) {
   PixelDeposits run;
   bool open = false;
@@ -109,7 +112,7 @@ size_t PackDeposits(std::string_view records, std::string* out) {
   auto emit = [&] {
     // One record on the stack, appended at once: 4 varints of 32 bits and
     // 3 of 64 take at most 50 bytes.
-    char b[4 * 5 + 3 * 10];
+    char b[kMaxPixelRecordBytes];
     char* p = EncodeVarint64(b, ZigZag32(static_cast<int32_t>(run.pixel - previous)));
     p = EncodeVarint64(p, run.primaries);
     p = EncodeVarint64(p, run.spawned);
@@ -156,37 +159,125 @@ size_t PackDeposits(std::string_view records, std::string* out) {
   return count;
 }
 
-absl::StatusOr<std::vector<PixelDeposits>> DecodePackedDeposits(std::string_view bytes,
-                                                                uint32_t pixel_limit) {
-  std::vector<PixelDeposits> out;
-  Decoder in(bytes);
+namespace {
+
+// A varint of at most 8 bytes at p, without bounds checks: the caller
+// made sure 8 bytes may be read there. Returns its length, or 0 when it
+// is longer (the checked decoder then takes the record). Without branches
+// on the length, which varies from pixel to pixel: 8 bytes read at once,
+// cut after the first with its top bit clear, their 7-bit groups joined.
+inline int ShortVarint(const char* p, uint64_t* v) {
+  // Most are one byte (counts, zero sums): that case first.
+  if (static_cast<uint8_t>(*p) < 0x80) {
+    *v = static_cast<uint8_t>(*p);
+    return 1;
+  }
+  uint64_t x;
+  std::memcpy(&x, p, 8);
+  const uint64_t last = ~x & 0x8080808080808080ull;
+  if (last == 0) return 0;
+  const int bytes = (std::countr_zero(last) >> 3) + 1;
+  x &= bytes == 8 ? ~0ull : (1ull << (8 * bytes)) - 1;
+  x = ((x & 0x7f007f007f007f00ull) >> 1) | (x & 0x007f007f007f007full);
+  x = ((x & 0x3fff00003fff0000ull) >> 2) | (x & 0x00003fff00003fffull);
+  x = ((x & 0x0fffffff00000000ull) >> 4) | (x & 0x000000000fffffffull);
+  *v = x;
+  return bytes;
+}
+
+// One pixel record at p, its fields in their varints' values (step and
+// sums still zigzagged). The fast form: every varint short (a 32-bit field
+// below 2^28, a sum below 2^56) and at least kMaxPixelRecordBytes + 8
+// bytes from p on; returns the record's end, or null when it is not of
+// that form.
+inline const char* ShortPixelRecord(const char* p, uint64_t f[7]) {
+  for (int k = 0; k < 7; ++k) {
+    const int n = ShortVarint(p, &f[k]);
+    if (n == 0 || (k < 4 && n > 4)) return nullptr;
+    p += n;
+  }
+  return p;
+}
+
+// Decodes packed deposits into `out` (cleared first, its memory kept).
+absl::Status DecodePackedInto(std::string_view bytes, uint32_t pixel_limit,
+                              std::vector<PixelDeposits>* out) {
+  out->clear();
+  // A record takes at least 7 bytes.
+  out->reserve(bytes.size() / 7);
+  const char* const end = bytes.data() + bytes.size();
+  const char* p = bytes.data();
   uint32_t previous = 0;
-  while (in.remaining() > 0) {
-    PixelDeposits d;
-    uint32_t step;
+  while (p < end) {
+    uint32_t step, primaries, spawned, shadows;
     uint64_t sum[3];
-    const bool whole = in.GetVarint32(&step) && in.GetVarint32(&d.primaries) &&
-                       in.GetVarint32(&d.spawned) && in.GetVarint32(&d.shadows) &&
-                       in.GetVarint64(&sum[0]) && in.GetVarint64(&sum[1]) &&
-                       in.GetVarint64(&sum[2]);
-    const size_t i = out.size();
-    if (!whole) {
-      return absl::InvalidArgumentError(absl::StrCat("deposit batch: pixel record ", i,
-                                                     " is cut short or has a varint too long"));
+    uint64_t f[7];
+    const char* next = nullptr;
+    if constexpr (std::endian::native == std::endian::little) {
+      if (static_cast<size_t>(end - p) >= kMaxPixelRecordBytes + 8) next = ShortPixelRecord(p, f);
     }
+    if (next != nullptr) {
+      step = static_cast<uint32_t>(f[0]);
+      primaries = static_cast<uint32_t>(f[1]);
+      spawned = static_cast<uint32_t>(f[2]);
+      shadows = static_cast<uint32_t>(f[3]);
+      for (int c = 0; c < 3; ++c) sum[c] = f[4 + c];
+    } else {
+      // Near the end, or a long varint: the checked decoder.
+      Decoder in(std::string_view(p, static_cast<size_t>(end - p)));
+      const bool whole = in.GetVarint32(&step) && in.GetVarint32(&primaries) &&
+                         in.GetVarint32(&spawned) && in.GetVarint32(&shadows) &&
+                         in.GetVarint64(&sum[0]) && in.GetVarint64(&sum[1]) &&
+                         in.GetVarint64(&sum[2]);
+      if (!whole) {
+        return absl::InvalidArgumentError(absl::StrCat("deposit batch: pixel record ", out->size(),
+                                                       " is cut short or has a varint too long"));
+      }
+      next = end - in.remaining();
+    }
+    p = next;
+    PixelDeposits d;
     d.pixel = previous + static_cast<uint32_t>(UnZigZag32(step));
+    d.primaries = primaries;
+    d.spawned = spawned;
+    d.shadows = shadows;
     for (int c = 0; c < 3; ++c) d.sum[c] = UnZigZag64(sum[c]);
     if (d.pixel >= pixel_limit || (d.primaries == 0 && d.shadows == 0) ||
         (d.primaries == 0 && d.spawned != 0)) {
       return absl::InvalidArgumentError(
-          absl::StrCat("deposit batch: pixel record ", i, " is invalid (pixel ", d.pixel, " of ",
-                       pixel_limit, ", ", d.primaries, " primary and ", d.shadows,
+          absl::StrCat("deposit batch: pixel record ", out->size(), " is invalid (pixel ", d.pixel,
+                       " of ", pixel_limit, ", ", d.primaries, " primary and ", d.shadows,
                        " shadow deposits, ", d.spawned, " spawned)"));
     }
     previous = d.pixel;
-    out.push_back(d);
+    out->push_back(d);
   }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::StatusOr<std::vector<PixelDeposits>> DecodePackedDeposits(std::string_view bytes,
+                                                                uint32_t pixel_limit) {
+  std::vector<PixelDeposits> out;
+  if (auto s = DecodePackedInto(bytes, pixel_limit, &out); !s.ok()) return s;
   return out;
+}
+
+absl::StatusOr<PackedDepositsAdded> AddPackedDeposits(std::string_view bytes, Framebuffer& fb) {
+  // Decoded whole before any is added, so that a bad record leaves fb as it
+  // was; into memory this thread keeps from batch to batch.
+  thread_local std::vector<PixelDeposits> records;
+  const uint32_t limit = static_cast<uint32_t>(fb.width()) * static_cast<uint32_t>(fb.height());
+  if (auto s = DecodePackedInto(bytes, limit, &records); !s.ok()) return s;
+  PackedDepositsAdded added;
+  for (const PixelDeposits& d : records) added.deposits += uint64_t{d.primaries} + d.shadows;
+  fb.Add(std::span<const PixelDeposits>(records));
+  added.records = records.size();
+  // A worker's batch (FrameOptions::deposit_batch) fits in what is kept;
+  // the memory of a larger one goes back.
+  if (records.capacity() > (size_t{1} << 16)) std::vector<PixelDeposits>().swap(records);
+  return added;
 }
 
 void AppendFloats(const float* values, size_t n, std::string* out) {

@@ -249,22 +249,14 @@ grpc::Status DisplayService::AddDeposits(const v1::DepositBatch& batch, FrameSta
         absl::StrCat("display: frame ", f.id, " is complete; deposits after it are refused")));
   }
   f.last_activity = Clock::now();
-  const uint32_t limit =
-      static_cast<uint32_t>(f.fb->width()) * static_cast<uint32_t>(f.fb->height());
-  auto records = DecodePackedDeposits(batch.packed(), limit);
-  if (!records.ok()) {
+  auto added = AddPackedDeposits(batch.packed(), *f.fb);
+  if (!added.ok()) {
     metrics_->Add("transtick_display_deposits_refused_total", 1);
-    return ToGrpc(
-        absl::InvalidArgumentError(absl::StrCat("display: ", records.status().message())));
+    return ToGrpc(absl::InvalidArgumentError(absl::StrCat("display: ", added.status().message())));
   }
-  uint64_t deposits = 0;
-  for (const PixelDeposits& d : *records) {
-    f.fb->Add(d);
-    deposits += uint64_t{d.primaries} + d.shadows;
-  }
-  f.deposits += deposits;
-  metrics_->Add("transtick_display_deposits_total", static_cast<double>(deposits));
-  metrics_->Add("transtick_display_pixel_records_total", static_cast<double>(records->size()));
+  f.deposits += added->deposits;
+  metrics_->Add("transtick_display_deposits_total", static_cast<double>(added->deposits));
+  metrics_->Add("transtick_display_pixel_records_total", static_cast<double>(added->records));
   metrics_->Add("transtick_display_deposit_bytes_total",
                 static_cast<double>(batch.packed().size()));
   *completed = f.fb->Complete();

@@ -8,6 +8,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "transtick/ray.h"
@@ -52,6 +53,10 @@ class Framebuffer {
   // state as adding each of them. Returns true when they completed it.
   // REQUIRES: deposits.pixel < width * height.
   bool Add(const PixelDeposits& deposits);
+  // Adds a batch of them, as one by one; returns how many pixels they
+  // completed.
+  // REQUIRES: every pixel < width * height.
+  uint64_t Add(std::span<const PixelDeposits> batch);
 
   // A colour in the sums' fixed point: round(c * kScale), halves away from
   // zero, saturated beyond what an int64 holds, 0 for NaN. What
@@ -95,6 +100,17 @@ class Framebuffer {
     uint8_t counted;  // in complete_ already
   };
   bool Counted(Pixel& p);  // completion, once per pixel
+  // Whether this deposit completes p: then it is marked, and the caller
+  // counts it in complete_.
+  bool Completes(Pixel& p) const {
+    if (p.primary_seen == samples_ && p.owed == 0 && !p.counted) {
+      p.counted = 1;
+      return true;
+    }
+    return false;
+  }
+  // The merged deposits of d into p (Add(PixelDeposits)), without counting.
+  static void Merge(Pixel& p, const PixelDeposits& d);
   std::vector<Pixel> pixels_;
   std::atomic<uint64_t> complete_{0};
 };

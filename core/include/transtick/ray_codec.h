@@ -38,6 +38,18 @@ size_t PackDeposits(std::string_view records, std::string* out);
 absl::StatusOr<std::vector<PixelDeposits>> DecodePackedDeposits(std::string_view bytes,
                                                                  uint32_t pixel_limit);
 
+class Framebuffer;
+// What one batch of packed deposits added to a framebuffer.
+struct PackedDepositsAdded {
+  uint64_t records = 0;   // pixel records
+  uint64_t deposits = 0;  // the deposits they merge
+};
+// The display's ingest: adds a batch of packed deposits to `fb`, all of it
+// when every record is valid (as DecodePackedDeposits checks them, with
+// fb's pixels as the limit), else none of it, and an error naming the
+// record.
+absl::StatusOr<PackedDepositsAdded> AddPackedDeposits(std::string_view bytes, Framebuffer& fb);
+
 // Float arrays on the wire (slab scalars, image rows): little-endian f32.
 void AppendFloats(const float* values, size_t n, std::string* out);
 // Decodes bytes.size() / 4 floats into `out`.
