@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <random>
 #include <vector>
 
 #include "gtest/gtest.h"
@@ -466,6 +467,45 @@ TEST(FramebufferTest, CompletesPixelsInAnyOrder) {
   Image img = fb.Resolve();
   EXPECT_EQ(img.rgb[0], 1.0f);
   EXPECT_EQ(img.rgb[4], 0.625f);
+}
+
+// CompleteRows counts the rows from the top whose every pixel is complete,
+// whatever order pixels complete in, and the count only grows; Clear
+// starts it again.
+TEST(FramebufferTest, CompleteRowsAreTheLeadingRowsAllComplete) {
+  std::mt19937 rng(5);
+  for (int round = 0; round < 300; ++round) {
+    const int width = 1 + static_cast<int>(rng() % 17), height = 1 + static_cast<int>(rng() % 13);
+    Framebuffer fb(width, height);
+    for (int pass = 0; pass < 2; ++pass) {
+      std::vector<uint32_t> order(static_cast<size_t>(width) * height);
+      for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+      // Mostly top to bottom, as rows are traced, with pixels out of place.
+      for (size_t k = 0; k < order.size() / 3; ++k) {
+        std::swap(order[rng() % order.size()], order[rng() % order.size()]);
+      }
+      std::vector<bool> done(order.size(), false);
+      int last = 0;
+      for (uint32_t p : order) {
+        fb.Add(Deposit{p, RayKind::kPrimary, 0, {0.5f, 0, 0}});
+        done[p] = true;
+        if (rng() % 3 != 0) continue;
+        int want = 0;
+        while (want < height && std::all_of(done.begin() + static_cast<ptrdiff_t>(want) * width,
+                                            done.begin() + static_cast<ptrdiff_t>(want + 1) * width,
+                                            [](bool b) { return b; })) {
+          ++want;
+        }
+        const int got = fb.CompleteRows();
+        ASSERT_EQ(got, want) << width << "x" << height;
+        ASSERT_GE(got, last);
+        last = got;
+      }
+      ASSERT_EQ(fb.CompleteRows(), height);
+      fb.Clear();
+      ASSERT_EQ(fb.CompleteRows(), 0);
+    }
+  }
 }
 
 // With N samples a pixel completes after N primaries and every shadow ray

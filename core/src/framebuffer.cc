@@ -33,6 +33,12 @@ void Framebuffer::Clear(int samples) {
   samples_ = samples;
   std::fill(pixels_.begin(), pixels_.end(), Pixel{{0, 0, 0}, 0, 0, 0});
   complete_.store(0, std::memory_order_relaxed);
+  complete_prefix_ = 0;
+}
+
+int Framebuffer::CompleteRows() {
+  while (complete_prefix_ < pixels_.size() && pixels_[complete_prefix_].counted) ++complete_prefix_;
+  return width_ > 0 ? static_cast<int>(complete_prefix_ / static_cast<size_t>(width_)) : height_;
 }
 
 bool Framebuffer::Add(const Deposit& d) {

@@ -19,6 +19,13 @@ namespace {
 
 // Image rows per chunk: keeps messages near 1 MB whatever the width.
 int RowsPerChunk(int width) { return std::max(1, (1 << 20) / (width * 12)); }
+// Rows complete before the frame go out once there are about 64 KB of them,
+// or an eighth of a smaller image (or the image's last rows): a chunk per
+// deposit batch or so, not per row.
+int EarlyChunkRows(int width, int height) {
+  return std::max(1, std::min((1 << 16) / (width * 12), height / 8));
+}
+uint64_t RowBytes(int width) { return static_cast<uint64_t>(width) * 12; }
 
 double Mb(uint64_t bytes) { return bytes / 1048576.0; }
 double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
@@ -228,15 +235,15 @@ grpc::Status DisplayService::Accumulate(const v1::DepositBatch& batch,
     return ToGrpc(
         absl::NotFoundError(absl::StrCat("display: frame ", batch.frame_id(), " was not begun")));
   }
-  bool completed = false;
-  grpc::Status s = AddDeposits(batch, *frame, &completed);
-  // The frame's AwaitFrame streams send `complete` and the image.
-  if (completed) Wake(*frame);
+  bool wake = false;
+  grpc::Status s = AddDeposits(batch, *frame, &wake);
+  // The frame's AwaitFrame streams send `complete` and the image, or the
+  // rows now complete.
+  if (wake) Wake(*frame);
   return s;
 }
 
-grpc::Status DisplayService::AddDeposits(const v1::DepositBatch& batch, FrameState& f,
-                                         bool* completed) {
+grpc::Status DisplayService::AddDeposits(const v1::DepositBatch& batch, FrameState& f, bool* wake) {
   absl::MutexLock lock(&f.mu);
   if (f.aborted) {
     metrics_->Add("transtick_display_deposits_refused_total", 1);
@@ -259,10 +266,15 @@ grpc::Status DisplayService::AddDeposits(const v1::DepositBatch& batch, FrameSta
   metrics_->Add("transtick_display_pixel_records_total", static_cast<double>(added->records));
   metrics_->Add("transtick_display_deposit_bytes_total",
                 static_cast<double>(batch.packed().size()));
-  *completed = f.fb->Complete();
-  if (*completed) {
+  if (f.fb->Complete()) {
+    *wake = true;
     metrics_->Add("transtick_display_frames_total", 1, {{"result", "complete"}});
     metrics_->Observe("transtick_display_frame_assembly_seconds", Seconds(Clock::now() - f.begun));
+  } else if (const int rows = f.fb->CompleteRows();
+             rows >= f.woken_rows + EarlyChunkRows(f.width, f.height)) {
+    // Enough rows complete for an early chunk.
+    f.woken_rows = rows;
+    *wake = true;
   }
   return grpc::Status::OK;
 }
@@ -285,20 +297,26 @@ grpc::Status DisplayService::ImageStatus(const FrameState& f) {
   return grpc::Status::OK;
 }
 
-// One AwaitFrame call: progress while the frame traces, then `complete`
-// (the root ends the workers' frame on it), then the image in chunks of
-// rows, each resolved from the framebuffer when the previous one is out.
-// Step() decides the next message under the frame's lock and starts it
-// after unlocking; no reaction ever waits. Owns itself until OnDone.
+// One AwaitFrame call: progress while the frame traces, and the image's
+// first rows as they complete, up to the bytes asked for; then `complete`
+// (the root ends the workers' frame on it), then the rest of the image in
+// chunks of rows, each resolved from the framebuffer when the previous one
+// is out. Step() decides the next message under the frame's lock and
+// starts it after unlocking; no reaction ever waits. Owns itself until
+// OnDone.
 class DisplayService::AwaitStream : public grpc::ServerWriteReactor<v1::FrameProgress> {
  public:
-  AwaitStream(DisplayService* service, std::shared_ptr<FrameState> frame, bool no_image)
-      : service_(service), frame_(std::move(frame)), no_image_(no_image) {}
+  AwaitStream(DisplayService* service, std::shared_ptr<FrameState> frame, bool no_image,
+              uint64_t early_bytes)
+      : service_(service),
+        frame_(std::move(frame)),
+        no_image_(no_image),
+        early_left_(no_image ? 0 : early_bytes) {}
 
   // Joins `frame`'s watchers and takes the first step.
   static AwaitStream* Start(DisplayService* service, std::shared_ptr<FrameState> frame,
-                            bool no_image) {
-    auto stream = std::make_shared<AwaitStream>(service, frame, no_image);
+                            bool no_image, uint64_t early_bytes) {
+    auto stream = std::make_shared<AwaitStream>(service, frame, no_image, early_bytes);
     stream->self_ = stream;
     {
       absl::MutexLock lock(&frame->mu);
@@ -326,7 +344,11 @@ class DisplayService::AwaitStream : public grpc::ServerWriteReactor<v1::FramePro
           status = ImageStatus(*frame_);
           act = Act::kFinish;
         } else if (!frame_->fb->Complete()) {
-          if (tick_) {
+          if (const int r1 = EarlyChunkEnd(); r1 > next_row_) {
+            early_left_ -= static_cast<uint64_t>(r1 - next_row_) * RowBytes(frame_->width);
+            Chunk(r1, false);
+            act = Act::kWrite;
+          } else if (tick_) {
             msg_ = Progress(frame_->fb->complete_pixels(), false);
             act = Act::kWrite;
           }
@@ -345,18 +367,7 @@ class DisplayService::AwaitStream : public grpc::ServerWriteReactor<v1::FramePro
         status = s;
         act = Act::kFinish;
       } else {
-        const int r0 = next_row_;
-        const int r1 = std::min(frame_->height, r0 + RowsPerChunk(frame_->width));
-        msg_ = Progress(Total(), true);
-        v1::ImageChunk* c = msg_.mutable_image();
-        c->set_width(frame_->width);
-        c->set_height(frame_->height);
-        c->set_row_begin(r0);
-        c->set_row_end(r1);
-        std::vector<float> rgb(static_cast<size_t>(r1 - r0) * frame_->width * 3);
-        frame_->fb->ResolveRows(r0, r1, rgb.data());
-        AppendFloats(rgb.data(), rgb.size(), c->mutable_rgb());
-        next_row_ = r1;
+        Chunk(std::min(frame_->height, next_row_ + RowsPerChunk(frame_->width)), true);
         act = Act::kWrite;
       }
       if (act == Act::kWrite) {
@@ -405,6 +416,36 @@ class DisplayService::AwaitStream : public grpc::ServerWriteReactor<v1::FramePro
 
  private:
   uint64_t Total() const { return static_cast<uint64_t>(frame_->width) * frame_->height; }
+  // Where an early chunk from next_row_ would end: the rows complete from
+  // there, at most a chunk's and what is left of the bytes asked for; at
+  // next_row_ when that is too few to send yet.
+  int EarlyChunkEnd() ABSL_EXCLUSIVE_LOCKS_REQUIRED(frame_->mu) {
+    const uint64_t row_bytes = RowBytes(frame_->width);
+    if (no_image_ || early_left_ < row_bytes) return next_row_;
+    const int complete = frame_->fb->CompleteRows();
+    const uint64_t fit = early_left_ / row_bytes;
+    const int r1 = static_cast<int>(
+        std::min<uint64_t>({static_cast<uint64_t>(complete), next_row_ + fit,
+                            static_cast<uint64_t>(next_row_ + RowsPerChunk(frame_->width))}));
+    const bool enough =
+        r1 - next_row_ >= EarlyChunkRows(frame_->width, frame_->height) || r1 == frame_->height;
+    return enough ? r1 : next_row_;
+  }
+  // The image's rows [next_row_, r1) into msg_, resolved from the
+  // framebuffer, as progress with `complete`.
+  void Chunk(int r1, bool complete) ABSL_EXCLUSIVE_LOCKS_REQUIRED(frame_->mu) {
+    const int r0 = next_row_;
+    msg_ = Progress(complete ? Total() : frame_->fb->complete_pixels(), complete);
+    v1::ImageChunk* c = msg_.mutable_image();
+    c->set_width(frame_->width);
+    c->set_height(frame_->height);
+    c->set_row_begin(r0);
+    c->set_row_end(r1);
+    std::vector<float> rgb(static_cast<size_t>(r1 - r0) * frame_->width * 3);
+    frame_->fb->ResolveRows(r0, r1, rgb.data());
+    AppendFloats(rgb.data(), rgb.size(), c->mutable_rgb());
+    next_row_ = r1;
+  }
   v1::FrameProgress Progress(uint64_t done, bool complete) const {
     v1::FrameProgress p;
     p.set_pixels_done(done);
@@ -416,6 +457,8 @@ class DisplayService::AwaitStream : public grpc::ServerWriteReactor<v1::FramePro
   DisplayService* const service_;
   const std::shared_ptr<FrameState> frame_;
   const bool no_image_;
+  // Bytes of image rows it may still send before the frame is complete.
+  uint64_t early_left_ ABSL_GUARDED_BY(frame_->mu);
   std::shared_ptr<AwaitStream> self_;  // set by Start, dropped by OnDone
   v1::FrameProgress msg_ ABSL_GUARDED_BY(frame_->mu);  // the message being written
   bool writing_ ABSL_GUARDED_BY(frame_->mu) = false;
@@ -440,7 +483,7 @@ grpc::ServerWriteReactor<v1::FrameProgress>* DisplayService::AwaitFrame(
     return new RefusedWrite<v1::FrameProgress>(ToGrpc(
         absl::NotFoundError(absl::StrCat("display: frame ", req->frame_id(), " was not begun"))));
   }
-  return AwaitStream::Start(this, std::move(frame), req->no_image());
+  return AwaitStream::Start(this, std::move(frame), req->no_image(), req->early_image_bytes());
 }
 
 void DisplayService::Wake(FrameState& frame, bool tick) {

@@ -42,9 +42,10 @@ struct DisplayOptions {
 };
 
 // Every method uses gRPC's callback API, and no reaction waits: a deposit
-// that completes a frame, an abort, or the 250 ms heartbeat wakes the
-// frame's AwaitFrame streams, and each sends its image a chunk at a time,
-// resolving the chunk's rows from the framebuffer as it goes.
+// that completes a frame or more of its rows, an abort, or the 250 ms
+// heartbeat wakes the frame's AwaitFrame streams, and each sends its image
+// a chunk at a time, resolving the chunk's rows from the framebuffer as it
+// goes.
 class DisplayService final
     : public v1::Display::WithCallbackMethod_BeginFrame<v1::Display::WithCallbackMethod_AbortFrame<
           v1::Display::WithCallbackMethod_Deposits<
@@ -92,6 +93,9 @@ class DisplayService final
     bool aborted ABSL_GUARDED_BY(mu) = false;
     std::string abort_reason ABSL_GUARDED_BY(mu);
     uint64_t deposits ABSL_GUARDED_BY(mu) = 0;
+    // The rows complete from the top when the AwaitFrame streams were last
+    // woken for them (early image chunks).
+    int woken_rows ABSL_GUARDED_BY(mu) = 0;
     // The AwaitFrame streams in progress; each leaves when it is done.
     std::vector<std::weak_ptr<AwaitStream>> watchers ABSL_GUARDED_BY(mu);
     Clock::time_point last_activity ABSL_GUARDED_BY(mu) = Clock::now();
@@ -123,10 +127,11 @@ class DisplayService final
   // Adds a batch's deposits to its frame; `frame` caches the frame of the
   // stream's last batch.
   grpc::Status Accumulate(const v1::DepositBatch& batch, std::shared_ptr<FrameState>* frame);
-  // Adds a batch's deposits to `frame`; `completed` says whether the frame
-  // is complete after them.
-  grpc::Status AddDeposits(const v1::DepositBatch& batch, FrameState& frame,
-                           bool* completed) ABSL_LOCKS_EXCLUDED(frame.mu);
+  // Adds a batch's deposits to `frame`; `wake` says whether its AwaitFrame
+  // streams have something to send: the frame is complete after them, or
+  // rows enough for an early image chunk are.
+  grpc::Status AddDeposits(const v1::DepositBatch& batch, FrameState& frame, bool* wake)
+      ABSL_LOCKS_EXCLUDED(frame.mu);
 
   const DisplayOptions options_;
   const std::shared_ptr<Metrics> metrics_;

@@ -23,6 +23,10 @@ constexpr double kCallDeadline = 30;
 // cost 30 s instead of at most 10.
 constexpr double kStartDeadline = 10;
 constexpr double kAbortDeadline = 10;
+// How much of a frame's image the display may send before the frame is
+// complete (rows already complete): the transfer overlaps the tracing, and
+// the root holds at most this much of a frame not yet complete.
+constexpr uint64_t kEarlyImageBytes = 32 << 20;
 
 }  // namespace
 
@@ -177,6 +181,11 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
     ctx.set_deadline(Deadline(frame_timeout_s_));
     v1::FrameRef await = ref;
     await.set_no_image(!on_chunk);
+    // The image's first rows may come while the frame traces; they wait
+    // here until it is complete, for a frame that fails is traced again
+    // and its image must reach the job's watchers once.
+    if (on_chunk) await.set_early_image_bytes(kEarlyImageBytes);
+    std::vector<v1::ImageChunk> early;
     auto reader = display->AwaitFrame(&ctx, await);
     // The watchdog: a member that stops renewing its registration (dead, or
     // paused), or a display that sends nothing (it reports progress every
@@ -221,6 +230,15 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
         complete = true;
         ender = std::thread([&] { end_all(/*cancel=*/false); });
         if (on_traced) on_traced();
+        for (v1::ImageChunk& c : early) {
+          relay = on_chunk(std::move(c));
+          if (!relay.ok()) break;
+        }
+        early.clear();
+        if (!relay.ok()) {
+          ctx.TryCancel();
+          break;
+        }
       }
       if (p.has_image()) {
         v1::ImageChunk* c = p.mutable_image();
@@ -234,6 +252,10 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
           break;
         }
         rows = c->row_end();
+        if (!complete) {
+          early.push_back(std::move(*c));
+          continue;
+        }
         relay = on_chunk(std::move(*c));
         if (!relay.ok()) {
           ctx.TryCancel();
@@ -251,7 +273,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
     if (cancelled()) return abort(absl::CancelledError("cancelled"));
     if (!relay.ok()) return abort(relay);
     if (!stalled.empty()) return abort(absl::UnavailableError(stalled));
-    const bool through = on_chunk ? rows == view.height() : complete;
+    const bool through = complete && (!on_chunk || rows == view.height());
     if (!st.ok() || !through) {
       absl::Status why =
           st.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED

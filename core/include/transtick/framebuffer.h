@@ -75,6 +75,12 @@ class Framebuffer {
   }
 
   uint64_t complete_pixels() const { return complete_.load(std::memory_order_relaxed); }
+  // How many rows from the top have every pixel complete: rows whose
+  // values no deposit of a correct renderer changes any more, so that
+  // they may be resolved and sent before the frame is complete. Advances
+  // a cursor, so the pixels of a frame are looked at once in all.
+  // REQUIRES: no Add while it runs.
+  int CompleteRows();
   bool Complete() const { return complete_pixels() == static_cast<uint64_t>(width_) * height_; }
   int width() const { return width_; }
   int height() const { return height_; }
@@ -113,6 +119,7 @@ class Framebuffer {
   static void Merge(Pixel& p, const PixelDeposits& d);
   std::vector<Pixel> pixels_;
   std::atomic<uint64_t> complete_{0};
+  size_t complete_prefix_ = 0;  // pixels from the first on seen complete (CompleteRows)
 };
 
 }  // namespace transtick
