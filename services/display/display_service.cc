@@ -148,8 +148,9 @@ grpc::Status DisplayService::Begin(const v1::DisplayFrame& req) {
     // another size goes when keeping it would pass the limit.
     std::unique_ptr<Framebuffer> fb;
     if (spare_ && spare_->width() == req.width() && spare_->height() == req.height()) {
+      // Cleared when it was put aside, off this frame's start.
       fb = std::move(spare_);
-      fb->Clear(samples);
+      fb->SetSamples(samples);
     } else {
       if (spare_ && open + bytes + Framebuffer::MemoryBytes(spare_->width(), spare_->height()) >
                         options_.max_bytes) {
@@ -507,15 +508,21 @@ void DisplayService::Heartbeat() {
 }
 
 void DisplayService::Release(const std::shared_ptr<FrameState>& frame) {
+  // Workers' deposit streams hold the frame state, not the framebuffer:
+  // every deposit is in, so none will touch it again. It is cleared here,
+  // outside the locks, so that the next frame's BeginFrame need not.
+  std::unique_ptr<Framebuffer> fb;
+  {
+    absl::MutexLock frame_lock(&frame->mu);
+    fb = std::move(frame->fb);
+  }
+  if (fb) fb->Clear();
   absl::MutexLock lock(&mu_);
   if (auto it = frames_.find(frame->id); it != frames_.end() && it->second == frame) {
     frames_.erase(it);
   }
-  // Workers' deposit streams hold the frame state, not the framebuffer:
-  // every deposit is in, so none will touch it again.
-  absl::MutexLock frame_lock(&frame->mu);
-  if (frame->fb) {
-    spare_ = std::move(frame->fb);
+  if (fb) {
+    spare_ = std::move(fb);
     spare_since_ = Clock::now();
   }
 }

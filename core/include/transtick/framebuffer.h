@@ -42,6 +42,9 @@ class Framebuffer {
 
   // Back to no deposits, keeping the memory, for frames of `samples`.
   void Clear(int samples = 1);
+  // For frames of `samples`.
+  // REQUIRES: no deposits since the last Clear (or construction).
+  void SetSamples(int samples) { samples_ = samples; }
 
   // Adds a deposit. Returns true when this deposit completed its pixel;
   // each pixel completes once, whatever arrives after (sums wrap rather
