@@ -8,7 +8,9 @@
 #      costs, which the load does not move (bench/instructions.sh);
 #   2. the cluster: the embedded cluster of 1, 2 and 4 workers against the
 #      in-process frame in the same rounds, and the summed tracer CPU of N
-#      workers over 1 (cluster_bench scaling);
+#      workers over 1 (cluster_bench scaling); what packing a frame's
+#      deposits and the display's ingest cost per deposit (cluster_bench
+#      deposits);
 #   3. balance: tracer CPU max/mean before and after balancing, 2, 4 and 8
 #      workers, frontal and 45 degrees (cluster_bench tables);
 #   4. a turntable through 2 worker daemons: steady frames/s, frame time,
@@ -53,6 +55,9 @@ section "2. cluster over in-process (cluster_bench scaling, smooth)"
 "$build/bench/cluster_bench" scaling --volume "$volume" --repeat 5
 section "2. cluster over in-process (cluster_bench scaling, voxel)"
 "$build/bench/cluster_bench" scaling --volume "$volume" --materials "$tmp/voxel.json" --repeat 5
+
+section "2. deposits on their way to the display (cluster_bench deposits)"
+"$build/bench/cluster_bench" deposits --volume "$volume" --repeat 9
 
 section "3. balance before and after (cluster_bench tables)"
 "$build/bench/cluster_bench" tables --volume "$volume"
