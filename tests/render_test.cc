@@ -469,6 +469,34 @@ TEST(FramebufferTest, CompletesPixelsInAnyOrder) {
   EXPECT_EQ(img.rgb[4], 0.625f);
 }
 
+// AddUncounted leaves the count of complete pixels to its caller: what it
+// returns, summed and handed to CountCompleted, gives the state Add gives.
+TEST(FramebufferTest, UncountedDepositsCountedOnceGiveTheSameState) {
+  std::mt19937 rng(6);
+  for (int round = 0; round < 100; ++round) {
+    const int width = 1 + static_cast<int>(rng() % 9), height = 1 + static_cast<int>(rng() % 9);
+    Framebuffer counted(width, height, 2), uncounted(width, height, 2);
+    uint64_t completed = 0, returned = 0;
+    for (int k = 0; k < 6 * width * height; ++k) {
+      const uint32_t pixel = static_cast<uint32_t>(rng() % (width * height));
+      const bool primary = rng() % 3 != 0;
+      const Deposit d{pixel,
+                      primary ? RayKind::kPrimary : RayKind::kShadow,
+                      static_cast<uint16_t>(primary ? rng() % 2 : 0),
+                      {0.25f, 0.5f, 0.125f}};
+      const bool a = counted.Add(d);
+      const bool b = uncounted.AddUncounted(d);
+      ASSERT_EQ(a, b);
+      returned += a;
+      completed += b;
+    }
+    uncounted.CountCompleted(completed);
+    EXPECT_EQ(counted.complete_pixels(), returned);
+    EXPECT_EQ(uncounted.complete_pixels(), counted.complete_pixels());
+    EXPECT_EQ(uncounted.Resolve().rgb, counted.Resolve().rgb);
+  }
+}
+
 // CompleteRows counts the rows from the top whose every pixel is complete,
 // whatever order pixels complete in, and the count only grows; Clear
 // starts it again.

@@ -42,6 +42,12 @@ int Framebuffer::CompleteRows() {
 }
 
 bool Framebuffer::Add(const Deposit& d) {
+  if (!AddUncounted(d)) return false;
+  complete_.fetch_add(1, std::memory_order_relaxed);
+  return true;
+}
+
+bool Framebuffer::AddUncounted(const Deposit& d) {
   TRANSTICK_DCHECK_LT(d.pixel, pixels_.size());
   Pixel& p = pixels_[d.pixel];
   for (int c = 0; c < 3; ++c) p.sum[c] = WrappingAdd(p.sum[c], ToFixed(d.color[c]));
@@ -51,7 +57,7 @@ bool Framebuffer::Add(const Deposit& d) {
   } else {
     p.owed = WrappingAdd(p.owed, int32_t{-1});
   }
-  return Counted(p);
+  return Completes(p);
 }
 
 inline void Framebuffer::Merge(Pixel& p, const PixelDeposits& d) {

@@ -13,6 +13,9 @@ void TraceRows(const Tracer& tracer, const Camera& camera, int row_begin, int ro
                Framebuffer& fb, TraceCounters& counters) {
   std::vector<RayDescriptor> pending;
   Deposit deposit;
+  // Counted here and added once: the threads tracing other rows would
+  // otherwise contend for the framebuffer's counter at every pixel.
+  uint64_t completed = 0;
   const int width = camera.width();
   const int samples = fb.samples();
   for (int py = row_begin; py < row_end; ++py) {
@@ -22,7 +25,7 @@ void TraceRows(const Tracer& tracer, const Camera& camera, int row_begin, int ro
         const auto [ox, oy] = SampleOffset(s, samples);
         RayDescriptor ray;
         if (!tracer.MakePrimary(camera.GenerateAt(px, py, ox, oy), pixel, &ray)) {
-          fb.Add(tracer.MissDeposit(pixel));
+          completed += fb.AddUncounted(tracer.MissDeposit(pixel));
           continue;
         }
         ++counters.primary;
@@ -32,11 +35,12 @@ void TraceRows(const Tracer& tracer, const Camera& camera, int row_begin, int ro
           pending.pop_back();
           // A whole-volume scene has no slab planes: every ray finishes here.
           tracer.Trace(r, pending, deposit, counters);
-          fb.Add(deposit);
+          completed += fb.AddUncounted(deposit);
         }
       }
     }
   }
+  fb.CountCompleted(completed);
 }
 
 absl::StatusOr<Image> RenderLocal(const Scene& scene, const Camera& camera,

@@ -52,6 +52,13 @@ class Framebuffer {
   // REQUIRES: deposit.pixel < width * height (decoders check pixels from
   // the network against the image before they get here).
   bool Add(const Deposit& deposit);
+  // The same, but a pixel it completes is left for the caller to count
+  // with CountCompleted: threads that add to one framebuffer at once then
+  // share no counter while they trace.
+  bool AddUncounted(const Deposit& deposit);
+  void CountCompleted(uint64_t pixels) {
+    if (pixels > 0) complete_.fetch_add(pixels, std::memory_order_relaxed);
+  }
   // Adds deposits of one pixel merged (PixelDeposits, ray.h): the same
   // state as adding each of them. Returns true when they completed it.
   // REQUIRES: deposits.pixel < width * height.
