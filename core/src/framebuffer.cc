@@ -42,9 +42,9 @@ int Framebuffer::CompleteRows() {
 }
 
 bool Framebuffer::Add(const Deposit& d) {
-  if (!AddUncounted(d)) return false;
-  complete_.fetch_add(1, std::memory_order_relaxed);
-  return true;
+  const bool completed = AddUncounted(d);
+  CountCompleted(completed);
+  return completed;
 }
 
 bool Framebuffer::AddUncounted(const Deposit& d) {
@@ -69,10 +69,7 @@ inline void Framebuffer::Merge(Pixel& p, const PixelDeposits& d) {
 }
 
 bool Framebuffer::Add(const PixelDeposits& d) {
-  TRANSTICK_DCHECK_LT(d.pixel, pixels_.size());
-  Pixel& p = pixels_[d.pixel];
-  Merge(p, d);
-  return Counted(p);
+  return Add(std::span<const PixelDeposits>(&d, 1)) > 0;
 }
 
 uint64_t Framebuffer::Add(std::span<const PixelDeposits> batch) {
@@ -84,17 +81,8 @@ uint64_t Framebuffer::Add(std::span<const PixelDeposits> batch) {
     Merge(p, d);
     completed += Completes(p);
   }
-  if (completed > 0) complete_.fetch_add(completed, std::memory_order_relaxed);
+  CountCompleted(completed);
   return completed;
-}
-
-bool Framebuffer::Counted(Pixel& p) {
-  // A pixel is counted once: deposits after its last one (which no
-  // renderer sends) must not count it again, or complete_pixels() could
-  // reach the image's size with pixels still missing.
-  if (!Completes(p)) return false;
-  complete_.fetch_add(1, std::memory_order_relaxed);
-  return true;
 }
 
 Image Framebuffer::Resolve() const {

@@ -115,9 +115,10 @@ class Framebuffer {
     uint8_t primary_seen;  // primary deposits, up to 255
     uint8_t counted;  // in complete_ already
   };
-  bool Counted(Pixel& p);  // completion, once per pixel
   // Whether this deposit completes p: then it is marked, and the caller
-  // counts it in complete_.
+  // counts it in complete_. A pixel completes once: deposits after its
+  // last one (which no renderer sends) must not count it again, or
+  // complete_pixels() could reach the image's size with pixels missing.
   bool Completes(Pixel& p) const {
     if (p.primary_seen == samples_ && p.owed == 0 && !p.counted) {
       p.counted = 1;
