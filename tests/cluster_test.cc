@@ -139,14 +139,18 @@ TEST_F(ClusterTest, ImagesEqualTheInProcessRender) {
       EXPECT_EQ(stats->front().workers_size(), workers);
       // Each frame starts after the job was submitted and after the frame
       // before it started; frames are pipelined two deep, so a frame starts
-      // after the one two before it ended.
+      // after the one two before it ended. A frame the root had to render
+      // again (a stalled machine can drop a worker) reports its last
+      // attempt, which may start after the next frame did.
       EXPECT_GT(stats->front().since_submit_ms(), 0);
+      for (size_t i = 0; i < views.size(); ++i) EXPECT_GE((*stats)[i].attempts(), 1);
       for (size_t i = 1; i < views.size(); ++i) {
+        if ((*stats)[i].attempts() > 1 || (*stats)[i - 1].attempts() > 1) continue;
         EXPECT_GE((*stats)[i].since_submit_ms(), (*stats)[i - 1].since_submit_ms())
             << "frame " << i;
         overlapped += (*stats)[i].since_submit_ms() <
                       (*stats)[i - 1].since_submit_ms() + (*stats)[i - 1].frame_ms();
-        if (i >= 2) {
+        if (i >= 2 && (*stats)[i - 2].attempts() == 1) {
           EXPECT_GE((*stats)[i].since_submit_ms(),
                     (*stats)[i - 2].since_submit_ms() + (*stats)[i - 2].frame_ms() - 1)
               << "frame " << i;

@@ -187,12 +187,21 @@ done
 rm -f "$dir/out/long.png"
 start=$(date +%s.%N)
 timeout 120 "$T" submit "$dir/long.json" --root 127.0.0.1:$rport --out-dir "$dir/out" \
-  >"$dir/submit4.log" 2>&1 &
+  --stats "$dir/stats4.json" >"$dir/submit4.log" 2>&1 &
 spid=$!
 sleep 1
 kill -STOP "$w5"
 if wait "$spid"; then
   cmp -s "$dir/out/long.png" "$dir/long_ref.png" || fail "image after a worker paused mid-job differs"
+  # The frame the pause caught was rendered again, and its statistics say so.
+  python3 - "$dir/stats4.json" <<'PY' || fail "no frame's statistics show the retry after the pause"
+import json, sys
+stats = json.load(open(sys.argv[1]))
+assert len(stats) == 80 and all(s["attempts"] >= 1 for s in stats)
+retried = [i for i, s in enumerate(stats) if s["attempts"] > 1]
+assert retried, "every frame reports 1 attempt"
+print("paused worker: frames rendered again:", retried)
+PY
 else
   fail "job with a worker paused mid-frame did not complete in 120 s: $(tail -3 "$dir/submit4.log")"
 fi

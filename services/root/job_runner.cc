@@ -266,6 +266,7 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
       continue;
     }
     RenderedFrame out;
+    out.attempts = attempt + 1;
     Layout& layout = out.layout;
     out.report.job_id = task.who;
     const auto balance_start = Clock::now();
@@ -417,6 +418,7 @@ void JobRunner::Describe(const std::string& who, const std::string& label, const
   fs.set_job_id(who);
   fs.set_frame_ms(frame.frame_ms);
   fs.set_since_submit_ms((frame.started_unix - submitted_unix) * 1e3);
+  fs.set_attempts(rendered.attempts);
   for (const std::string& w : data.warnings) fs.add_warnings(w);
   fs.set_width(view.width());
   fs.set_height(view.height());

@@ -84,6 +84,7 @@ struct RenderedFrame {
   FrameResult result;
   Layout layout;
   BalanceReport report;
+  int attempts = 1;  // the attempt that rendered it, counting from 1
 };
 
 class JobRunner {
