@@ -419,39 +419,47 @@ void CrossingWalk::Extend(double new_t1) {
   }
 }
 
+TRANSTICK_INLINE void CrossingWalk::Solve() {
+  // The field along the ray in s = t - t_in, from the entry point in
+  // cell coordinates, so that the coefficients stay well scaled however
+  // far the ray's origin lies; and its Bernstein coefficients on
+  // [0, span], whose hull holds the cubic there.
+  const double span = t_out_ - t_in_;
+  std::array<double, 3> entry;
+#if defined(__SSE2__)
+  // x and y in the two lanes, the same operations as z's.
+  const __m128d corner =
+      _mm_sub_pd(_mm_cvtepi32_pd(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(c_.data()))),
+                 _mm_set1_pd(0.5));
+  _mm_storeu_pd(entry.data(),
+                _mm_sub_pd(_mm_add_pd(_mm_loadu_pd(origin_.data()),
+                                      _mm_mul_pd(_mm_loadu_pd(dir_.data()), _mm_set1_pd(t_in_))),
+                           corner));
+  entry[2] = origin_[2] + dir_[2] * t_in_ - (c_[2] - 0.5);
+#else
+  for (int a = 0; a < 3; ++a) entry[a] = origin_[a] + dir_[a] * t_in_ - (c_[a] - 0.5);
+#endif
+  cubic_ = Cubic(corners_, entry, dir_, 0);
+  const double p1 = cubic_.c * span, p2 = cubic_.b * span * span,
+               p3 = cubic_.a * span * span * span;
+  hull_[0] = cubic_.d;
+  hull_[1] = cubic_.d + p1 / 3;
+  hull_[2] = cubic_.d + (2 * p1 + p2) / 3;
+  hull_[3] = cubic_.d + p1 + p2 + p3;
+  solved_ = true;
+}
+
+TRANSTICK_INLINE bool CrossingWalk::HullStraddles(double e) const {
+  const bool below = hull_[0] - e < 0;
+  return (hull_[1] - e < 0) != below || (hull_[2] - e < 0) != below || (hull_[3] - e < 0) != below;
+}
+
 TRANSTICK_INLINE CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
   // The two edges of a band differ in parity: one slot each.
   EdgeRoots& r = cache_[edge & 1];
   if (r.edge == edge) return r;
   const double span = t_out_ - t_in_;
-  if (!solved_) {
-    // The field along the ray in s = t - t_in, from the entry point in
-    // cell coordinates, so that the coefficients stay well scaled however
-    // far the ray's origin lies; and its Bernstein coefficients on
-    // [0, span], whose hull holds the cubic there.
-    std::array<double, 3> entry;
-#if defined(__SSE2__)
-    // x and y in the two lanes, the same operations as z's.
-    const __m128d corner =
-        _mm_sub_pd(_mm_cvtepi32_pd(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(c_.data()))),
-                   _mm_set1_pd(0.5));
-    _mm_storeu_pd(entry.data(),
-                  _mm_sub_pd(_mm_add_pd(_mm_loadu_pd(origin_.data()),
-                                        _mm_mul_pd(_mm_loadu_pd(dir_.data()), _mm_set1_pd(t_in_))),
-                             corner));
-    entry[2] = origin_[2] + dir_[2] * t_in_ - (c_[2] - 0.5);
-#else
-    for (int a = 0; a < 3; ++a) entry[a] = origin_[a] + dir_[a] * t_in_ - (c_[a] - 0.5);
-#endif
-    cubic_ = Cubic(corners_, entry, dir_, 0);
-    const double p1 = cubic_.c * span, p2 = cubic_.b * span * span,
-                 p3 = cubic_.a * span * span * span;
-    hull_[0] = cubic_.d;
-    hull_[1] = cubic_.d + p1 / 3;
-    hull_[2] = cubic_.d + (2 * p1 + p2) / 3;
-    hull_[3] = cubic_.d + p1 + p2 + p3;
-    solved_ = true;
-  }
+  if (!solved_) Solve();
   const double e = bands_->edges()[edge];
   r.edge = edge;
   r.count = 0;
@@ -459,10 +467,7 @@ TRANSTICK_INLINE CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
   // Most cells whose corners straddle an edge are crossed by the ray
   // without a root: when every Bernstein coefficient lies on one side of
   // the edge, so does the cubic, and no extremum is needed.
-  const bool below = hull_[0] - e < 0;
-  if ((hull_[1] - e < 0) == below && (hull_[2] - e < 0) == below && (hull_[3] - e < 0) == below) {
-    return r;
-  }
+  if (!HullStraddles(e)) return r;
   RayCubic g = cubic_;
   g.d -= e;
   // One change of sign among the coefficients, none of them 0, leaves the
@@ -503,16 +508,11 @@ TRANSTICK_INLINE std::optional<std::pair<double, int>> CrossingWalk::Candidate(i
 std::optional<Crossing> CrossingWalk::NextRoot() {
   // Band b lies between edge b - 1 below and edge b above. An edge the
   // corners do not straddle (lo < e <= hi) is not crossed in this cell.
-  const std::vector<float>& edges = bands_->edges();
   const int down = band_ - 1, up = band_;
   std::optional<std::pair<double, int>> best;
   bool best_up = false;
-  if (down >= 0 && down < static_cast<int>(edges.size()) && edges[down] > lo_value_ &&
-      edges[down] <= hi_value_) {
-    best = Candidate(down, false);
-  }
-  if (up >= 0 && up < static_cast<int>(edges.size()) && edges[up] > lo_value_ &&
-      edges[up] <= hi_value_) {
+  if (Straddles(down_edge_, lo_value_, hi_value_)) best = Candidate(down, false);
+  if (Straddles(up_edge_, lo_value_, hi_value_)) {
     auto c = Candidate(up, true);
     if (c && (!best || c->first < best->first)) best = c, best_up = true;
   }
@@ -685,10 +685,17 @@ std::optional<Crossing> CrossingWalk::Scan() {
       Load();
       loaded = true;
       hi_ = to;
-      if (auto crossing = NextRoot()) {
-        stop();
-        state_ = State::kRoots;
-        return crossing;
+      // Most such cells hold no root of the edges next to the ray's band:
+      // the hull of the cubic says so here, without NextRoot's search.
+      const bool down = Straddles(down_edge_, lo_value_, hi_value_);
+      const bool up = Straddles(up_edge_, lo_value_, hi_value_);
+      if (down || up) Solve();
+      if (((down && HullStraddles(down_edge_)) || (up && HullStraddles(up_edge_)))) {
+        if (auto crossing = NextRoot()) {
+          stop();
+          state_ = State::kRoots;
+          return crossing;
+        }
       }
     }
     // On to the next cell, across the face the ray leaves by: its span

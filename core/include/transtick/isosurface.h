@@ -18,7 +18,9 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <optional>
+#include <vector>
 
 #include "transtick/classification.h"
 #include "transtick/field_grid.h"
@@ -196,10 +198,23 @@ class CrossingWalk {
   // taken when it is this edge's.
   std::optional<std::pair<double, int>> Candidate(int edge, bool up);
   std::optional<Crossing> NextRoot();
+  // The field along the ray in the loaded cell: cubic_ and hull_.
+  void Solve();
+  // Whether the hull of the loaded cell's cubic (Solve) leaves a root of
+  // edge value `e` possible: its coefficients are not all on one side.
+  bool HullStraddles(double e) const;
   void SetBand(int band) {
     band_ = band;
     label_band_ = band >= 0 && band < FieldGrid::kMixed ? band : -1;
+    const std::vector<float>& edges = bands_->edges();
+    const int n = static_cast<int>(edges.size());
+    down_edge_ = band - 1 >= 0 && band - 1 < n ? edges[band - 1] : kNoEdge;
+    up_edge_ = band >= 0 && band < n ? edges[band] : kNoEdge;
   }
+  // Whether a cell whose corners range over [lo, hi] may hold a root of
+  // edge value `e` (NaN, kNoEdge: never).
+  static bool Straddles(float e, float lo, float hi) { return e > lo && e <= hi; }
+  static constexpr float kNoEdge = std::numeric_limits<float>::quiet_NaN();
 
   const Scene* scene_;
   const Bands* bands_;
@@ -238,6 +253,8 @@ class CrossingWalk {
   State state_ = State::kExamine;
   int band_ = 0;
   int label_band_ = -1;    // band_ as a FieldGrid label, -1 if none can be
+  // The values of the edges below and above band_ (kNoEdge where none).
+  float down_edge_ = kNoEdge, up_edge_ = kNoEdge;
   double t_;               // where the ray is: crossings before it are behind
   int last_edge_ = -1;     // the edge of the crossing just taken, in this cell
   int last_index_ = -1;    // and its index among that edge's roots
