@@ -244,8 +244,11 @@ CrossingWalk::CrossingWalk(const Scene& scene, const Bands& bands, const Vec3& o
     grid_first_ = {0, grid_->row_begin(), 0};
     grid_count_ = grid_->cells();
     const auto& g = grid_->groups();
-    const ptrdiff_t group_stride[3] = {1, g[0], ptrdiff_t{g[0]} * g[1]};
-    for (int a = 0; a < 3; ++a) group_step_[a] = step_[a] * group_stride[a];
+    group_stride_[0] = 1;
+    group_stride_[1] = static_cast<size_t>(g[0]);
+    group_stride_[2] = static_cast<size_t>(g[0]) * g[1];
+    for (int a = 0; a < 3; ++a)
+      group_step_[a] = step_[a] * static_cast<ptrdiff_t>(group_stride_[a]);
   }
   // The cells a ray can cross in [t0, t1): one more per unit it moves
   // along each axis, and a few for the ends.
@@ -581,7 +584,6 @@ std::optional<Crossing> CrossingWalk::Scan() {
     exit = leave[2] < l01 ? 2 : e01;
     t_out = leave[2] < l01 ? leave[2] : l01;
   };
-  const FieldGrid* grid = grid_;
   // The walk's constants, read once: no store in the loop below may alias
   // them, so they stay in registers.
   const double t1 = t1_, t_here = t_;
@@ -598,11 +600,13 @@ std::optional<Crossing> CrossingWalk::Scan() {
   int sub = 0;
   bool held = false;
   auto locate = [&] {
-    held = grid && grid->Holds(c[0], c[1], c[2]);
-    if (held) {
-      gi = grid->GroupIndex(c[0], c[1], c[2]);
-      sub = grid->Sub(c[0], c[1], c[2]);
-    }
+    // FieldGrid::Holds, GroupIndex and Sub, without branches, from the
+    // walk's copies of the grid's shape (no grid: no cell is held).
+    const unsigned x = c[0] - grid_first_[0], y = c[1] - grid_first_[1], z = c[2] - grid_first_[2];
+    held = x < static_cast<unsigned>(grid_count_[0]) && y < static_cast<unsigned>(grid_count_[1]) &&
+           z < static_cast<unsigned>(grid_count_[2]);
+    gi = (z >> 1) * group_stride_[2] + (y >> 1) * group_stride_[1] + (x >> 1);
+    sub = static_cast<int>((x & 1) | (y & 1) << 1 | (z & 1) << 2);
   };
   locate();
   for (;;) {

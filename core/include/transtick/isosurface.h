@@ -233,6 +233,7 @@ class CrossingWalk {
   const FieldGrid::Group* grid_groups_ = nullptr;
   std::array<int, 3> grid_first_ = {0, 0, 0};
   std::array<int, 3> grid_count_ = {0, 0, 0};
+  size_t group_stride_[3] = {0, 0, 0};  // groups per step along each axis
   ptrdiff_t group_step_[3] = {0, 0, 0};
   WalkWork work_;
   std::array<double, 3> origin_;  // an array: indexed by a variable axis without branches
