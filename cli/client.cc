@@ -38,29 +38,6 @@ fs::path ImagePath(const std::string& output, const std::string& job_id, int dat
   return path;
 }
 
-// Adds a chunk of rows the root sent to `img` (sized by the first chunk)
-// and counts them in `*rows`; DATA_LOSS for a chunk of an impossible size
-// or one that does not fit the image.
-absl::Status AddChunk(const v1::ImageChunk& c, Image* img, int* rows) {
-  if (img->rgb.empty()) {
-    if (c.width() <= 0 || c.height() <= 0 || c.width() > CameraSpec::kMaxImageSize ||
-        c.height() > CameraSpec::kMaxImageSize) {
-      return absl::DataLossError("the root sent an image chunk of an impossible size");
-    }
-    img->width = c.width();
-    img->height = c.height();
-    img->rgb.resize(static_cast<size_t>(c.width()) * c.height() * 3);
-  }
-  const size_t floats = static_cast<size_t>(c.row_end() - c.row_begin()) * c.width() * 3;
-  if (c.width() != img->width || c.height() != img->height || c.row_begin() < 0 ||
-      c.row_end() > img->height || c.row_end() < c.row_begin() || c.rgb().size() != floats * 4) {
-    return absl::DataLossError("the root sent a malformed image chunk");
-  }
-  DecodeFloats(c.rgb(), img->rgb.data() + static_cast<size_t>(c.row_begin()) * img->width * 3);
-  *rows += c.row_end() - c.row_begin();
-  return absl::OkStatus();
-}
-
 absl::Status CheckDirectory(const fs::path& dir, const std::string& what) {
   if (dir.empty()) return absl::OkStatus();
   std::error_code ec;
@@ -72,6 +49,30 @@ absl::Status CheckDirectory(const fs::path& dir, const std::string& what) {
 }
 
 }  // namespace
+
+absl::Status ImageRows::Add(const v1::ImageChunk& c) {
+  if (image_.rgb.empty()) {
+    if (c.width() <= 0 || c.height() <= 0 || c.width() > CameraSpec::kMaxImageSize ||
+        c.height() > CameraSpec::kMaxImageSize) {
+      return absl::DataLossError("the root sent an image chunk of an impossible size");
+    }
+    image_.width = c.width();
+    image_.height = c.height();
+    image_.rgb.resize(static_cast<size_t>(c.width()) * c.height() * 3);
+    have_.assign(c.height(), false);
+  }
+  const size_t floats = static_cast<size_t>(c.row_end() - c.row_begin()) * c.width() * 3;
+  if (c.width() != image_.width || c.height() != image_.height || c.row_begin() < 0 ||
+      c.row_end() > image_.height || c.row_end() < c.row_begin() || c.rgb().size() != floats * 4) {
+    return absl::DataLossError("the root sent a malformed image chunk");
+  }
+  DecodeFloats(c.rgb(), image_.rgb.data() + static_cast<size_t>(c.row_begin()) * image_.width * 3);
+  for (int y = c.row_begin(); y < c.row_end(); ++y) {
+    rows_ += !have_[y];
+    have_[y] = true;
+  }
+  return absl::OkStatus();
+}
 
 absl::Status CheckOutputDirectories(const v1::Job& job, const std::string& out_dir) {
   if (absl::Status s = CheckDirectory(out_dir, "--out-dir"); !s.ok()) return s;
@@ -125,6 +126,7 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> WatchJob(const std::string& r
   // the root sends (and if need be renders again) only the others.
   std::vector<v1::ClusterFrameStats> stats;
   std::set<int> have;
+  std::set<int> stats_of;  // frames whose statistics are in `stats`
   std::set<std::string> warned;
   v1::JobState state = v1::QUEUED;
   std::string error;
@@ -138,8 +140,7 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> WatchJob(const std::string& r
     request.set_resume(true);
     for (int f : have) request.add_have_frames(f);
     auto reader = stub->Watch(&ctx, request);
-    std::map<int, Image> images;  // frames being received
-    std::map<int, int> rows_in;
+    std::map<int, ImageRows> images;  // frames being received
     v1::JobEvent e;
     while (reader->Read(&e)) {
       last_contact = std::chrono::steady_clock::now();
@@ -152,18 +153,22 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> WatchJob(const std::string& r
       if (e.has_image()) {
         const v1::ImageChunk& c = e.image();
         const int frame = e.frame();
-        Image& img = images[frame];
-        if (absl::Status s = AddChunk(c, &img, &rows_in[frame]); !s.ok()) return s;
-        if (e.has_stats()) {
+        // One statistics record per frame: a frame rendered again for a
+        // resuming watcher may bring a second.
+        if (e.has_stats() && stats_of.insert(frame).second) {
           stats.push_back(e.stats());
           for (const std::string& w : e.stats().warnings()) {
             if (warned.insert(w).second && progress) progress->Warn("warning: " + w);
           }
         }
-        if (rows_in[frame] == img.height) {
+        // Rows of a frame already saved (a second rendering's) are left.
+        if (have.count(frame)) continue;
+        ImageRows& img = images[frame];
+        if (absl::Status s = img.Add(c); !s.ok()) return s;
+        if (img.whole()) {
           const fs::path path = ImagePath(c.output(), job_id, e.dataset(), e.view(), options.out_dir);
           absl::Status s = CheckDirectory(path.parent_path(), absl::StrCat("frame ", frame));
-          if (s.ok()) s = WriteImage(path.string(), img);
+          if (s.ok()) s = WriteImage(path.string(), img.image());
           if (!s.ok() && save_error.ok()) save_error = s;
           have.insert(frame);
           if (progress) {
@@ -172,7 +177,6 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> WatchJob(const std::string& r
                                           e.has_stats() ? e.stats().frame_ms() : 0.0));
           }
           images.erase(frame);
-          rows_in.erase(frame);
         }
       } else if (progress && e.pixels_total() > 0 && e.frames_total() > 0) {
         const double frame_part = static_cast<double>(e.pixels_done()) / e.pixels_total();
@@ -296,12 +300,12 @@ absl::StatusOr<SessionClient::Event> SessionClient::Next() {
       return out;
     }
     if (!e.has_image()) continue;
-    auto& [img, rows] = partial_[{e.seq(), e.preview()}];
-    if (absl::Status s = AddChunk(e.image(), &img, &rows); !s.ok()) return s;
-    if (rows < img.height) continue;
+    ImageRows& img = partial_[{e.seq(), e.preview()}];
+    if (absl::Status s = img.Add(e.image()); !s.ok()) return s;
+    if (!img.whole()) continue;
     out.has_frame = true;
     out.preview = e.preview();
-    out.image = std::move(img);
+    out.image = std::move(img.image());
     out.stats = e.stats();
     partial_.erase({e.seq(), e.preview()});
     return out;

@@ -32,6 +32,25 @@ struct WatchOptions {
   // Images of views without an output path: out_dir/JOB-dD-vV.png.
 };
 
+// A frame's image as its chunks of rows come (docs/formats.md: a frame is
+// whole when its chunks cover its height). A row may come more than once:
+// from a rendering a resuming watcher asked for again, after the first
+// rendering's remaining rows; it holds the same bits. Only rows not yet
+// held count toward the whole.
+class ImageRows {
+ public:
+  // Adds `chunk`'s rows (the first chunk sizes the image); DATA_LOSS for a
+  // chunk of an impossible size or one that does not fit the image.
+  absl::Status Add(const v1::ImageChunk& chunk);
+  bool whole() const { return image_.height > 0 && rows_ == image_.height; }
+  Image& image() { return image_; }
+
+ private:
+  Image image_;
+  std::vector<bool> have_;  // per row
+  int rows_ = 0;            // rows held
+};
+
 // Submits `job` to the root; UNAVAILABLE naming the root when it cannot
 // be reached.
 absl::StatusOr<v1::SubmitReply> SubmitJob(const std::string& root, const v1::Job& job);
@@ -111,7 +130,7 @@ class SessionClient {
   uint64_t next_seq_ ABSL_GUARDED_BY(mu_) = 1;
   bool closed_ ABSL_GUARDED_BY(mu_) = false;
   bool finished_ ABSL_GUARDED_BY(mu_) = false;  // the stream's status is in: nothing more to write
-  std::map<std::pair<uint64_t, bool>, std::pair<Image, int>> partial_;  // by (seq, preview): rows in
+  std::map<std::pair<uint64_t, bool>, ImageRows> partial_;  // by (seq, preview)
 };
 
 // Reads a job file (protobuf JSON of transtick.v1.Job). A dataset may name

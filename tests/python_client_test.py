@@ -146,5 +146,38 @@ class ClientTest(unittest.TestCase):
             transtick.Client(ROOT, token="a-token-of-sixteen-chars")
 
 
+class RowsTest(unittest.TestCase):
+    """A frame's image from its chunks: whole only when they cover every row,
+    however chunks of two renderings repeat and overlap."""
+
+    def test_whole_only_when_covered(self):
+        import random
+
+        import cluster_pb2
+        from transtick.client import _Rows
+
+        rng = random.Random(5)
+        for _ in range(500):
+            w, h = rng.randint(1, 4), rng.randint(1, 20)
+            truth = np.arange(h * w * 3, dtype="<f4").reshape(h, w, 3)
+            stream = []
+            for _ in range(rng.randint(1, 3)):
+                y = 0
+                while y < h:
+                    end = min(h, y + rng.randint(1, max(1, h // 3)))
+                    if rng.random() < 0.75:
+                        stream.append(cluster_pb2.ImageChunk(width=w, height=h, row_begin=y, row_end=end,
+                                                             rgb=truth[y:end].tobytes()))
+                    y = end
+            rows, covered = _Rows(), np.zeros(h, dtype=bool)
+            for c in stream:
+                whole = rows.add(c)
+                covered[c.row_begin:c.row_end] = True
+                self.assertEqual(whole, bool(covered.all()))
+                if whole:
+                    np.testing.assert_array_equal(rows.image, truth)
+                    break
+
+
 if __name__ == "__main__":
     unittest.main(verbosity=2)

@@ -115,13 +115,13 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
   std::vector<v1::WorkerFrameStats> stats(members.size());
   auto end_all = [&](bool cancel) {
     // Statistics of workers that fail to end are simply missing.
-    // A cancelled frame does not wait on a member that stopped answering
-    // (its registration expired): it would hold the retry for the deadline.
+    // No frame waits on a member that stopped answering (its registration
+    // expired): it would hold the retry, or the image, for the deadline.
     v1::FrameRef end = ref;
     end.set_cancel(cancel);
     CallAll(members.size(), cancel ? kAbortDeadline : kCallDeadline,
             [&](size_t i, grpc::ClientContext* ctx, auto done) {
-              if (cancel && !registry_.Alive(members[i].worker->id)) {
+              if (!registry_.Alive(members[i].worker->id)) {
                 done(grpc::Status(grpc::StatusCode::UNAVAILABLE, "not answering"));
                 return;
               }
@@ -195,11 +195,15 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
     // It looks every 100 ms and is woken at once when the wait ends, so it
     // adds nothing to a frame's time (it used to sleep its 100 ms out).
     absl::Notification awaited;
+    // Once every deposit is in, the image is the display's alone: a worker
+    // lost then (or a machine that stalled past its registration's expiry)
+    // costs its statistics, not the frame.
+    std::atomic<bool> all_in{false};
     std::string stalled;  // written by the watchdog before it cancels
     std::thread watchdog([&] {
       while (!awaited.WaitForNotificationWithTimeout(absl::Milliseconds(100))) {
         for (const Member& m : members) {
-          if (!awaited.HasBeenNotified() && !registry_.Alive(m.worker->id)) {
+          if (!awaited.HasBeenNotified() && !all_in.load() && !registry_.Alive(m.worker->id)) {
             stalled = absl::StrCat("worker ", m.worker->address, " stopped answering");
             ctx.TryCancel();
             return;
@@ -228,6 +232,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
       if (cancelled()) ctx.TryCancel();
       if (p.complete() && !ender.joinable()) {
         complete = true;
+        all_in = true;
         ender = std::thread([&] { end_all(/*cancel=*/false); });
         if (on_traced) on_traced();
         for (v1::ImageChunk& c : early) {

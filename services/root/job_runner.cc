@@ -343,6 +343,7 @@ absl::Status JobRunner::RunView(Job& job, LoadedDataset& data, FrameTask::Chosen
   // The image passes through as the display sends it, chunk by chunk; the
   // last chunk waits for the frame's statistics, which go with it.
   std::optional<v1::JobEvent> held;
+  RowsOnce rows_once;  // over the frame's attempts
   const uint64_t pixels = static_cast<uint64_t>(view.width()) * view.height();
   const auto& queue_options = queue_.options();
   FrameTask task;
@@ -363,19 +364,23 @@ absl::Status JobRunner::RunView(Job& job, LoadedDataset& data, FrameTask::Chosen
     // Images go out in frame order: the frame before finishes first.
     if (before) before->published.WaitForNotification();
     if (held) {
+      const int sent_end = held->image().row_end();
       absl::Status s = job.PublishImage(*std::move(held), queue_options.max_pending_image_bytes,
                                         queue_options.image_wait);
       held.reset();
       if (!s.ok()) return s;
+      rows_once.Sent(sent_end);
     }
+    std::optional<v1::ImageChunk> fresh = rows_once.Trim(std::move(chunk));
+    if (!fresh) return absl::OkStatus();
     v1::JobEvent e;
     e.set_frame(frame);
     e.set_dataset(d);
     e.set_view(v);
     e.set_pixels_done(pixels);
     e.set_pixels_total(pixels);
-    chunk.set_output(view.output());
-    *e.mutable_image() = std::move(chunk);
+    fresh->set_output(view.output());
+    *e.mutable_image() = *std::move(fresh);
     held = std::move(e);
     return absl::OkStatus();
   };
@@ -405,6 +410,16 @@ absl::Status JobRunner::RunView(Job& job, LoadedDataset& data, FrameTask::Chosen
                                             queue_options.image_wait);
   me.published.Notify();
   return published;
+}
+
+std::optional<v1::ImageChunk> RowsOnce::Trim(v1::ImageChunk chunk) const {
+  if (chunk.row_end() <= out_) return std::nullopt;
+  if (chunk.row_begin() < out_) {
+    const size_t row_bytes = static_cast<size_t>(chunk.width()) * 3 * sizeof(float);
+    chunk.mutable_rgb()->erase(0, static_cast<size_t>(out_ - chunk.row_begin()) * row_bytes);
+    chunk.set_row_begin(out_);
+  }
+  return chunk;
 }
 
 void JobRunner::Describe(const std::string& who, const std::string& label, const v1::View& view,

@@ -7,8 +7,10 @@
 #ifndef TRANSTICK_SERVICES_ROOT_JOB_RUNNER_H_
 #define TRANSTICK_SERVICES_ROOT_JOB_RUNNER_H_
 
+#include <algorithm>
 #include <atomic>
 #include <memory>
+#include <optional>
 #include <string>
 #include <thread>
 
@@ -85,6 +87,25 @@ struct RenderedFrame {
   Layout layout;
   BalanceReport report;
   int attempts = 1;  // the attempt that rendered it, counting from 1
+};
+
+// A frame's image rows, each passed on once over the frame's attempts. An
+// attempt can fail after some of its chunks went out (the display lost in
+// the middle of the image); the frame is then traced again, to the same
+// bits, and the rows that already went out are dropped from the next
+// attempt's chunks. A client that counts the rows it was sent would
+// otherwise take the frame as whole before its last rows came.
+class RowsOnce {
+ public:
+  // The part of `chunk` whose rows have not gone out; none when all have.
+  // REQUIRES: rows go out in order (chunks of an attempt come in order, and
+  // what goes out is a prefix of the image); rgb holds the rows' floats.
+  std::optional<v1::ImageChunk> Trim(v1::ImageChunk chunk) const;
+  // The rows of a chunk that ended at `row_end` went out.
+  void Sent(int row_end) { out_ = std::max(out_, row_end); }
+
+ private:
+  int out_ = 0;  // rows [0, out_) have gone out
 };
 
 class JobRunner {

@@ -219,6 +219,7 @@ grpc::Status Sessions::Serve(grpc::ServerContext* ctx,
     const FrameRequest& request = plan.views[0];
     std::unique_ptr<Balancer> balancer = MakeBalancer(plan.balance[0], planned->second.rule, 32);
     std::optional<v1::SessionEvent> held;
+    RowsOnce rows_once;  // over the frame's attempts
     FrameTask task;
     task.who = id;
     task.view = &planned->first.datasets(0).views(0);
@@ -231,14 +232,20 @@ grpc::Status Sessions::Serve(grpc::ServerContext* ctx,
     task.cancelled = stopped;
     task.on_attempt = [&] { held.reset(); };
     task.on_chunk = [&](v1::ImageChunk chunk) -> absl::Status {
-      if (held && !stream->Write(*held)) {
-        write_failed = true;
-        return absl::CancelledError("the client left");
+      if (held) {
+        if (!stream->Write(*held)) {
+          write_failed = true;
+          return absl::CancelledError("the client left");
+        }
+        rows_once.Sent(held->image().row_end());
+        held.reset();
       }
+      std::optional<v1::ImageChunk> fresh = rows_once.Trim(std::move(chunk));
+      if (!fresh) return absl::OkStatus();
       held.emplace();
       held->set_seq(seq);
       held->set_preview(is_preview);
-      *held->mutable_image() = std::move(chunk);
+      *held->mutable_image() = *std::move(fresh);
       return absl::OkStatus();
     };
     auto rendered = runner_.Render(task);

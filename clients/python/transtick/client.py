@@ -31,6 +31,30 @@ class JobFailed(Exception):
         self.error = error
 
 
+class _Rows:
+    """A frame's image as its chunks of rows come. It is whole when they cover
+    its height; a row may come twice (a frame rendered again for a resuming
+    watcher), with the same bits, and counts once."""
+
+    def __init__(self) -> None:
+        self.image: Optional[np.ndarray] = None
+        self.have: Optional[np.ndarray] = None
+        self.count = 0
+        self.stats = None  # the first statistics seen with the frame's chunks
+
+    def add(self, e_image, stats=None) -> bool:
+        """Adds a chunk; True when the image is whole."""
+        c = e_image
+        self.image = _image(c, self.image)
+        if self.have is None:
+            self.have = np.zeros(c.height, dtype=bool)
+        self.count += int(np.count_nonzero(~self.have[c.row_begin:c.row_end]))
+        self.have[c.row_begin:c.row_end] = True
+        if stats is not None and self.stats is None:
+            self.stats = stats
+        return self.count == c.height
+
+
 @dataclasses.dataclass
 class Frame:
     """One rendered frame of a job."""
@@ -121,8 +145,7 @@ class Session:
         self._seq = itertools.count(1)
         self._lock = threading.Lock()
         self._closed = False
-        self._partial: Dict[tuple, np.ndarray] = {}
-        self._rows: Dict[tuple, int] = {}
+        self._partial: Dict[tuple, _Rows] = {}
         # As a job's dataset: materials_file and transfer_file are read here.
         job = cluster_pb2.Job()
         job.datasets.append(_message(dataset, cluster_pb2.Dataset))
@@ -161,14 +184,12 @@ class Session:
             if not e.HasField("image"):
                 continue
             key = (e.seq, e.preview)
-            self._partial[key] = _image(e.image, self._partial.get(key))
-            self._rows[key] = self._rows.get(key, 0) + e.image.row_end - e.image.row_begin
-            if self._rows[key] < e.image.height:
+            rows = self._partial.setdefault(key, _Rows())
+            if not rows.add(e.image, e.stats if e.HasField("stats") else None):
                 continue
-            image = self._partial.pop(key)
-            del self._rows[key]
-            stats = json_format.MessageToDict(e.stats, preserving_proto_field_name=True)
-            return SessionEvent(e.seq, image=image, preview=e.preview, stats=stats)
+            del self._partial[key]
+            stats = json_format.MessageToDict(rows.stats or e.stats, preserving_proto_field_name=True)
+            return SessionEvent(e.seq, image=rows.image, preview=e.preview, stats=stats)
         raise StopIteration
 
     def frame(self, seq: int) -> SessionEvent:
@@ -299,8 +320,7 @@ class Client:
         backoff = 0.25
         while True:
             request = cluster_pb2.WatchRequest(job_id=job_id, resume=True, have_frames=sorted(have))
-            images: Dict[int, np.ndarray] = {}
-            rows_in: Dict[int, int] = {}
+            images: Dict[int, _Rows] = {}
             state, error = cluster_pb2.QUEUED, ""
             try:
                 for e in self._stub.Watch(request, metadata=self._metadata):
@@ -308,7 +328,7 @@ class Client:
                     backoff = 0.25
                     state, error = e.state, e.error
                     if e.HasField("image"):
-                        frame = self._take_chunk(e, images, rows_in)
+                        frame = None if e.frame in have else self._take_chunk(e, images)
                         if frame is not None and frame.index not in have:
                             have.add(frame.index)
                             yield frame
@@ -339,12 +359,11 @@ class Client:
         return sorted(self.frames(job_id, progress=progress), key=lambda f: f.index)
 
     @staticmethod
-    def _take_chunk(e, images: Dict[int, np.ndarray], rows_in: Dict[int, int]) -> Optional[Frame]:
+    def _take_chunk(e, images: Dict[int, "_Rows"]) -> Optional[Frame]:
         c = e.image
-        images[e.frame] = image = _image(c, images.get(e.frame))
-        rows_in[e.frame] = rows_in.get(e.frame, 0) + c.row_end - c.row_begin
-        if rows_in[e.frame] < c.height:
+        rows = images.setdefault(e.frame, _Rows())
+        if not rows.add(c, e.stats if e.HasField("stats") else None):
             return None
-        del images[e.frame], rows_in[e.frame]
-        stats = json_format.MessageToDict(e.stats, preserving_proto_field_name=True) if e.HasField("stats") else {}
-        return Frame(index=e.frame, dataset=e.dataset, view=e.view, image=image, stats=stats, output=c.output)
+        del images[e.frame]
+        stats = json_format.MessageToDict(rows.stats, preserving_proto_field_name=True) if rows.stats is not None else {}
+        return Frame(index=e.frame, dataset=e.dataset, view=e.view, image=rows.image, stats=stats, output=c.output)

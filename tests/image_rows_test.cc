@@ -1,0 +1,152 @@
+// A frame's image rows between the root and its clients: the root passes
+// each row on once over a frame's attempts (RowsOnce), and a client takes a
+// frame as whole only when its chunks cover every row (ImageRows), however
+// the chunks repeat or overlap.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <optional>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "client.h"
+#include "job_runner.h"
+
+namespace transtick {
+namespace {
+
+// The floats of row y of a w-wide image: a function of (y, x, channel), so
+// every rendering of the frame carries the same bits.
+float Value(int y, int x, int c) { return static_cast<float>(y * 1000 + x * 3 + c) * 0.25f; }
+
+v1::ImageChunk Chunk(int w, int h, int begin, int end) {
+  v1::ImageChunk c;
+  c.set_width(w);
+  c.set_height(h);
+  c.set_row_begin(begin);
+  c.set_row_end(end);
+  std::string bytes;
+  for (int y = begin; y < end; ++y) {
+    for (int x = 0; x < w; ++x) {
+      for (int k = 0; k < 3; ++k) {
+        const float v = Value(y, x, k);
+        char b[4];
+        std::memcpy(b, &v, 4);  // little-endian, as docs/formats.md has it
+        bytes.append(b, 4);
+      }
+    }
+  }
+  c.set_rgb(bytes);
+  return c;
+}
+
+// A rendering's chunks: the rows in order, cut at random.
+std::vector<v1::ImageChunk> Rendering(int w, int h, std::mt19937& rng) {
+  std::vector<v1::ImageChunk> out;
+  for (int y = 0; y < h;) {
+    const int n = std::uniform_int_distribution<int>(1, std::max(1, h / 3))(rng);
+    const int end = std::min(h, y + n);
+    out.push_back(Chunk(w, h, y, end));
+    y = end;
+  }
+  return out;
+}
+
+TEST(RowsOnceTest, EveryRowGoesOutOnceOverFailedAttempts) {
+  std::mt19937 rng(7);
+  for (int trial = 0; trial < 3000; ++trial) {
+    const int w = std::uniform_int_distribution<int>(1, 5)(rng);
+    const int h = std::uniform_int_distribution<int>(1, 40)(rng);
+    // The runner's protocol: each chunk is held until the next comes, and
+    // the chunk held when an attempt fails is dropped; the last attempt's
+    // held chunk goes out with the statistics.
+    RowsOnce once;
+    std::vector<v1::ImageChunk> out;
+    const int attempts = std::uniform_int_distribution<int>(1, 4)(rng);
+    for (int a = 0; a < attempts; ++a) {
+      const std::vector<v1::ImageChunk> chunks = Rendering(w, h, rng);
+      const bool last = a + 1 == attempts;
+      // A failed attempt stops after a random number of chunks.
+      const size_t n =
+          last ? chunks.size() : std::uniform_int_distribution<size_t>(0, chunks.size())(rng);
+      std::optional<v1::ImageChunk> held;
+      for (size_t i = 0; i < n; ++i) {
+        if (held) {
+          once.Sent(held->row_end());
+          out.push_back(*std::move(held));
+          held.reset();
+        }
+        held = once.Trim(chunks[i]);
+      }
+      if (last) {
+        ASSERT_TRUE(held.has_value())
+            << "the last attempt ends with a chunk to carry its statistics";
+        out.push_back(*std::move(held));
+      }
+    }
+    // What went out: rows 0 .. h in order, each once, with the image's bits.
+    int next = 0;
+    for (const v1::ImageChunk& c : out) {
+      ASSERT_EQ(c.row_begin(), next) << "trial " << trial;
+      ASSERT_GT(c.row_end(), c.row_begin());
+      EXPECT_EQ(c.rgb(), Chunk(w, h, c.row_begin(), c.row_end()).rgb());
+      next = c.row_end();
+    }
+    EXPECT_EQ(next, h) << "trial " << trial;
+  }
+}
+
+TEST(ImageRowsTest, WholeOnlyWhenTheChunksCoverEveryRow) {
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 3000; ++trial) {
+    const int w = std::uniform_int_distribution<int>(1, 4)(rng);
+    const int h = std::uniform_int_distribution<int>(1, 30)(rng);
+    // Chunks of up to three renderings, some lost (taken by a watcher that
+    // went away), in an order where renderings follow one another.
+    std::vector<v1::ImageChunk> stream;
+    const int renderings = std::uniform_int_distribution<int>(1, 3)(rng);
+    for (int r = 0; r < renderings; ++r) {
+      for (v1::ImageChunk& c : Rendering(w, h, rng)) {
+        if (std::uniform_int_distribution<int>(0, 3)(rng) > 0) stream.push_back(std::move(c));
+      }
+    }
+    ImageRows rows;
+    std::vector<bool> covered(h, false);
+    for (const v1::ImageChunk& c : stream) {
+      if (rows.whole()) break;
+      ASSERT_TRUE(rows.Add(c).ok());
+      for (int y = c.row_begin(); y < c.row_end(); ++y) covered[y] = true;
+      const bool all = std::find(covered.begin(), covered.end(), false) == covered.end();
+      ASSERT_EQ(rows.whole(), all) << "trial " << trial;
+    }
+    if (!rows.whole()) continue;
+    const Image& img = rows.image();
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < w; ++x) {
+        for (int k = 0; k < 3; ++k) {
+          ASSERT_EQ(img.rgb[(static_cast<size_t>(y) * w + x) * 3 + k], Value(y, x, k));
+        }
+      }
+    }
+  }
+}
+
+TEST(ImageRowsTest, RefusesChunksThatDoNotFit) {
+  ImageRows rows;
+  ASSERT_TRUE(rows.Add(Chunk(4, 10, 0, 2)).ok());
+  EXPECT_EQ(rows.Add(Chunk(5, 10, 2, 4)).code(), absl::StatusCode::kDataLoss);  // width
+  EXPECT_EQ(rows.Add(Chunk(4, 11, 2, 4)).code(), absl::StatusCode::kDataLoss);  // height
+  v1::ImageChunk short_rgb = Chunk(4, 10, 2, 4);
+  short_rgb.mutable_rgb()->pop_back();
+  EXPECT_EQ(rows.Add(short_rgb).code(), absl::StatusCode::kDataLoss);
+  v1::ImageChunk past = Chunk(4, 10, 8, 10);
+  past.set_row_end(11);
+  EXPECT_EQ(rows.Add(past).code(), absl::StatusCode::kDataLoss);
+  ImageRows empty;
+  EXPECT_EQ(empty.Add(Chunk(0, 10, 0, 0)).code(), absl::StatusCode::kDataLoss);
+  EXPECT_FALSE(rows.whole());
+}
+
+}  // namespace
+}  // namespace transtick
