@@ -208,6 +208,40 @@ fi
 printf 'paused worker: 80-frame job done %.1f s after submission\n' "$(echo "$(date +%s.%N) - $start" | bc)"
 kill -9 "$w5"
 
+# The root paused with SIGSTOP for 7 s in the middle of a job (a debugger, a
+# stalled virtual machine): the workers' heartbeats went unheard meanwhile,
+# which is not their silence. No worker is dropped, no frame is rendered
+# again, and the job completes with the right image.
+for _ in $(seq 100); do
+  "$T" status --root 127.0.0.1:$rport 2>/dev/null | grep -q '^2 workers' && break
+  sleep 0.1
+done
+dropped=$(grep -c "dropping worker" "$dir/root.log")
+rm -f "$dir/out/long.png"
+timeout 120 "$T" submit "$dir/long.json" --root 127.0.0.1:$rport --out-dir "$dir/out" \
+  --stats "$dir/stats5.json" >"$dir/submit5.log" 2>&1 &
+spid=$!
+sleep 1
+kill -STOP "$rpid"
+sleep 7
+kill -CONT "$rpid"
+if wait "$spid"; then
+  cmp -s "$dir/out/long.png" "$dir/long_ref.png" || fail "image after the root was paused differs"
+  grep -q "the root did not run for" "$dir/root.log" || fail "the root did not notice its pause"
+  [[ $(grep -c "dropping worker" "$dir/root.log") == "$dropped" ]] ||
+    fail "the paused root dropped a worker: $(grep "dropping worker" "$dir/root.log" | tail -1)"
+  python3 - "$dir/stats5.json" <<'PY' || fail "a frame was rendered again after the root's pause"
+import json, sys
+stats = json.load(open(sys.argv[1]))
+assert len(stats) == 80, len(stats)
+again = [i for i, s in enumerate(stats) if s["attempts"] != 1]
+assert not again, f"frames rendered again: {again}"
+PY
+else
+  fail "job with the root paused for 7 s did not complete in 120 s: $(tail -3 "$dir/submit5.log")"
+fi
+echo "paused root: $(grep -o 'the root did not run for [0-9]* ms' "$dir/root.log" | tail -1)"
+
 # The root killed (SIGKILL) in the middle of a job, with a second job queued
 # behind it, and started again on the same state directory: the workers
 # register again by themselves (their heartbeat), both clients watch again,

@@ -201,7 +201,17 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
     std::atomic<bool> all_in{false};
     std::string stalled;  // written by the watchdog before it cancels
     std::thread watchdog([&] {
+      auto last_look = Clock::now();
       while (!awaited.WaitForNotificationWithTimeout(absl::Milliseconds(100))) {
+        // A look more than a second after the last means the root did not
+        // run meanwhile (paused, or its machine stalled): whatever the
+        // display sent then has not been read yet, and is not its silence
+        // (the registry forgives the workers' likewise).
+        const auto now = Clock::now();
+        if (now - last_look > std::chrono::seconds(1)) {
+          last_message = now.time_since_epoch().count();
+        }
+        last_look = now;
         for (const Member& m : members) {
           if (!awaited.HasBeenNotified() && !all_in.load() && !registry_.Alive(m.worker->id)) {
             stalled = absl::StrCat("worker ", m.worker->address, " stopped answering");

@@ -5,6 +5,7 @@
 #include <algorithm>
 
 #include "absl/strings/str_cat.h"
+#include "absl/time/time.h"
 #include "daemon.h"
 
 namespace transtick {
@@ -13,6 +14,41 @@ bool IsWorkerFailure(const grpc::Status& s) {
   return s.error_code() == grpc::StatusCode::UNAVAILABLE ||
          s.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED ||
          s.error_code() == grpc::StatusCode::CANCELLED;
+}
+
+namespace {
+
+// How often the registry's clock looks, and the gap between looks that
+// means the root did not run.
+constexpr auto kLook = std::chrono::milliseconds(100);
+constexpr auto kStall = std::chrono::seconds(1);
+
+}  // namespace
+
+Registry::Registry(std::chrono::milliseconds expiry)
+    : expiry_(expiry), last_look_(std::chrono::steady_clock::now()) {
+  clock_ = std::thread([this] {
+    while (!stop_.WaitForNotificationWithTimeout(absl::FromChrono(kLook))) {
+      absl::MutexLock lock(&mu_);
+      LookLocked(std::chrono::steady_clock::now());
+    }
+  });
+}
+
+Registry::~Registry() {
+  stop_.Notify();
+  clock_.join();
+}
+
+void Registry::LookLocked(std::chrono::steady_clock::time_point now) {
+  const auto gap = now - last_look_;
+  last_look_ = now;
+  if (gap <= kStall || last_seen_.empty()) return;
+  spdlog::warn(
+      "the root did not run for {} ms (paused, or its machine stalled); its workers' "
+      "silence is counted without that time",
+      std::chrono::duration_cast<std::chrono::milliseconds>(gap).count());
+  for (auto& [id, seen] : last_seen_) seen = std::min(now, seen + gap);
 }
 
 absl::Status Registry::Register(const v1::RegisterRequest& req) {
@@ -114,6 +150,9 @@ absl::StatusOr<std::vector<std::shared_ptr<WorkerEntry>>> Registry::Workers(
 
 void Registry::ExpireLocked() {
   const auto now = std::chrono::steady_clock::now();
+  // Whichever thread runs first after a pause sees the gap, the clock or a
+  // frame's watchdog asking whether a worker is alive.
+  LookLocked(now);
   for (auto it = workers_.begin(); it != workers_.end();) {
     auto seen = last_seen_.find(it->first);
     if (seen != last_seen_.end() && now - seen->second <= expiry_) {

@@ -10,11 +10,13 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "absl/base/thread_annotations.h"
 #include "absl/status/statusor.h"
 #include "absl/synchronization/mutex.h"
+#include "absl/synchronization/notification.h"
 #include "cluster.grpc.pb.h"
 
 namespace transtick {
@@ -46,7 +48,14 @@ struct HeldSlab {
 class Registry {
  public:
   // A worker not heard from (Register renews) for `expiry` is dropped.
-  explicit Registry(std::chrono::milliseconds expiry = std::chrono::seconds(5)) : expiry_(expiry) {}
+  // Silence is counted while the root runs: a clock thread looks every
+  // 100 ms, and a gap of more than a second between its looks means the
+  // root itself did not run (a paused process, a stalled machine) and could
+  // not have heard any heartbeat, so the gap is not held against a worker.
+  explicit Registry(std::chrono::milliseconds expiry = std::chrono::seconds(5));
+  ~Registry();
+  Registry(const Registry&) = delete;
+  Registry& operator=(const Registry&) = delete;
 
   // Registers a worker, or renews one the registry knows at the same
   // address (and then fails ALREADY_EXISTS, as for any known id).
@@ -75,13 +84,20 @@ class Registry {
  private:
   // Drops workers not heard from within the expiry.
   void ExpireLocked() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+  // The clock's look: a gap since the last one that shows the root did not
+  // run moves every worker's last heartbeat on by the gap.
+  void LookLocked(std::chrono::steady_clock::time_point now) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
 
   const std::chrono::milliseconds expiry_;
   mutable absl::Mutex mu_;
+  std::chrono::steady_clock::time_point last_look_ ABSL_GUARDED_BY(mu_);
   uint64_t next_order_ ABSL_GUARDED_BY(mu_) = 0;
   std::map<std::string, std::chrono::steady_clock::time_point> last_seen_ ABSL_GUARDED_BY(mu_);
   std::map<std::string, std::shared_ptr<WorkerEntry>> workers_ ABSL_GUARDED_BY(mu_);  // by id
   std::map<std::string, HeldSlab> held_ ABSL_GUARDED_BY(mu_);  // by worker id
+  // The clock's thread, started by the constructor, joined by the destructor.
+  absl::Notification stop_;
+  std::thread clock_;
 };
 
 // Whether a failed call means the worker itself is gone (rather than a
