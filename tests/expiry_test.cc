@@ -5,6 +5,9 @@
 // the least recently active frame is evicted, and the display refuses a
 // framebuffer that would pass its byte limit.
 #include <grpcpp/grpcpp.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <string>
@@ -125,6 +128,33 @@ TEST_F(ExpiryTest, ARunningFrameThatReceivesRaysIsKept) {
   EXPECT_GE(stats->received_left(), 10u);
   stream->WritesDone();
   stream->Finish();
+}
+
+// Stops this process (every thread) for `d`, as a debugger or a stalled
+// machine would: a child sends SIGSTOP, then SIGCONT.
+void PauseThisProcess(milliseconds d) {
+  const pid_t self = getpid();
+  const pid_t child = fork();
+  if (child == 0) {
+    kill(self, SIGSTOP);
+    usleep(static_cast<useconds_t>(d.count() * 1000));
+    kill(self, SIGCONT);
+    _exit(0);
+  }
+  ASSERT_GT(child, 0);
+  waitpid(child, nullptr, 0);  // the child ends after SIGCONT
+}
+
+// Time the worker did not run is not a frame's idleness: a paused worker
+// keeps the frames it held, and they expire after their own silence.
+TEST_F(ExpiryTest, TimeTheWorkerWasPausedIsNotIdleness) {
+  ASSERT_TRUE(Prepare(9).ok());
+  ASSERT_TRUE(Run(9).ok());
+  PauseThisProcess(2 * kRunningIdle + milliseconds(500));
+  // The sweeper runs every 200 ms; give it two looks.
+  std::this_thread::sleep_for(milliseconds(450));
+  EXPECT_EQ(worker_service_->frames_held(), 1u) << "the pause was counted as the frame's silence";
+  ASSERT_TRUE(Eventually([&] { return worker_service_->frames_held() == 0; }));
 }
 
 // A root that waits for a frame keeps it: its own deadline governs.

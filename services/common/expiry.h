@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <map>
 #include <string>
@@ -20,16 +21,33 @@ namespace transtick {
 // Calls `tick` every `period` on a thread of its own, from construction
 // until destruction; the destructor waits for a tick in progress. Declare it
 // after what `tick` uses, so that it stops first. Thread-safe.
+//
+// It also notices when its process did not run: a tick that comes more than
+// a second later than due means the process (or its machine) was paused,
+// for the excess. Nothing could touch a frame meanwhile, so an expiry sweep
+// does not count that time as the frame's idleness (PausedSince).
 class Ticker {
  public:
+  using SteadyClock = std::chrono::steady_clock;
+
   Ticker(std::chrono::milliseconds period, std::function<void()> tick);
   ~Ticker();
   Ticker(const Ticker&) = delete;
   Ticker& operator=(const Ticker&) = delete;
 
+  // How long the process was paused after `since`, as far as this ticker
+  // saw (its last 32 pauses), before the tick in progress.
+  SteadyClock::duration PausedSince(SteadyClock::time_point since) const;
+
  private:
+  struct Pause {
+    SteadyClock::time_point end;
+    SteadyClock::duration length;
+  };
   absl::Mutex mu_;
   bool stopping_ ABSL_GUARDED_BY(mu_) = false;
+  mutable absl::Mutex pauses_mu_;
+  std::deque<Pause> pauses_ ABSL_GUARDED_BY(pauses_mu_);
   std::thread thread_;
 };
 

@@ -585,7 +585,9 @@ void DisplayService::ExpireIdle() {
   {
     absl::MutexLock lock(&mu_);
     for (auto it = frames_.begin(); it != frames_.end();) {
-      const Clock::duration idle = now - LastActive(*it->second, now);
+      const Clock::time_point active = LastActive(*it->second, now);
+      // Time the display did not run is not the frame's idleness.
+      const Clock::duration idle = now - active - sweeper_.PausedSince(active);
       if (idle <= options_.idle) {
         ++it;
         continue;

@@ -60,14 +60,16 @@ std::vector<std::shared_ptr<Frame>> FrameTable::TakeAll() {
   return all;
 }
 
-std::vector<FrameTable::Dropped> FrameTable::TakeExpired(Clock::time_point now) {
+std::vector<FrameTable::Dropped> FrameTable::TakeExpired(
+    Clock::time_point now, const std::function<Clock::duration(Clock::time_point)>& paused_since) {
   absl::MutexLock lock(&mu_);
   std::vector<Dropped> expired;
   for (auto it = frames_.begin(); it != frames_.end();) {
     const Frame& f = *it->second;
     const bool running = f.running();
     const auto limit = running ? limits_.running_idle : limits_.prepared_idle;
-    const auto idle = now - f.last_activity();
+    const Clock::time_point active = f.last_activity();
+    const auto idle = now - active - (paused_since ? paused_since(active) : Clock::duration{0});
     if (idle <= limit) {
       ++it;
       continue;

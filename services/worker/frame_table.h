@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <optional>
@@ -60,8 +61,11 @@ class FrameTable {
   // Removes the frame and returns it (null when absent).
   std::shared_ptr<Frame> Take(uint64_t id);
   std::vector<std::shared_ptr<Frame>> TakeAll();
-  // Removes the frames idle beyond their limit at `now`.
-  std::vector<Dropped> TakeExpired(Clock::time_point now);
+  // Removes the frames idle beyond their limit at `now`, not counting the
+  // time `paused_since(t)` says the process did not run after t.
+  std::vector<Dropped> TakeExpired(
+      Clock::time_point now,
+      const std::function<Clock::duration(Clock::time_point)>& paused_since = {});
   // Why frame `id` is not held: " (it expired: ...)" when a limit dropped
   // it recently, else empty. For error messages.
   std::string WhyGone(uint64_t id) const;

@@ -84,7 +84,9 @@ WorkerService::WorkerService(WorkerOptions options)
       frames_(options_.frames),
       sweeper_(SweepPeriod(std::min(options_.frames.prepared_idle, options_.frames.running_idle)),
                [this] {
-                 for (FrameTable::Dropped& d : frames_.TakeExpired(Clock::now())) {
+                 // Time the worker did not run is not a frame's idleness.
+                 auto paused = [this](Clock::time_point t) { return sweeper_.PausedSince(t); };
+                 for (FrameTable::Dropped& d : frames_.TakeExpired(Clock::now(), paused)) {
                    metrics_->Add("transtick_worker_frames_dropped_total", 1);
                    Drop(std::move(d));
                  }
