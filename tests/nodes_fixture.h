@@ -24,7 +24,8 @@
 
 namespace transtick::testing {
 
-// Polls `done` every 10 ms until it holds (true) or `patience` has passed.
+// Polls `done` every 10 ms until it holds (true) or `patience` has passed,
+// not counting time the process did not run (a stalled machine).
 bool Eventually(const std::function<bool()>& done,
                 std::chrono::milliseconds patience = std::chrono::seconds(10));
 
