@@ -4,7 +4,11 @@
 // gateway serving; sessions are bounded, expire when idle, and are answered
 // only on a loopback Host; the volume listing finds what ReadVolume reads
 // and nothing outside the data directory.
+#include <arpa/inet.h>
 #include <httplib.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -21,15 +25,16 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
+#include "absl/synchronization/mutex.h"
 #include "convert.h"
 #include "gateway.h"
 #include "gtest/gtest.h"
 #include "local_cluster.h"
-#include "transtick/png.h"
 #include "session_fixture.h"
 #include "testing.h"
 #include "transtick/camera.h"
 #include "transtick/image_io.h"
+#include "transtick/png.h"
 #include "transtick/scene.h"
 #include "transtick/synthetic.h"
 #include "transtick/volume_io.h"
@@ -195,6 +200,89 @@ class WebGatewayTest : public ::testing::Test {
   std::unique_ptr<httplib::Client> http_;
 };
 
+// A TCP port that answers only after `delay`, then relays every connection
+// to `target_port`: a root that is still coming up.
+class LateRelay {
+ public:
+  LateRelay(int target_port, std::chrono::milliseconds delay) : target_port_(target_port) {
+    // A free port, closed again until the delay has passed.
+    const int probe = socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a = Loopback(0);
+    EXPECT_EQ(bind(probe, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+    socklen_t len = sizeof a;
+    getsockname(probe, reinterpret_cast<sockaddr*>(&a), &len);
+    port_ = ntohs(a.sin_port);
+    close(probe);
+    thread_ = std::thread([this, delay] {
+      std::this_thread::sleep_for(delay);
+      listen_fd_ = socket(AF_INET, SOCK_STREAM, 0);
+      const int one = 1;
+      setsockopt(listen_fd_, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+      sockaddr_in l = Loopback(port_);
+      if (bind(listen_fd_, reinterpret_cast<sockaddr*>(&l), sizeof l) != 0 ||
+          listen(listen_fd_, 16) != 0) {
+        return;
+      }
+      while (!stop_) {
+        pollfd p{listen_fd_, POLLIN, 0};
+        if (poll(&p, 1, 50) <= 0) continue;
+        const int in = accept(listen_fd_, nullptr, nullptr);
+        if (in < 0) continue;
+        const int out = socket(AF_INET, SOCK_STREAM, 0);
+        sockaddr_in t = Loopback(target_port_);
+        if (connect(out, reinterpret_cast<sockaddr*>(&t), sizeof t) != 0) {
+          close(in);
+          close(out);
+          continue;
+        }
+        absl::MutexLock lock(&mu_);
+        fds_.push_back(in);
+        fds_.push_back(out);
+        pumps_.emplace_back([in, out] { Pump(in, out); });
+        pumps_.emplace_back([in, out] { Pump(out, in); });
+      }
+    });
+  }
+  ~LateRelay() {
+    stop_ = true;
+    thread_.join();
+    {
+      absl::MutexLock lock(&mu_);
+      for (int fd : fds_) shutdown(fd, SHUT_RDWR);
+    }
+    for (std::thread& t : pumps_) t.join();
+    for (int fd : fds_) close(fd);
+    close(listen_fd_);
+  }
+  std::string address() const { return absl::StrCat("127.0.0.1:", port_); }
+
+ private:
+  static sockaddr_in Loopback(int port) {
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    a.sin_port = htons(static_cast<uint16_t>(port));
+    return a;
+  }
+  static void Pump(int from, int to) {
+    char buf[16384];
+    ssize_t n;
+    while ((n = read(from, buf, sizeof buf)) > 0) {
+      if (write(to, buf, static_cast<size_t>(n)) != n) break;
+    }
+    shutdown(to, SHUT_WR);
+  }
+
+  const int target_port_;
+  int port_ = 0;
+  int listen_fd_ = -1;
+  std::atomic<bool> stop_{false};
+  absl::Mutex mu_;
+  std::vector<int> fds_;
+  std::vector<std::thread> pumps_;
+  std::thread thread_;
+};
+
 // A gateway destroyed at once after it started used to leave httplib's
 // listening thread in accept() for ever (its stop() does nothing before the
 // loop runs), and the destructor waiting on it: the test hung now and then.
@@ -214,6 +302,28 @@ TEST_F(WebGatewayTest, StopsRightAfterItStarts) {
   gateway_.reset();
   done = true;
   watchdog.join();
+}
+
+// A session opened while the root cannot be reached yet (restarting, a
+// stalled machine) opens once it can, within the gateway's 10 s of trying.
+TEST_F(WebGatewayTest, AnOpenWaitsForARootThatComesUp) {
+  const std::string root = cluster_->root_address();
+  LateRelay late(std::stoi(root.substr(root.rfind(':') + 1)), std::chrono::milliseconds(1500));
+  WebOptions o;
+  o.listen = "127.0.0.1:0";
+  o.root = late.address();
+  auto g = WebGateway::Start(o);
+  ASSERT_TRUE(g.ok()) << g.status();
+  gateway_ = *std::move(g);
+  http_ = std::make_unique<httplib::Client>("127.0.0.1", gateway_->port());
+  http_->set_read_timeout(std::chrono::seconds(60));
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string id = Open(Camera(30));
+  ASSERT_FALSE(id.empty());
+  EXPECT_GE(std::chrono::steady_clock::now() - t0, std::chrono::milliseconds(1400));
+  uint32_t after = 0;
+  EXPECT_FALSE(NextFull(id, &after, 1).empty());
+  gateway_.reset();  // its sessions end before the relay goes
 }
 
 TEST_F(WebGatewayTest, FramesAreTheInProcessRenderAndTheNewestCameraWins) {

@@ -5,6 +5,7 @@
 #include <openssl/rand.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstring>
@@ -26,10 +27,10 @@
 #include "client.h"
 #include "cluster.grpc.pb.h"
 #include "convert.h"
-#include "transtick/png.h"
 #include "rpc_channel.h"
 #include "rpc_status.h"
 #include "security.h"
+#include "transtick/png.h"
 #include "version.h"
 #include "web.pb.h"
 
@@ -483,13 +484,26 @@ void WebGateway::Impl::OpenSession(const httplib::Request& req, httplib::Respons
     absl::MutexLock lock(&mu_);
     --opening_;
   };
-  auto client = SessionClient::Open(options_.root, open.dataset(), preview, token);
-  if (!client.ok()) {
-    release();
-    return SetStatus(res, client.status());
+  // The session and its first event: the dataset is ready, or the open
+  // failed. A root that could not be reached (a connection that failed, a
+  // root restarting, a stalled machine) is tried again for up to 10 s
+  // before the browser hears of it; the root holds no session for an open
+  // that never reached it, or whose stream broke.
+  absl::StatusOr<std::unique_ptr<SessionClient>> client;
+  absl::StatusOr<SessionClient::Event> first;
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  for (auto backoff = std::chrono::milliseconds(100);;
+       backoff = std::min(backoff * 2, std::chrono::milliseconds(1000))) {
+    client = SessionClient::Open(options_.root, open.dataset(), preview, token);
+    first = client.ok() ? (*client)->Next() : client.status();
+    if (first.ok() || !absl::IsUnavailable(first.status()) ||
+        std::chrono::steady_clock::now() + backoff > give_up) {
+      break;
+    }
+    spdlog::warn("web: opening a session on the root failed ({}); trying again",
+                 Printable(first.status().message()));
+    std::this_thread::sleep_for(backoff);
   }
-  // The first event: the dataset is ready, or the open failed.
-  auto first = (*client)->Next();
   if (!first.ok() || !first->ready) {
     release();
     return SetStatus(res, first.ok() ? absl::InternalError("the root's first event was not ready")
