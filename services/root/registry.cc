@@ -5,7 +5,6 @@
 #include <algorithm>
 
 #include "absl/strings/str_cat.h"
-#include "absl/time/time.h"
 #include "daemon.h"
 
 namespace transtick {
@@ -26,19 +25,10 @@ constexpr auto kStall = std::chrono::seconds(1);
 }  // namespace
 
 Registry::Registry(std::chrono::milliseconds expiry)
-    : expiry_(expiry), last_look_(std::chrono::steady_clock::now()) {
-  clock_ = std::thread([this] {
-    while (!stop_.WaitForNotificationWithTimeout(absl::FromChrono(kLook))) {
-      absl::MutexLock lock(&mu_);
-      LookLocked(std::chrono::steady_clock::now());
-    }
-  });
-}
-
-Registry::~Registry() {
-  stop_.Notify();
-  clock_.join();
-}
+    : expiry_(expiry), last_look_(std::chrono::steady_clock::now()), clock_(kLook, [this] {
+        absl::MutexLock lock(&mu_);
+        LookLocked(std::chrono::steady_clock::now());
+      }) {}
 
 void Registry::LookLocked(std::chrono::steady_clock::time_point now) {
   const auto gap = now - last_look_;

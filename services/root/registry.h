@@ -10,14 +10,13 @@
 #include <map>
 #include <memory>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "absl/base/thread_annotations.h"
 #include "absl/status/statusor.h"
 #include "absl/synchronization/mutex.h"
-#include "absl/synchronization/notification.h"
 #include "cluster.grpc.pb.h"
+#include "expiry.h"
 
 namespace transtick {
 
@@ -53,7 +52,6 @@ class Registry {
   // root itself did not run (a paused process, a stalled machine) and could
   // not have heard any heartbeat, so the gap is not held against a worker.
   explicit Registry(std::chrono::milliseconds expiry = std::chrono::seconds(5));
-  ~Registry();
   Registry(const Registry&) = delete;
   Registry& operator=(const Registry&) = delete;
 
@@ -95,9 +93,8 @@ class Registry {
   std::map<std::string, std::chrono::steady_clock::time_point> last_seen_ ABSL_GUARDED_BY(mu_);
   std::map<std::string, std::shared_ptr<WorkerEntry>> workers_ ABSL_GUARDED_BY(mu_);  // by id
   std::map<std::string, HeldSlab> held_ ABSL_GUARDED_BY(mu_);  // by worker id
-  // The clock's thread, started by the constructor, joined by the destructor.
-  absl::Notification stop_;
-  std::thread clock_;
+  // The clock: last, so that it stops before the rest goes.
+  Ticker clock_;
 };
 
 // Whether a failed call means the worker itself is gone (rather than a
