@@ -195,10 +195,12 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
     // It looks every 100 ms and is woken at once when the wait ends, so it
     // adds nothing to a frame's time (it used to sleep its 100 ms out).
     absl::Notification awaited;
-    // Once every deposit is in, the image is the display's alone: a worker
-    // lost then (or a machine that stalled past its registration's expiry)
-    // costs its statistics, not the frame.
-    std::atomic<bool> all_in{false};
+    // Every deposit is in once the display says the frame is complete: the
+    // image is then the display's alone, so a worker lost (or a machine that
+    // stalled past its registration's expiry) costs its statistics, not the
+    // frame. The workers end the frame (and report) while its image is
+    // resolved and its rows pass through here.
+    std::atomic<bool> complete{false};
     std::string stalled;  // written by the watchdog before it cancels
     std::thread watchdog([&] {
       auto last_look = Clock::now();
@@ -213,7 +215,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
         }
         last_look = now;
         for (const Member& m : members) {
-          if (!awaited.HasBeenNotified() && !all_in.load() && !registry_.Alive(m.worker->id)) {
+          if (!awaited.HasBeenNotified() && !complete.load() && !registry_.Alive(m.worker->id)) {
             stalled = absl::StrCat("worker ", m.worker->address, " stopped answering");
             ctx.TryCancel();
             return;
@@ -232,17 +234,12 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
     int rows = 0;
     auto last_progress = Clock::now() - std::chrono::seconds(1);
     absl::Status relay;
-    // Every deposit is in once the display says the frame is complete: the
-    // workers end the frame (and report) while its image is resolved and
-    // its rows pass through here.
     std::thread ender;
-    bool complete = false;
     while (reader->Read(&p)) {
       last_message = Clock::now().time_since_epoch().count();
       if (cancelled()) ctx.TryCancel();
       if (p.complete() && !ender.joinable()) {
         complete = true;
-        all_in = true;
         ender = std::thread([&] { end_all(/*cancel=*/false); });
         if (on_traced) on_traced();
         for (v1::ImageChunk& c : early) {
