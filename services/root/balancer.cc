@@ -186,6 +186,7 @@ class PreviousFrame : public Balancer {
     report->cuts_before = report->cuts_after = layout.Cuts();
     return absl::OkStatus();
   }
+  bool LearnsFromProfiles() const override { return true; }
   void Learn(const FrameResult& frame, const Layout& layout, BalanceMemory& memory,
              BalanceReport* report) override {
     // What this frame's cut moves cost: the price of the next move.

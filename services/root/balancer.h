@@ -45,6 +45,9 @@ class Balancer {
   // members (Layout::Members).
   virtual absl::Status Plan(const v1::View& view, BalanceMemory& memory, Layout& layout,
                             const Prerender& prerender, BalanceReport* report) = 0;
+  // Whether Learn reads the frames' work profiles, so that the workers
+  // must count them (FrameSpec.work_profile; a prerender always counts).
+  virtual bool LearnsFromProfiles() const { return false; }
   // After the frame: what the next frame starts from.
   virtual void Learn(const FrameResult& frame, const Layout& layout, BalanceMemory& memory,
                      BalanceReport* report);

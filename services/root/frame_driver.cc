@@ -46,9 +46,9 @@ FrameDriver::FrameDriver(Registry& registry, std::string display, double frame_t
 absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedDataset& data,
                                              const Layout& layout,
                                              const std::function<bool()>& cancelled,
-                                             const ProgressFn& on_progress,
-                                             const ChunkFn& on_chunk,
-                                             const std::function<void()>& on_traced) {
+                                             const ProgressFn& on_progress, const ChunkFn& on_chunk,
+                                             const std::function<void()>& on_traced,
+                                             bool work_profile) {
   const uint64_t frame_id = next_frame_id_++;
   const auto t0 = Clock::now();
   const double started_unix =
@@ -78,6 +78,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
       spec.set_row_begin(std::min(r, view.height()));
       spec.set_row_end(view.height());
       spec.set_row_step(rings);
+      spec.set_work_profile(work_profile || !on_chunk);
       members.push_back({ring.workers[i], std::move(spec), r});
     }
   }

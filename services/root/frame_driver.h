@@ -48,13 +48,16 @@ class FrameDriver {
   // the display sends no image, only completion. `on_traced`, when set, is
   // called once, on the calling thread, as soon as the display holds every
   // deposit (before the image comes and the workers report): the cluster's
-  // tracers are free for the next frame from then on. Fails UNAVAILABLE
+  // tracers are free for the next frame from then on. The workers count
+  // their work profiles (FrameSpec.work_profile) for a prerender and when
+  // `work_profile` is set. Fails UNAVAILABLE
   // when a worker or the display failed (a failed worker is dropped from
   // the registry), CANCELLED when `cancelled()` turned true.
   absl::StatusOr<FrameResult> Run(const v1::View& view, const LoadedDataset& data,
                                   const Layout& layout, const std::function<bool()>& cancelled,
                                   const ProgressFn& on_progress, const ChunkFn& on_chunk,
-                                  const std::function<void()>& on_traced = nullptr);
+                                  const std::function<void()>& on_traced = nullptr,
+                                  bool work_profile = false);
 
  private:
   Registry& registry_;

@@ -299,11 +299,13 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
     // The prerender and the plane moves it caused.
     if (prerendered) out.report.balance_ms = MsSince(balance_start);
     if (task.on_attempt) task.on_attempt();
-    auto result = driver_.Run(*local_view, data, layout, task.cancelled, task.on_progress,
-                              task.on_chunk, [&] {
-                                turn.Release();
-                                if (task.on_traced) task.on_traced();
-                              });
+    auto result = driver_.Run(
+        *local_view, data, layout, task.cancelled, task.on_progress, task.on_chunk,
+        [&] {
+          turn.Release();
+          if (task.on_traced) task.on_traced();
+        },
+        task.balancer->LearnsFromProfiles());
     if (!result.ok()) {
       status = result.status();
       if (status.code() != absl::StatusCode::kUnavailable || task.cancelled()) return status;

@@ -616,11 +616,14 @@ bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>*
   const int64_t k1 = std::min<int64_t>(k0 + kWorkUnit, pixels_in_rows_);
   const int width = camera_.width();
   const int me = spec_.index();
+  // One record for all: Primary fills it whole when it is this slab's (a
+  // record made per pixel cost a tenth of this loop, mostly for pixels outside
+  // the slab's footprint).
+  RayDescriptor ray;
   for (int64_t k = k0; k < k1; ++k) {
     const int row = spec_.row_begin() + static_cast<int>(k / width) * spec_.row_step();
     const int col = static_cast<int>(k % width);
     for (int s = 0; s < samples_; ++s) {
-      RayDescriptor ray;
       switch (layout_.Primary(me, col, row, s, samples_, tracer_, &ray)) {
         case RingLayout::PrimaryRole::kTrace:
           out->push_back(ray);
@@ -629,7 +632,7 @@ bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>*
           misses->push_back(tracer_.MissDeposit(static_cast<uint32_t>(row) * width + col));
           // Only the first slab deposits misses: their cost stays with
           // its first plane wherever the cuts go.
-          plane_work[0] += tracer_.work_weights().ray;
+          if (plane_work) plane_work[0] += tracer_.work_weights().ray;
           break;
         case RingLayout::PrimaryRole::kNone:
           break;
@@ -642,8 +645,12 @@ bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>*
 void Frame::TraceLoop(int thread_index) {
   NameThread("tt-tracer");
   ThreadStats& st = thread_stats_[thread_index];
-  st.plane_work.assign(scene_->y_end() - scene_->y_begin(), 0);
-  st.counters.plane_work = st.plane_work.data();
+  // The work profile, when the root asked for it: counting it costs the
+  // walk about 5% of its instructions.
+  if (spec_.work_profile()) {
+    st.plane_work.assign(scene_->y_end() - scene_->y_begin(), 0);
+    st.counters.plane_work = st.plane_work.data();
+  }
   std::vector<RayDescriptor> work;
   std::vector<Deposit> misses;
   std::string to_left, to_right, deposits;
@@ -661,7 +668,8 @@ void Frame::TraceLoop(int thread_index) {
     const double cpu0 = ThreadCpuMs();
     work.clear();
     // Rays from neighbours first: they free the nodes waiting on them.
-    bool got = inbox_.TryPop(kWorkUnit, &work) || NextPrimaries(&work, &misses, st.plane_work.data());
+    bool got =
+        inbox_.TryPop(kWorkUnit, &work) || NextPrimaries(&work, &misses, st.counters.plane_work);
     for (const Deposit& d : misses) AppendDeposit(d, &deposits);
     misses.clear();
     if (!got) {
@@ -787,12 +795,16 @@ v1::WorkerFrameStats Frame::Finish(bool cancel) {
   }
   stats.set_rays_truncated(truncated);
   stats.set_rays_rejected(rejected_);
-  // A tracer that never started has no profile yet: its planes count 0.
-  std::vector<uint64_t> work(scene_->y_end() - scene_->y_begin(), 0);
-  for (const ThreadStats& t : thread_stats_) {
-    for (size_t y = 0; y < t.plane_work.size() && y < work.size(); ++y) work[y] += t.plane_work[y];
+  if (spec_.work_profile()) {
+    // A tracer that never started has no profile yet: its planes count 0.
+    std::vector<uint64_t> work(scene_->y_end() - scene_->y_begin(), 0);
+    for (const ThreadStats& t : thread_stats_) {
+      for (size_t y = 0; y < t.plane_work.size() && y < work.size(); ++y) {
+        work[y] += t.plane_work[y];
+      }
+    }
+    for (uint64_t w : work) stats.add_plane_work(w);
   }
-  for (uint64_t w : work) stats.add_plane_work(w);
   stats.set_elapsed_ms(elapsed);
   stats.set_active_ms(std::max(0.0, elapsed - idle / std::max<size_t>(1, thread_stats_.size())));
   stats.set_cpu_ms(cpu);

@@ -217,8 +217,8 @@ class Frame : public std::enable_shared_from_this<Frame> {
   v1::WorkerFrameStats Finish(bool cancel);
   // Fills `out` with the next primary rays entering this slab, and
   // `misses` with the deposits of rays that miss the volume (counted in
-  // the work profile `plane_work`); false when every pixel has been
-  // generated.
+  // the work profile `plane_work` when it is not null); false when every
+  // pixel has been generated.
   bool NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>* misses,
                      uint64_t* plane_work);
   void ReceiveBatch(const v1::RayBatch& batch, Link& from);
@@ -289,7 +289,9 @@ class Frame : public std::enable_shared_from_this<Frame> {
     double cpu_ms = 0;  // CPU time (CLOCK_THREAD_CPUTIME_ID) spent tracing
     TraceCounters counters;
     uint64_t primary = 0, shadow = 0;
-    std::vector<uint64_t> plane_work;  // counters.plane_work points here
+    // counters.plane_work points here when the frame counts its work
+    // profile (FrameSpec.work_profile); empty otherwise.
+    std::vector<uint64_t> plane_work;
   };
   std::vector<ThreadStats> thread_stats_;
 };
