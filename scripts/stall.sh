@@ -11,7 +11,7 @@
 # A test that fails under the freezes and passes without them is a defect
 # of this kind, or of the test's own patience (tests/nodes_fixture.h,
 # Eventually). The freezes fall at random points of the suite, so one run
-# covers different ground from the next; a clean run takes about four
+# covers different ground from the next; a clean run takes two to three
 # minutes with the defaults on 2 cores.
 #
 # Usage: scripts/stall.sh [--period S] [--stall S] [--build DIR] [--] [COMMAND...]
