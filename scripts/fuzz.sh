@@ -61,6 +61,7 @@ mkdir -p "$work/seeds/job" "$work/seeds/sticks" "$work/artifacts" "$work/tmp"
 cp examples/*_job.json tests/fuzz/corpus/job/*.json "$work/seeds/job/"
 # Inputs that once failed, kept as seeds so that every run replays them.
 cp tests/fuzz/corpus/volume/* "$work/seeds/volume/"
+cp tests/fuzz/corpus/batch/* "$work/seeds/batch/"
 
 # UB already aborts (-fno-sanitize-recover); print where.
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1}

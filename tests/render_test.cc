@@ -257,6 +257,53 @@ TEST(RenderTest, SmoothSurfacesDoNotShadowThemselves) {
   EXPECT_GT(voxel_fraction, 0.005);
 }
 
+// A hostile record can start a smooth ray a cell past its slab's plane
+// (Validate allows a cell of rounding between a ray's cell and its point).
+// The point it is shaded at, where its shadow ray starts and its gradient
+// is read, stays within a quarter voxel of the slab, so only stored planes
+// are read. It was clamped into the field's cell past the slab, and its
+// gradient read a plane past the slab's ghosts (found by batch_fuzzer).
+TEST(RenderTest, ASmoothHitPastTheSlabsPlaneIsShadedInTheSlab) {
+  // A ramp along y inside the material from y = 4 on: every point the rays
+  // start at is in it, with a gradient to light.
+  const Scene whole = FieldScene(
+      {32, 32, 32}, [](const Vec3& p) { return p.y - 4; }, SurfaceModel::kSmooth);
+  constexpr int kBegin = 8, kEnd = 16;
+  const Scene slab = whole.Slab(kBegin, kEnd);
+  const Camera cam = MakeCamera({32, 32, 32}, 24, 30, 20);
+  const Tracer tracer(slab, RenderSettings{}, cam);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> unit(-1, 1), past(0.0, 0.999);
+  int shaded = 0;
+  for (int i = 0; i < 2000; ++i) {
+    // The record's cell is the slab's last plane (or its first), and its
+    // point up to a cell past the plane.
+    const bool above = i % 2 == 0;
+    const Vec3 point{16 + 8 * unit(rng), above ? kEnd + past(rng) : kBegin - past(rng),
+                     16 + 8 * unit(rng)};
+    const Vec3 d = Normalize(Vec3{unit(rng), unit(rng), unit(rng)});
+    RayDescriptor ray;
+    ray.direction = d;
+    ray.t = 50;
+    ray.t_start = 40;
+    ray.origin = point - d * ray.t;
+    ray.cell = {static_cast<int32_t>(point.x), above ? kEnd - 1 : kBegin,
+                static_cast<int32_t>(point.z)};
+    ray.kind = RayKind::kPrimary;
+    if (!tracer.Validate(ray).ok()) continue;
+    std::vector<RayDescriptor> spawned;
+    Deposit deposit;
+    TraceCounters counters;
+    tracer.Trace(ray, spawned, deposit, counters);
+    for (const RayDescriptor& s : spawned) {
+      ++shaded;
+      ASSERT_GE(s.origin.y, kBegin - 0.25) << "point " << point.y;
+      ASSERT_LE(s.origin.y, kEnd + 0.25) << "point " << point.y;
+    }
+  }
+  EXPECT_GT(shaded, 200);  // the records were taken and shaded
+}
+
 // A wall 0.7 voxel thick (thinner than a voxel, so its field crosses the
 // threshold twice within one or two cells) between the light and a back
 // wall: the shadow ray meets both roots and the light does not leak.

@@ -407,19 +407,21 @@ Tracer::Outcome Tracer::TraceSmooth(RayDescriptor& ray, std::vector<RayDescripto
 }
 
 Vec3 Tracer::HitPoint(const RayDescriptor& ray, double t, const std::array<int, 3>& cell) const {
-  // In the cell of the field (c - 0.5 .. c + 0.5), the volume, and a
-  // quarter voxel of the slab: every plane a gradient there reads is
-  // stored.
+  // In the cell of the field (c - 0.5 .. c + 0.5) and the volume, then
+  // within a quarter voxel of the slab, whatever the cell: every plane a
+  // gradient there reads is stored. A ray's walk keeps to cells of its
+  // slab, but a hostile record can start one a cell past the slab's plane
+  // (Validate allows a cell of rounding), and the gradient of a point
+  // clamped into that cell read a plane past the slab's ghosts (found by
+  // batch_fuzzer). Where the cell meets the slab, as for every ray a node
+  // sends, the two clamps give the point the one clamp to both gave before.
   const auto& dims = scene_.dims();
   Vec3 p = ray.origin + ray.direction * t;
   for (int a = 0; a < 3; ++a) {
-    double lo = std::max(cell[a] - 0.5, 0.0), hi = std::min(cell[a] + 0.5, double(dims[a]));
-    if (a == 1) {
-      lo = std::max(lo, scene_.y_begin() - 0.25);
-      hi = std::min(hi, scene_.y_end() + 0.25);
-    }
+    const double lo = std::max(cell[a] - 0.5, 0.0), hi = std::min(cell[a] + 0.5, double(dims[a]));
     p[a] = std::max(lo, std::min(hi, p[a]));
   }
+  p.y = std::clamp(p.y, scene_.y_begin() - 0.25, scene_.y_end() + 0.25);
   return p;
 }
 
