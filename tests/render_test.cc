@@ -459,10 +459,12 @@ bool HitsBox(const WorldRay& r, const Vec3& lo, const Vec3& hi) {
 
 TEST(CameraTest, FootprintHoldsEveryPixelWhoseRayMeetsTheBox) {
   // Slabs of a 80x60x40 volume, from many views: no pixel outside a slab's
-  // footprint sees the slab, and thin slabs seen from the side leave most
-  // rows out.
+  // footprint sees the slab at its centre or at any of 9 samples across
+  // it, thin slabs seen from the side leave most rows out, and a footprint
+  // follows the slab's outline rather than its bounding rectangle.
   const Vec3 extent{80, 60, 40};
   int rows_left_out = 0;
+  int64_t in_footprints = 0, in_rectangles = 0, seen = 0;
   for (Projection projection : {Projection::kPerspective, Projection::kOrthographic}) {
     for (auto [az, el, zoom] : {std::tuple{0.0, 0.0, 1.0}, std::tuple{45.0, 0.0, 1.0},
                                 std::tuple{120.0, 35.0, 1.0}, std::tuple{10.0, 89.0, 1.0},
@@ -478,11 +480,26 @@ TEST(CameraTest, FootprintHoldsEveryPixelWhoseRayMeetsTheBox) {
       ASSERT_TRUE(cam.ok());
       for (auto [y0, y1] : {std::pair{0, 60}, std::pair{0, 7}, std::pair{29, 31}, std::pair{50, 60}}) {
         const Vec3 lo{-40, y0 - 30.0, -20}, hi{40, y1 - 30.0, 20};
-        const ImageRect r = cam->Footprint(lo, hi);
-        rows_left_out += 70 - (r.y1 - r.y0);
+        const ImageSpans r = cam->Footprint(lo, hi);
+        ASSERT_EQ(r.rows.size(), 70u);
+        int x_lo = 90, x_hi = 0, y_lo = 70, y_hi = 0;
+        for (int py = 0; py < 70; ++py) {
+          const auto [first, last] = r.Row(py);
+          if (first >= last) {
+            ++rows_left_out;
+            continue;
+          }
+          in_footprints += last - first;
+          x_lo = std::min(x_lo, first), x_hi = std::max(x_hi, last);
+          y_lo = std::min(y_lo, py), y_hi = std::max(y_hi, py + 1);
+        }
+        if (x_lo < x_hi) in_rectangles += int64_t{x_hi - x_lo} * (y_hi - y_lo);
         for (int py = 0; py < 70; ++py) {
           for (int px = 0; px < 90; ++px) {
-            if (HitsBox(cam->Generate(px, py), lo, hi)) {
+            for (int s = 0; s < 9; ++s) {
+              const auto [ox, oy] = SampleOffset(s, 9);
+              if (!HitsBox(cam->GenerateAt(px, py, ox, oy), lo, hi)) continue;
+              ++seen;
               ASSERT_TRUE(r.Contains(px, py)) << az << " " << el << " slab " << y0 << "-" << y1
                                                << " pixel " << px << "," << py;
             }
@@ -492,11 +509,13 @@ TEST(CameraTest, FootprintHoldsEveryPixelWhoseRayMeetsTheBox) {
     }
   }
   EXPECT_GT(rows_left_out, 1000);
+  EXPECT_GT(seen, 0);
+  EXPECT_LT(in_footprints, 0.9 * in_rectangles) << in_footprints << " " << in_rectangles;
   // A box behind a perspective eye: the whole image, not a guess.
   auto cam = Camera::Create(CameraSpec{}, extent);
-  const ImageRect all = cam->Footprint({-1, -1, 1000}, {1, 1, 1001});
-  EXPECT_EQ(all.x1 - all.x0, 400);
-  EXPECT_EQ(all.y1 - all.y0, 400);
+  const ImageSpans all = cam->Footprint({-1, -1, 1000}, {1, 1, 1001});
+  ASSERT_EQ(all.rows.size(), 400u);
+  for (const auto& row : all.rows) EXPECT_EQ(row, (std::pair{0, 400}));
 }
 
 TEST(FramebufferTest, CompletesPixelsInAnyOrder) {

@@ -1,5 +1,7 @@
 #include "transtick/camera.h"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <numbers>
 
@@ -96,40 +98,79 @@ WorldRay Camera::GenerateAt(int px, int py, double ox, double oy) const {
   return {eye_ + right_ * sx + up_ * sy, forward_};
 }
 
-ImageRect Camera::Footprint(const Vec3& lo, const Vec3& hi) const {
-  const ImageRect whole{0, width_, 0, height_};
+ImageSpans Camera::Footprint(const Vec3& lo, const Vec3& hi) const {
+  ImageSpans spans;
+  spans.rows.assign(height_, {0, width_});  // the whole image
   const double aspect = static_cast<double>(width_) / height_;
-  double sx_min = HUGE_VAL, sx_max = -HUGE_VAL, sy_min = HUGE_VAL, sy_max = -HUGE_VAL;
+  // The corners in pixel coordinates: pixel (c, r) spans [c - 0.5, c + 0.5)
+  // x [r - 0.5, r + 0.5), its centre at (c, r) (Generate, inverted).
+  std::array<std::pair<double, double>, 8> points;
   for (int corner = 0; corner < 8; ++corner) {
     const Vec3 p{corner & 1 ? hi[0] : lo[0], corner & 2 ? hi[1] : lo[1], corner & 4 ? hi[2] : lo[2]};
     const Vec3 d = p - eye_;
     double sx = Dot(d, right_), sy = Dot(d, up_);
     if (projection_ == Projection::kPerspective) {
       const double depth = Dot(d, forward_);
-      if (depth <= 1e-9 * (1 + Length(d))) return whole;
+      if (depth <= 1e-9 * (1 + Length(d))) return spans;
       sx /= depth;
       sy /= depth;
     }
-    sx_min = std::min(sx_min, sx);
-    sx_max = std::max(sx_max, sx);
-    sy_min = std::min(sy_min, sy);
-    sy_max = std::max(sy_max, sy);
+    const double x = (sx / (aspect * half_height_) + 1.0) * 0.5 * width_ - 0.5;
+    const double y = (1.0 - sy / half_height_) * 0.5 * height_ - 0.5;
+    if (!std::isfinite(x) || !std::isfinite(y)) return spans;
+    points[corner] = {x, y};
   }
-  // Inverse of Generate: pixel centre px + 0.5 = (sx / (aspect h) + 1) w / 2.
-  auto px = [&](double sx) { return (sx / (aspect * half_height_) + 1.0) * 0.5 * width_ - 0.5; };
-  auto py = [&](double sy) { return (1.0 - sy / half_height_) * 0.5 * height_ - 0.5; };
+  // The box projects onto the convex hull of its corners (Andrew's
+  // monotone chain, counterclockwise in these coordinates).
+  std::sort(points.begin(), points.end());
+  std::array<std::pair<double, double>, 16> hull;
+  int n = 0;
+  auto turn = [](const std::pair<double, double>& o, const std::pair<double, double>& a,
+                 const std::pair<double, double>& b) {
+    return (a.first - o.first) * (b.second - o.second) -
+           (a.second - o.second) * (b.first - o.first);
+  };
+  for (int i = 0; i < 8; ++i) {
+    while (n >= 2 && turn(hull[n - 2], hull[n - 1], points[i]) <= 0) --n;
+    hull[n++] = points[i];
+  }
+  for (int i = 6, lower = n + 1; i >= 0; --i) {
+    while (n >= lower && turn(hull[n - 2], hull[n - 1], points[i]) <= 0) --n;
+    hull[n++] = points[i];
+  }
+  n = std::max(n - 1, 1);        // the last point repeats the first
   constexpr double kMargin = 2;  // pixels, against rounding
   auto clamp = [](double v, int lo_limit, int hi_limit) {
     if (!(v > lo_limit)) return lo_limit;  // also NaN
     if (v > hi_limit) return hi_limit;
     return static_cast<int>(v);
   };
-  ImageRect r;
-  r.x0 = clamp(std::floor(px(sx_min) - kMargin), 0, width_);
-  r.x1 = clamp(std::ceil(px(sx_max) + kMargin) + 1, 0, width_);
-  r.y0 = clamp(std::floor(py(sy_max) - kMargin), 0, height_);
-  r.y1 = clamp(std::ceil(py(sy_min) + kMargin) + 1, 0, height_);
-  return r;
+  for (int row = 0; row < height_; ++row) {
+    // The hull's extent along x within the row's band, margin included:
+    // the ends of its edges' parts in the band (and a lone point's).
+    const double y_lo = row - 0.5 - kMargin, y_hi = row + 0.5 + kMargin;
+    double x_min = HUGE_VAL, x_max = -HUGE_VAL;
+    auto take = [&](double x) {
+      x_min = std::min(x_min, x);
+      x_max = std::max(x_max, x);
+    };
+    for (int i = 0; i < n; ++i) {
+      const auto [ax, ay] = hull[i];
+      const auto [bx, by] = hull[(i + 1) % n];
+      if (ay >= y_lo && ay <= y_hi) take(ax);
+      if (std::max(ay, by) < y_lo || std::min(ay, by) > y_hi || ay == by) continue;
+      for (double y : {y_lo, y_hi}) {
+        if ((y - ay) * (y - by) <= 0) take(ax + (bx - ax) * (y - ay) / (by - ay));
+      }
+    }
+    if (x_min > x_max) {
+      spans.rows[row] = {0, 0};
+      continue;
+    }
+    spans.rows[row] = {clamp(std::floor(x_min - kMargin), 0, width_),
+                       clamp(std::ceil(x_max + kMargin) + 1, 0, width_)};
+  }
+  return spans;
 }
 
 absl::StatusOr<CameraSpec> ToVolumeFrame(const CameraSpec& world, const Direction& direction,

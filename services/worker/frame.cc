@@ -620,22 +620,37 @@ bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>*
   // record made per pixel cost a tenth of this loop, mostly for pixels outside
   // the slab's footprint).
   RayDescriptor ray;
-  for (int64_t k = k0; k < k1; ++k) {
+  for (int64_t k = k0; k < k1;) {
+    // The unit's pixels in one row at a time: columns [col, end).
     const int row = spec_.row_begin() + static_cast<int>(k / width) * spec_.row_step();
     const int col = static_cast<int>(k % width);
-    for (int s = 0; s < samples_; ++s) {
-      switch (layout_.Primary(me, col, row, s, samples_, tracer_, &ray)) {
-        case RingLayout::PrimaryRole::kTrace:
-          out->push_back(ray);
-          break;
-        case RingLayout::PrimaryRole::kMiss:
-          misses->push_back(tracer_.MissDeposit(static_cast<uint32_t>(row) * width + col));
-          // Only the first slab deposits misses: their cost stays with
-          // its first plane wherever the cuts go.
-          if (plane_work) plane_work[0] += tracer_.work_weights().ray;
-          break;
-        case RingLayout::PrimaryRole::kNone:
-          break;
+    const int end = static_cast<int>(std::min<int64_t>(width, col + (k1 - k)));
+    k += end - col;
+    // Outside its footprint a slab has nothing to do for a pixel but
+    // deposit the misses of pixels in no footprint, which slab 0 does
+    // (RingLayout::Primary): the others look at their footprint's columns
+    // only. With 8 slabs each had looked at every pixel.
+    int from = col, to = end;
+    if (me != 0) {
+      const auto [first, last] = layout_.Footprint(me).Row(row);
+      from = std::max(from, first);
+      to = std::min(to, last);
+    }
+    for (int c = from; c < to; ++c) {
+      for (int s = 0; s < samples_; ++s) {
+        switch (layout_.Primary(me, c, row, s, samples_, tracer_, &ray)) {
+          case RingLayout::PrimaryRole::kTrace:
+            out->push_back(ray);
+            break;
+          case RingLayout::PrimaryRole::kMiss:
+            misses->push_back(tracer_.MissDeposit(static_cast<uint32_t>(row) * width + c));
+            // Only the first slab deposits misses: their cost stays with
+            // its first plane wherever the cuts go.
+            if (plane_work) plane_work[0] += tracer_.work_weights().ray;
+            break;
+          case RingLayout::PrimaryRole::kNone:
+            break;
+        }
       }
     }
   }

@@ -4,6 +4,8 @@
 #define TRANSTICK_CAMERA_H_
 
 #include <optional>
+#include <utility>
+#include <vector>
 
 #include "absl/status/statusor.h"
 #include "transtick/vec.h"
@@ -54,11 +56,18 @@ inline constexpr int kMaxSamplesPerPixel = 64;
 // REQUIRES: 0 <= sample < samples <= kMaxSamplesPerPixel.
 std::array<double, 2> SampleOffset(int sample, int samples);
 
-// Pixels [x0, x1) x [y0, y1) of an image.
-struct ImageRect {
-  int x0 = 0, x1 = 0, y0 = 0, y1 = 0;
-  bool Contains(int x, int y) const { return x >= x0 && x < x1 && y >= y0 && y < y1; }
-  bool empty() const { return x0 >= x1 || y0 >= y1; }
+// Pixels of an image, row by row: columns [first, second) of each row
+// (none when first >= second).
+struct ImageSpans {
+  std::vector<std::pair<int, int>> rows;  // one per row of the image
+  bool Contains(int x, int y) const {
+    if (static_cast<size_t>(y) >= rows.size()) return false;
+    return x >= rows[y].first && x < rows[y].second;
+  }
+  // The columns of row y; none for a row outside the image.
+  std::pair<int, int> Row(int y) const {
+    return static_cast<size_t>(y) < rows.size() ? rows[y] : std::pair{0, 0};
+  }
 };
 
 // Immutable, thread-safe.
@@ -74,11 +83,11 @@ class Camera {
   // [0, 1) across the pixel.
   WorldRay GenerateAt(int px, int py, double ox, double oy) const;
 
-  // Pixels whose rays may meet the world-space box [lo, hi]: a conservative
-  // rectangle (the box's corners projected, plus a margin against
-  // rounding), clipped to the image. The whole image when a corner lies
-  // behind a perspective eye.
-  ImageRect Footprint(const Vec3& lo, const Vec3& hi) const;
+  // Pixels whose rays may meet the world-space box [lo, hi], at any point
+  // of the pixel: the convex hull of the box's corners projected, row by
+  // row, with a margin of two pixels against rounding, clipped to the
+  // image. The whole image when a corner lies behind a perspective eye.
+  ImageSpans Footprint(const Vec3& lo, const Vec3& hi) const;
 
   int width() const { return width_; }
   int height() const { return height_; }

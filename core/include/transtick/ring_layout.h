@@ -59,8 +59,8 @@ class RingLayout {
   }
 
   // The pixels whose primary rays may enter the slab: Camera::Footprint of
-  // the slab's world box, a conservative rectangle.
-  const ImageRect& Footprint(int slab) const { return footprints_[slab]; }
+  // the slab's world box, conservative, row by row.
+  const ImageSpans& Footprint(int slab) const { return footprints_[slab]; }
 
   // What slab `slab` does about the primary ray of pixel (col, row), the
   // paper's distributed policy narrowed by the footprints:
@@ -88,7 +88,7 @@ class RingLayout {
  private:
   std::vector<int> cuts_;
   std::array<int, 3> dims_;
-  std::vector<ImageRect> footprints_;  // one per slab
+  std::vector<ImageSpans> footprints_;  // one per slab
   Camera camera_;
 };
 
