@@ -60,13 +60,13 @@ std::array<double, 2> SampleOffset(int sample, int samples);
 // (none when first >= second).
 struct ImageSpans {
   std::vector<std::pair<int, int>> rows;  // one per row of the image
-  bool Contains(int x, int y) const {
-    if (static_cast<size_t>(y) >= rows.size()) return false;
-    return x >= rows[y].first && x < rows[y].second;
-  }
   // The columns of row y; none for a row outside the image.
   std::pair<int, int> Row(int y) const {
     return static_cast<size_t>(y) < rows.size() ? rows[y] : std::pair{0, 0};
+  }
+  bool Contains(int x, int y) const {
+    const auto [first, last] = Row(y);
+    return x >= first && x < last;
   }
 };
 
