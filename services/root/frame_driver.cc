@@ -43,12 +43,11 @@ FrameDriver::FrameDriver(Registry& registry, std::string display, double frame_t
       << 8;
 }
 
-absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedDataset& data,
-                                             const Layout& layout,
-                                             const std::function<bool()>& cancelled,
-                                             const ProgressFn& on_progress, const ChunkFn& on_chunk,
-                                             const std::function<void()>& on_traced,
-                                             bool work_profile) {
+absl::StatusOr<FrameResult> FrameDriver::Run(
+    const v1::View& view, const LoadedDataset& data, const Layout& layout,
+    const std::function<bool()>& cancelled, const ProgressFn& on_progress, const ChunkFn& on_chunk,
+    const std::function<void()>& on_traced, bool work_profile,
+    const std::function<void(const FrameResult&)>& on_reported) {
   const uint64_t frame_id = next_frame_id_++;
   const auto t0 = Clock::now();
   const double started_unix =
@@ -129,6 +128,20 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
               members[i].worker->stub->async()->EndFrame(ctx, &end, &stats[i], std::move(done));
             });
     for (size_t i = 0; i < members.size(); ++i) stats[i].set_ring(members[i].ring);
+  };
+  // The frame's result as it stands: its time so far and the reports.
+  auto result_now = [&] {
+    FrameResult result;
+    result.frame_ms = MsSince(t0);
+    result.started_unix = started_unix;
+    result.frame_id = frame_id;
+    result.workers = stats;
+    for (size_t i = 0; i < result.workers.size(); ++i) {
+      v1::WorkerFrameStats& w = result.workers[i];
+      if (w.id().empty()) w.set_id(members[i].worker->id);
+      if (w.address().empty()) w.set_address(members[i].worker->address);
+    }
+    return result;
   };
   auto abort = [&](const absl::Status& why) {
     grpc::ClientContext ctx;
@@ -241,7 +254,10 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
       if (cancelled()) ctx.TryCancel();
       if (p.complete() && !ender.joinable()) {
         complete = true;
-        ender = std::thread([&] { end_all(/*cancel=*/false); });
+        ender = std::thread([&] {
+          end_all(/*cancel=*/false);
+          if (on_reported) on_reported(result_now());
+        });
         if (on_traced) on_traced();
         for (v1::ImageChunk& c : early) {
           relay = on_chunk(std::move(c));
@@ -297,16 +313,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(const v1::View& view, const LoadedD
     }
     if (!complete) end_all(/*cancel=*/false);
   }
-  FrameResult result;
-  result.frame_ms = MsSince(t0);
-  result.started_unix = started_unix;
-  result.frame_id = frame_id;
-  for (size_t i = 0; i < stats.size(); ++i) {
-    if (stats[i].id().empty()) stats[i].set_id(members[i].worker->id);
-    if (stats[i].address().empty()) stats[i].set_address(members[i].worker->address);
-  }
-  result.workers = std::move(stats);
-  return result;
+  return result_now();
 }
 
 }  // namespace transtick

@@ -50,14 +50,19 @@ class FrameDriver {
   // deposit (before the image comes and the workers report): the cluster's
   // tracers are free for the next frame from then on. The workers count
   // their work profiles (FrameSpec.work_profile) for a prerender and when
-  // `work_profile` is set. Fails UNAVAILABLE
+  // `work_profile` is set. `on_reported`, when set, is called once the
+  // workers have ended the frame and reported, on another thread, while the
+  // image may still be on its way: with the statistics Run would return
+  // and the frame's time until then. It is not called when the frame
+  // fails before every deposit is in. Fails UNAVAILABLE
   // when a worker or the display failed (a failed worker is dropped from
   // the registry), CANCELLED when `cancelled()` turned true.
-  absl::StatusOr<FrameResult> Run(const v1::View& view, const LoadedDataset& data,
-                                  const Layout& layout, const std::function<bool()>& cancelled,
-                                  const ProgressFn& on_progress, const ChunkFn& on_chunk,
-                                  const std::function<void()>& on_traced = nullptr,
-                                  bool work_profile = false);
+  absl::StatusOr<FrameResult> Run(
+      const v1::View& view, const LoadedDataset& data, const Layout& layout,
+      const std::function<bool()>& cancelled, const ProgressFn& on_progress,
+      const ChunkFn& on_chunk, const std::function<void()>& on_traced = nullptr,
+      bool work_profile = false,
+      const std::function<void(const FrameResult&)>& on_reported = nullptr);
 
  private:
   Registry& registry_;

@@ -144,10 +144,11 @@ absl::Status JobRunner::RunJob(Job& job) {
         job.Publish(std::move(e));
       }
     }
-    // A frame balanced by the one before it plans only once that one has
-    // reported.
-    if (job.plan().datasets[key.dataset].balance[key.view] == v1::PREVIOUS_FRAME) {
-      if (absl::Status s = land(/*abandon=*/false); !s.ok()) return s;
+    // A frame balanced by the one before it plans only once that one's
+    // workers have reported and its balancer has learned from them; its
+    // image may still be on its way.
+    if (last && job.plan().datasets[key.dataset].balance[key.view] == v1::PREVIOUS_FRAME) {
+      last->learned.WaitForNotification();
     }
     auto next = std::make_shared<Flight>();
     next->frame = *frame;
@@ -155,6 +156,7 @@ absl::Status JobRunner::RunJob(Job& job) {
     next->thread = std::thread([this, &job, data, &chosen, me = next, before = last] {
       me->status = RunView(job, *data, chosen, *me, before.get());
       if (!me->traced.HasBeenNotified()) me->traced.Notify();
+      if (!me->learned.HasBeenNotified()) me->learned.Notify();
       if (!me->published.HasBeenNotified()) me->published.Notify();
     });
     if (absl::Status s = land(/*abandon=*/false); !s.ok()) {
@@ -299,13 +301,24 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
     // The prerender and the plane moves it caused.
     if (prerendered) out.report.balance_ms = MsSince(balance_start);
     if (task.on_attempt) task.on_attempt();
+    // The balancer learns as soon as the workers report, so that a frame
+    // that plans from this one's statistics need not wait for its image.
+    bool learned = false;
+    auto learn = [&](const FrameResult& result) {
+      {
+        absl::MutexLock lock(&task.data->mu);
+        task.balancer->Learn(result, layout, task.data->balance, &out.report);
+      }
+      learned = true;
+      if (task.on_learned) task.on_learned();
+    };
     auto result = driver_.Run(
         *local_view, data, layout, task.cancelled, task.on_progress, task.on_chunk,
         [&] {
           turn.Release();
           if (task.on_traced) task.on_traced();
         },
-        task.balancer->LearnsFromProfiles());
+        task.balancer->LearnsFromProfiles(), learn);
     if (!result.ok()) {
       status = result.status();
       if (status.code() != absl::StatusCode::kUnavailable || task.cancelled()) return status;
@@ -313,9 +326,9 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
       metrics_.Add("transtick_root_frame_retries_total", 1);
       continue;
     }
+    if (!learned) learn(*result);
     {
       absl::MutexLock lock(&task.data->mu);
-      task.balancer->Learn(*result, layout, task.data->balance, &out.report);
       task.data->costs = FrameCostsFrom(result->workers, CostsFor(task));
       task.data->costs_pixels = PixelsOf(task);
     }
@@ -361,6 +374,9 @@ absl::Status JobRunner::RunView(Job& job, LoadedDataset& data, FrameTask::Chosen
   task.on_attempt = [&] { held.reset(); };
   task.on_traced = [&] {
     if (!me.traced.HasBeenNotified()) me.traced.Notify();
+  };
+  task.on_learned = [&] {
+    if (!me.learned.HasBeenNotified()) me.learned.Notify();
   };
   task.on_chunk = [&](v1::ImageChunk chunk) -> absl::Status {
     // Images go out in frame order: the frame before finishes first.

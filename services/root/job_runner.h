@@ -69,6 +69,10 @@ struct FrameTask {
   // Once the frame has traced (FrameDriver::Run's on_traced), on the
   // rendering thread; again if a later attempt traces.
   std::function<void()> on_traced;
+  // Once the balancer has learned from the frame's statistics (the workers
+  // have reported; the image may still travel), on another thread; again
+  // if a later attempt reports.
+  std::function<void()> on_learned;
   bool interactive = false;
   // Rings (kAutoRings: chosen by the model for `frames` frames, once per
   // set of workers, and kept in `chosen` across the task's frames;
@@ -151,6 +155,7 @@ class JobRunner {
     absl::Status status;
     absl::Notification traced;     // every deposit is in, or the frame ended
     absl::Notification published;  // its image is out, or the frame ended
+    absl::Notification learned;    // its balancer learned from it, or the frame ended
     std::atomic<bool> abandon{false};  // the job ends: stop it
     std::thread thread;
   };
