@@ -532,8 +532,9 @@ double Imbalance(const std::vector<double>& active) {
 
 // ---------------------------------------------------------------- hops
 
-// N equal slabs of a whole-volume scene, their tracers and the ring's
-// layout, for tracing a frame slab by slab in this process (TraceRing).
+// The slabs of a whole-volume scene at the given cuts (equal ones unless
+// given), their tracers and the ring's layout, for tracing a frame slab by
+// slab in this process (TraceRing).
 struct EqualRing {
   static std::vector<int> Cuts(int planes, int n) {
     std::vector<int> cuts;
@@ -541,9 +542,13 @@ struct EqualRing {
     return cuts;
   }
   EqualRing(const Scene& whole, int n, const RenderSettings& settings, const Camera& camera)
-      : cuts(Cuts(whole.dims()[1], n)), layout(cuts, whole.dims(), whole.spacing(), camera) {
+      : EqualRing(whole, Cuts(whole.dims()[1], n), settings, camera) {}
+  EqualRing(const Scene& whole, std::vector<int> slab_cuts, const RenderSettings& settings,
+            const Camera& camera)
+      : cuts(std::move(slab_cuts)), layout(cuts, whole.dims(), whole.spacing(), camera) {
+    const size_t n = cuts.size() - 1;
     slabs.reserve(n);
-    for (int i = 0; i < n; ++i) slabs.push_back(whole.Slab(cuts[i], cuts[i + 1]));
+    for (size_t i = 0; i < n; ++i) slabs.push_back(whole.Slab(cuts[i], cuts[i + 1]));
     for (const Scene& sc : slabs) tracers.emplace_back(sc, settings, camera);
   }
   EqualRing(const EqualRing&) = delete;
@@ -955,6 +960,50 @@ int Deposits(const Options& o) {
   return ok ? 0 : 1;
 }
 
+// The cuts a series' last frame ran on, from its workers' slabs; empty
+// when they do not form one ring's slabs (several rings).
+std::vector<int> SeriesCuts(const Series& s) {
+  if (s.frames.empty()) return {};
+  std::vector<std::pair<int, int>> slabs;
+  for (const auto& w : s.frames.back().workers()) {
+    if (w.slab_size() != 2) return {};
+    slabs.emplace_back(w.slab(0), w.slab(1));
+  }
+  std::sort(slabs.begin(), slabs.end());
+  std::vector<int> cuts = {0};
+  for (const auto& [begin, end] : slabs) {
+    if (begin != cuts.back() || end <= begin) return {};
+    cuts.push_back(end);
+  }
+  return cuts;
+}
+
+// Each slab's tracer CPU time for one frame at `cuts`, traced in this
+// process slab by slab on one thread (TraceRing), the least of `repeat`
+// runs: the work the cuts give each worker, without the other workers'
+// threads on the same cores. With 8 workers on 2 cores, the cluster's own
+// max/mean CPU of the same cuts moves by 0.05-0.1 from one run to the next.
+std::vector<double> SlabCpuAlone(const Scene& whole, const std::vector<int>& cuts,
+                                 const v1::View& view, const Camera& camera, int repeat) {
+  const EqualRing ring(whole, cuts, ToRenderSettings(view), camera);
+  const size_t n = ring.tracers.size();
+  std::vector<double> least(n, std::numeric_limits<double>::infinity());
+  for (int r = 0; r < std::max(1, repeat); ++r) {
+    std::vector<double> ms(n, 0.0);
+    TraceRing(
+        ring.layout, ring.tracers, camera,
+        [&](int i, auto&& share) {
+          const double t0 = ThreadCpuMs();
+          share();
+          ms[i] += ThreadCpuMs() - t0;
+        },
+        [](int, const RayDescriptor&, const RayDescriptor&, const std::vector<RayDescriptor>&,
+           const TraceCounters&, Tracer::Outcome) {});
+    for (size_t i = 0; i < n; ++i) least[i] = std::min(least[i], ms[i]);
+  }
+  return least;
+}
+
 int Tables(const Options& o) {
   auto setup = Prepare(o);
   if (!setup.ok()) return Fail(setup.status());
@@ -965,9 +1014,11 @@ int Tables(const Options& o) {
     Image want;
   };
   std::vector<NamedView> views = {{"frontal", MakeView(o, 0), {}}, {"45 deg", MakeView(o, 45), {}}};
+  std::vector<Camera> cameras;
   for (auto& v : views) {
     auto camera = Camera::Create(*ToCameraSpec(v.view), setup->extent);
     if (!camera.ok()) return Fail(camera.status());
+    cameras.push_back(*camera);
     RenderStats rs;
     auto image = RenderLocal(*setup->scene, *camera, ToRenderSettings(v.view), cores, &rs);
     if (!image.ok()) return Fail(image.status());
@@ -1002,9 +1053,21 @@ int Tables(const Options& o) {
     }
   }
 
+  // The same cuts' balance measured alone (SlabCpuAlone), max/mean; 0
+  // when the cuts are not one ring's.
+  std::map<std::tuple<int, int, std::string>, double> alone;
+  for (const auto& [key, series] : results) {
+    const std::vector<int> cuts = SeriesCuts(series);
+    const int vi = std::get<1>(key);
+    alone[key] = cuts.empty() ? 0.0
+                              : Imbalance(SlabCpuAlone(*setup->scene, cuts, views[vi].view,
+                                                       cameras[vi], std::max(3, o.repeat)));
+  }
+
   std::printf("\nTable 1: per worker, elapsed / active / tracer CPU in ms\n");
-  std::printf("%-8s %-8s %-10s %-7s %-11s %9s %9s %9s %12s %12s\n", "workers", "view", "balance",
-              "worker", "slab", "elapsed", "active", "CPU", "max/mean act", "max/mean CPU");
+  std::printf("%-8s %-8s %-10s %-7s %-11s %9s %9s %9s %12s %12s %12s\n", "workers", "view",
+              "balance", "worker", "slab", "elapsed", "active", "CPU", "max/mean act",
+              "max/mean CPU", "CPU alone");
   for (int n : {2, 4}) {
     for (size_t vi = 0; vi < views.size(); ++vi) {
       for (const std::string balance : {"off", "test-rays"}) {
@@ -1018,7 +1081,8 @@ int Tables(const Options& o) {
           std::printf("%-8d %-8s %-10s %-7zu [%3d, %3d) %9.1f %9.1f %9.1f", n, views[vi].name,
                       balance.c_str(), i, w.slab(0), w.slab(1), elapsed[i], active[i], cpu[i]);
           if (i + 1 == elapsed.size()) {
-            std::printf(" %12.2f %12.2f", Imbalance(active), Imbalance(cpu));
+            std::printf(" %12.2f %12.2f %12.2f", Imbalance(active), Imbalance(cpu),
+                        alone[{n, static_cast<int>(vi), balance}]);
           }
           std::printf("\n");
         }
@@ -1027,8 +1091,9 @@ int Tables(const Options& o) {
   }
 
   std::printf("\nTable 2: frame time (ms) and relative efficiency T_2W / ((n/2) T_nW)\n");
-  std::printf("%-8s %-10s %-8s %9s %10s %11s %12s %12s %12s\n", "view", "balance", "workers",
-              "frame", "efficiency", "mean active", "max/mean act", "summed CPU", "max/mean CPU");
+  std::printf("%-8s %-10s %-8s %9s %10s %11s %12s %12s %12s %12s\n", "view", "balance", "workers",
+              "frame", "efficiency", "mean active", "max/mean act", "summed CPU", "max/mean CPU",
+              "CPU alone");
   for (size_t vi = 0; vi < views.size(); ++vi) {
     for (const std::string balance : {"off", "test-rays"}) {
       const double t2 = results[{2, static_cast<int>(vi), balance}].FrameMs();
@@ -1037,10 +1102,10 @@ int Tables(const Options& o) {
         const auto active = s.PerWorker(&v1::WorkerFrameStats::active_ms);
         const auto cpu = s.PerWorker(&v1::WorkerFrameStats::cpu_ms);
         const double t = s.FrameMs();
-        std::printf("%-8s %-10s %-8d %9.1f %10.2f %11.1f %12.2f %12.1f %12.2f\n", views[vi].name,
-                    balance.c_str(), n, t, t > 0 ? t2 / ((n / 2.0) * t) : 0.0,
+        std::printf("%-8s %-10s %-8d %9.1f %10.2f %11.1f %12.2f %12.1f %12.2f %12.2f\n",
+                    views[vi].name, balance.c_str(), n, t, t > 0 ? t2 / ((n / 2.0) * t) : 0.0,
                     active.empty() ? 0.0 : Sum(active) / active.size(), Imbalance(active), Sum(cpu),
-                    Imbalance(cpu));
+                    Imbalance(cpu), alone[{n, static_cast<int>(vi), balance}]);
       }
     }
   }
