@@ -405,15 +405,22 @@ TEST_F(ClusterTest, PreviousFrameBalancingCarriesCutsForward) {
   const std::string file = WriteConcentrated(dir_);
   auto cluster = StartCluster(3);
   ASSERT_TRUE(cluster.ok()) << cluster.status();
-  v1::View a = View(0, 0, true, "p0.exr"), b = View(10, 0, true, "p1.exr");
-  v1::Job job = MakeJob({a, b});
+  v1::View a = View(0, 0, true, "p0.exr"), b = View(10, 0, true, "p1.exr"),
+           c = View(20, 0, true, "p2.exr");
+  v1::Job job = MakeJob({a, b, c});
   job.mutable_datasets(0)->set_volume(file);
   job.set_balance(v1::PREVIOUS_FRAME);
   auto stats = SubmitAndWatch((*cluster)->root_address(), job, WatchOptions{});
   ASSERT_TRUE(stats.ok()) << stats.status();
-  ASSERT_EQ(stats->size(), 2u);
+  ASSERT_EQ(stats->size(), 3u);
   const auto& first = (*stats)[0];
   const auto& second = (*stats)[1];
+  // Each frame plans from the one before once that one's workers have
+  // reported (its image may still travel): the third runs on the cuts the
+  // second left, whether or not those moved.
+  EXPECT_EQ(std::vector<int>((*stats)[2].cuts_before().begin(), (*stats)[2].cuts_before().end()),
+            std::vector<int>(second.cuts_after().begin(), second.cuts_after().end()));
+  EXPECT_EQ(ReadImage(c.output())->rgb, Reference(dir_ + "/" + file, Materials(), c).rgb);
   // The first frame runs on uniform slabs and re-cuts toward the content;
   // the second runs on those cuts.
   EXPECT_EQ(std::vector<int>(first.cuts_before().begin(), first.cuts_before().end()),
