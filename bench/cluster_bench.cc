@@ -31,7 +31,10 @@
 // tables: the paper's Table 1 (per worker elapsed and active times, 2 and 4
 //   workers, frontal and 45 degree views, without and with balancing) and
 //   Table 2 (elapsed time for 2, 4 and 8 workers and the relative
-//   efficiency T_2W / ((n/2) T_nW)), plus active and CPU times.
+//   efficiency T_2W / ((n/2) T_nW)), plus active and CPU times, and "CPU
+//   alone": the max/mean tracer CPU of the same cuts with each slab traced
+//   in this process on one thread (the least of max(3, repeat) runs), which
+//   the other workers' threads on the same cores do not disturb.
 // hops: whether a ray should skip the slabs it only passes through. For N
 //   equal slabs, frontal and at 45 degrees, every ray of a frame is traced
 //   in this process slab by slab as the ring routes it (RingLayout); a hop
@@ -535,24 +538,24 @@ double Imbalance(const std::vector<double>& active) {
 // The slabs of a whole-volume scene at the given cuts (equal ones unless
 // given), their tracers and the ring's layout, for tracing a frame slab by
 // slab in this process (TraceRing).
-struct EqualRing {
+struct SlabRing {
   static std::vector<int> Cuts(int planes, int n) {
     std::vector<int> cuts;
     for (int i = 0; i <= n; ++i) cuts.push_back(static_cast<int>(int64_t{planes} * i / n));
     return cuts;
   }
-  EqualRing(const Scene& whole, int n, const RenderSettings& settings, const Camera& camera)
-      : EqualRing(whole, Cuts(whole.dims()[1], n), settings, camera) {}
-  EqualRing(const Scene& whole, std::vector<int> slab_cuts, const RenderSettings& settings,
-            const Camera& camera)
+  SlabRing(const Scene& whole, int n, const RenderSettings& settings, const Camera& camera)
+      : SlabRing(whole, Cuts(whole.dims()[1], n), settings, camera) {}
+  SlabRing(const Scene& whole, std::vector<int> slab_cuts, const RenderSettings& settings,
+           const Camera& camera)
       : cuts(std::move(slab_cuts)), layout(cuts, whole.dims(), whole.spacing(), camera) {
     const size_t n = cuts.size() - 1;
     slabs.reserve(n);
     for (size_t i = 0; i < n; ++i) slabs.push_back(whole.Slab(cuts[i], cuts[i + 1]));
     for (const Scene& sc : slabs) tracers.emplace_back(sc, settings, camera);
   }
-  EqualRing(const EqualRing&) = delete;
-  EqualRing& operator=(const EqualRing&) = delete;
+  SlabRing(const SlabRing&) = delete;
+  SlabRing& operator=(const SlabRing&) = delete;
   std::vector<int> cuts;
   RingLayout layout;
   std::vector<Scene> slabs;     // the tracers refer to them
@@ -573,7 +576,7 @@ absl::Status ForEachEqualRing(const Options& o, const Setup& setup,
     const RenderSettings settings = ToRenderSettings(view);
     for (int n : o.workers) {
       if (n < 1 || n > whole.dims()[1]) continue;
-      const EqualRing ring(whole, n, settings, *camera);
+      const SlabRing ring(whole, n, settings, *camera);
       f(azimuth, *camera, ring);
     }
   }
@@ -637,7 +640,7 @@ int Hops(const Options& o) {
   std::printf("%-8s %7s %10s %12s %8s %14s %12s %12s\n", "view", "slabs", "hops", "transit hops",
               "share", "transit steps", "all steps", "ended early");
   const absl::Status status = ForEachEqualRing(
-      o, *setup, {0.0, 45.0}, [&](double azimuth, const Camera& camera, const EqualRing& ring) {
+      o, *setup, {0.0, 45.0}, [&](double azimuth, const Camera& camera, const SlabRing& ring) {
         const int n = static_cast<int>(ring.tracers.size());
         const RingLayout& layout = ring.layout;
         uint64_t hops = 0, transit = 0, transit_steps = 0, steps = 0, ended = 0;
@@ -757,7 +760,7 @@ int Weights(const Options& o) {
     if (!setup.ok()) return Fail(setup.status());
     const absl::Status status = ForEachEqualRing(
         o, *setup, {0.0, 45.0, 90.0, 135.0},
-        [&](double azimuth, const Camera& camera, const EqualRing& ring) {
+        [&](double azimuth, const Camera& camera, const SlabRing& ring) {
           const int n = static_cast<int>(ring.tracers.size());
           std::vector<SlabWork> work(n);
           std::vector<double> best(n, 1e300);
@@ -853,7 +856,7 @@ int Deposits(const Options& o) {
               "bytes", "batches", "pack ns/dep", "(median)", "ingest ns/dep", "(median)");
   bool ok = true;
   const absl::Status status = ForEachEqualRing(
-      o, *setup, {o.azimuth}, [&](double, const Camera& camera, const EqualRing& ring) {
+      o, *setup, {o.azimuth}, [&](double, const Camera& camera, const SlabRing& ring) {
         // Each slab's deposit records in the order its tracer makes them.
         const int n = static_cast<int>(ring.tracers.size());
         std::vector<std::string> records(n);
@@ -985,7 +988,7 @@ std::vector<int> SeriesCuts(const Series& s) {
 // max/mean CPU of the same cuts moves by 0.05-0.1 from one run to the next.
 std::vector<double> SlabCpuAlone(const Scene& whole, const std::vector<int>& cuts,
                                  const v1::View& view, const Camera& camera, int repeat) {
-  const EqualRing ring(whole, cuts, ToRenderSettings(view), camera);
+  const SlabRing ring(whole, cuts, ToRenderSettings(view), camera);
   const size_t n = ring.tracers.size();
   std::vector<double> least(n, std::numeric_limits<double>::infinity());
   for (int r = 0; r < std::max(1, repeat); ++r) {
