@@ -35,6 +35,7 @@ double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).coun
 DisplayService::DisplayService(DisplayOptions options)
     : options_(options),
       metrics_(std::make_shared<Metrics>()),
+      early_(options.early_streams, options.early_deposit_wait),
       sweeper_(SweepPeriod(options.idle), [this] { ExpireIdle(); }),
       heartbeat_(std::chrono::milliseconds(250), [this] { Heartbeat(); }) {
   using T = Metrics::Type;
@@ -82,6 +83,11 @@ std::shared_ptr<DisplayService::FrameState> DisplayService::Find(uint64_t id) {
   absl::MutexLock lock(&mu_);
   auto it = frames_.find(id);
   return it == frames_.end() ? nullptr : it->second;
+}
+
+bool DisplayService::MayBegin(uint64_t id) {
+  absl::MutexLock lock(&mu_);
+  return frames_.count(id) == 0 && aborted_.Find(id) == nullptr;
 }
 
 grpc::ServerUnaryReactor* DisplayService::BeginFrame(grpc::CallbackServerContext* ctx,
@@ -164,6 +170,8 @@ grpc::Status DisplayService::Begin(const v1::DisplayFrame& req) {
     spdlog::warn("display: frame {} {}", evicted->id, why);
     MarkAborted(*evicted, why);
   }
+  // Deposits that came first go in now.
+  early_.Notify(req.frame_id());
   return grpc::Status::OK;
 }
 
@@ -188,6 +196,27 @@ class DisplayService::DepositStream : public grpc::ServerReadReactor<v1::Deposit
       Finish(grpc::Status::OK);
       return;
     }
+    // Deposits for a frame the root has not begun here yet: it begins the
+    // frame in the same round as the workers start it, so they wait for it,
+    // and nothing more is read meanwhile. While parked, no reaction of this
+    // stream runs.
+    const uint64_t id = batch_.frame_id();
+    DisplayService* const service = service_;  // once parked, this may be gone
+    if (!batch_.packed().empty() && (!frame_ || frame_->id != id) && service->MayBegin(id) &&
+        service->early_.Park(id, [this](bool) { Take(); })) {
+      // Begun (or aborted) between the look and the parking: its Notify
+      // found no one, so this one wakes the stream.
+      if (!service->MayBegin(id)) service->early_.Notify(id);
+      return;
+    }
+    Take();
+  }
+
+  void OnDone() override { delete this; }
+
+ private:
+  // Adds the batch just read and reads the next.
+  void Take() {
     grpc::Status s = service_->Accumulate(batch_, &frame_);
     if (!s.ok()) {
       Finish(s);
@@ -196,9 +225,6 @@ class DisplayService::DepositStream : public grpc::ServerReadReactor<v1::Deposit
     StartRead(&batch_);
   }
 
-  void OnDone() override { delete this; }
-
- private:
   DisplayService* const service_;
   grpc::CallbackServerContext* const ctx_;
   v1::DepositBatch batch_;

@@ -9,12 +9,13 @@
 #include <string>
 #include <vector>
 
-#include "metrics.h"
 #include "absl/base/thread_annotations.h"
 #include "absl/synchronization/mutex.h"
 #include "clock.h"
 #include "cluster.grpc.pb.h"
 #include "expiry.h"
+#include "frame_waiters.h"
+#include "metrics.h"
 #include "transtick/framebuffer.h"
 
 namespace transtick {
@@ -39,6 +40,11 @@ struct DisplayOptions {
   // tracing them, so a live frame is never this quiet. The spare
   // framebuffer kept for reuse is freed after as long unused.
   std::chrono::milliseconds idle = std::chrono::seconds(60);
+  // Deposits for a frame not begun yet wait this long for its BeginFrame
+  // (the root begins the frame in the same round as the workers prepare and
+  // start it); at most `early_streams` streams wait at once.
+  std::chrono::milliseconds early_deposit_wait{5000};
+  size_t early_streams = 64;
 };
 
 // Every method uses gRPC's callback API, and no reaction waits: a deposit
@@ -101,6 +107,8 @@ class DisplayService final
     Clock::time_point last_activity ABSL_GUARDED_BY(mu) = Clock::now();
   };
   std::shared_ptr<FrameState> Find(uint64_t id) ABSL_LOCKS_EXCLUDED(mu_);
+  // Whether frame `id` may still begin: not begun, and not aborted lately.
+  bool MayBegin(uint64_t id) ABSL_LOCKS_EXCLUDED(mu_);
   grpc::Status Begin(const v1::DisplayFrame& req) ABSL_LOCKS_EXCLUDED(mu_);
   void Abort(uint64_t id, const std::string& reason) ABSL_LOCKS_EXCLUDED(mu_);
   // Aborts `frame` unless it is complete (or aborted) already.
@@ -143,6 +151,8 @@ class DisplayService final
   // Why recently aborted frames were aborted, for an AwaitFrame that comes
   // after the abort.
   RecentReasons aborted_ ABSL_GUARDED_BY(mu_);
+  // Deposit streams that came before their frame (thread-safe by itself).
+  FrameWaiters early_;
   // Sweeps frames_ for idle frames, and beats for AwaitFrame; declared
   // last, so that they stop first.
   Ticker sweeper_;

@@ -78,6 +78,10 @@ absl::StatusOr<FrameResult> FrameDriver::Run(
       spec.set_row_end(view.height());
       spec.set_row_step(rings);
       spec.set_work_profile(work_profile || !on_chunk);
+      // Prepared and started in one round (FrameSpec.run): a neighbour's
+      // rays or a worker's deposits that come before a node knows the frame
+      // wait there for it.
+      spec.set_run(true);
       members.push_back({ring.workers[i], std::move(spec), r});
     }
   }
@@ -153,8 +157,9 @@ absl::StatusOr<FrameResult> FrameDriver::Run(
     end_all(/*cancel=*/true);
     return why;
   };
-  // The display learns of the frame while the workers prepare it; both are
-  // done before any worker starts, so no deposit comes early.
+  // One round: the display begins the frame while the workers prepare and
+  // start it (FrameSpec.run). A worker older than `run` only prepares it,
+  // and RunFrame then starts it.
   v1::DisplayFrame df;
   df.set_frame_id(frame_id);
   df.set_width(view.width());
@@ -184,6 +189,10 @@ absl::StatusOr<FrameResult> FrameDriver::Run(
   s = check(
       "RunFrame",
       CallAll(members.size(), kStartDeadline, [&](size_t i, grpc::ClientContext* ctx, auto done) {
+        if (acks[i].running()) {
+          done(grpc::Status::OK);
+          return;
+        }
         members[i].worker->stub->async()->RunFrame(ctx, &ref, &acks[i], std::move(done));
       }));
   if (!s.ok()) return abort(s);

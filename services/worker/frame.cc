@@ -382,8 +382,9 @@ class Frame::DisplayStream : public grpc::ClientWriteReactor<v1::DepositBatch>,
 // itself when done.
 class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch> {
  public:
-  LeftStream(grpc::CallbackServerContext* ctx, std::function<std::shared_ptr<Frame>(uint64_t)> find)
-      : ctx_(ctx), find_(std::move(find)) {
+  LeftStream(grpc::CallbackServerContext* ctx, std::function<std::shared_ptr<Frame>(uint64_t)> find,
+             FrameWaiters* waiters)
+      : ctx_(ctx), find_(std::move(find)), waiters_(waiters) {
     StartRead(&in_);
   }
 
@@ -394,27 +395,24 @@ class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBa
             ToGrpc(absl::InvalidArgumentError("Rays: the stream closed before its first batch")));
         return;
       }
-      frame_ = find_(in_.frame_id());
-      if (!frame_) {
-        Finish(ToGrpc(absl::NotFoundError(
-            absl::StrCat("Rays: frame ", in_.frame_id(), " is not prepared here"))));
-        return;
+      const uint64_t id = in_.frame_id();
+      std::shared_ptr<Frame> frame = find_(id);
+      // The neighbour may have prepared (and started) the frame a moment
+      // before this node: the batch waits for it, and nothing more is read
+      // meanwhile. While parked, no reaction of this stream runs.
+      if (!frame) {
+        // Copies: once parked, this stream may be resumed (and done) on
+        // another thread at any moment.
+        const auto find = find_;
+        FrameWaiters* const waiters = waiters_;
+        if (waiters->Park(id, [this](bool came) { Resumed(came); })) {
+          // Prepared between the look and the parking: its Notify found
+          // no one, so this one wakes the stream.
+          if (find(id)) waiters->Notify(id);
+          return;
+        }
       }
-      if (!frame_->AttachLeft(ctx_)) {
-        Finish(ToGrpc(absl::AlreadyExistsError(absl::StrCat(
-            "Rays: frame ", in_.frame_id(), " already has a stream from its left neighbour"))));
-        frame_ = nullptr;
-        return;
-      }
-      out_.set_frame_id(frame_->id());
-      Link& link = *frame_->left_;
-      link.outbox.Attach(
-          [this, &link](std::string batch) {
-            out_.set_rays(std::move(batch));
-            link.Count(out_);
-            StartWrite(&out_);
-          },
-          [this] { Release(); }, /*busy=*/false);
+      if (!Bind(std::move(frame), /*waited=*/false)) return;
     }
     if (!ok) {
       // The neighbour closed its side (it has ended the frame) or went away:
@@ -430,12 +428,46 @@ class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBa
   void OnWriteDone(bool ok) override {
     frame_->left_->outbox.WriteDone(ok, std::move(*out_.mutable_rays()));
   }
+  // The parked first batch's frame came (or the wait ended without it).
+  void Resumed(bool came) {
+    if (!Bind(came ? find_(in_.frame_id()) : nullptr, /*waited=*/true)) return;
+    frame_->ReceiveBatch(in_, *frame_->left_);
+    StartRead(&in_);
+  }
   void OnDone() override {
     if (frame_) frame_->DetachLeft();
     delete this;
   }
 
  private:
+  // Attaches the stream to `frame`, the one its first batch names; false
+  // (the stream finished with why) when there is none, or it has a left
+  // stream already.
+  bool Bind(std::shared_ptr<Frame> frame, bool waited) {
+    if (!frame) {
+      Finish(ToGrpc(absl::NotFoundError(
+          waited ? absl::StrCat("Rays: frame ", in_.frame_id(), " was not prepared here within ",
+                                waiters_->patience().count(), " ms")
+                 : absl::StrCat("Rays: frame ", in_.frame_id(), " is not prepared here"))));
+      return false;
+    }
+    if (!frame->AttachLeft(ctx_)) {
+      Finish(ToGrpc(absl::AlreadyExistsError(absl::StrCat(
+          "Rays: frame ", in_.frame_id(), " already has a stream from its left neighbour"))));
+      return false;
+    }
+    frame_ = std::move(frame);
+    out_.set_frame_id(frame_->id());
+    Link& link = *frame_->left_;
+    link.outbox.Attach(
+        [this, &link](std::string batch) {
+          out_.set_rays(std::move(batch));
+          link.Count(out_);
+          StartWrite(&out_);
+        },
+        [this] { Release(); }, /*busy=*/false);
+    return true;
+  }
   // Reading and writing each release the stream once; the second finishes.
   void Release() {
     if (--holds_ == 0) Finish(grpc::Status::OK);
@@ -443,6 +475,7 @@ class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBa
 
   grpc::CallbackServerContext* const ctx_;
   const std::function<std::shared_ptr<Frame>(uint64_t)> find_;
+  FrameWaiters* const waiters_;
   std::shared_ptr<Frame> frame_;  // set by the first read only
   v1::RayBatch in_, out_;
   std::atomic<int> holds_{2};
@@ -517,8 +550,9 @@ void Frame::Start(std::function<void(absl::Status)> started) {
 }
 
 grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* Frame::NewLeftStream(
-    grpc::CallbackServerContext* ctx, std::function<std::shared_ptr<Frame>(uint64_t)> find) {
-  return new LeftStream(ctx, std::move(find));
+    grpc::CallbackServerContext* ctx, std::function<std::shared_ptr<Frame>(uint64_t)> find,
+    FrameWaiters* waiters) {
+  return new LeftStream(ctx, std::move(find), waiters);
 }
 
 uint64_t Frame::rays_received_left() const { return left_->rays_received.load(); }

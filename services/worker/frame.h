@@ -23,6 +23,7 @@
 #include "absl/synchronization/mutex.h"
 #include "clock.h"
 #include "cluster.grpc.pb.h"
+#include "frame_waiters.h"
 #include "transtick/camera.h"
 #include "transtick/ray.h"
 #include "transtick/ring_layout.h"
@@ -187,9 +188,13 @@ class Frame : public std::enable_shared_from_this<Frame> {
   void Start(std::function<void(absl::Status)> started);
 
   // The server side of a Rays stream opened by a left neighbour: its first
-  // batch names the frame, which `find` looks up.
+  // batch names the frame, which `find` looks up. A frame not found yet
+  // may be a moment away (prepared in the same round as the neighbour that
+  // sent the batch): the stream then parks in `waiters` until the frame is
+  // added there, reading no further meanwhile.
   static grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* NewLeftStream(
-      grpc::CallbackServerContext* ctx, std::function<std::shared_ptr<Frame>(uint64_t)> find);
+      grpc::CallbackServerContext* ctx, std::function<std::shared_ptr<Frame>(uint64_t)> find,
+      FrameWaiters* waiters);
 
   // Stops tracing, closes the streams and calls `done` with this frame's
   // statistics: at once when no tracer runs, else from the last tracer

@@ -82,6 +82,7 @@ WorkerService::WorkerService(WorkerOptions options)
       metrics_(std::make_shared<Metrics>()),
       address_(options_.address),
       frames_(options_.frames),
+      early_(options_.early_streams, options_.early_stream_wait),
       sweeper_(SweepPeriod(std::min(options_.frames.prepared_idle, options_.frames.running_idle)),
                [this] {
                  // Time the worker did not run is not a frame's idleness.
@@ -166,6 +167,7 @@ void WorkerService::set_address(const std::string& address) {
 }
 
 void WorkerService::CancelAll() {
+  early_.Close();
   for (auto& f : frames_.TakeAll()) f->End(/*cancel=*/true);
 }
 
@@ -430,10 +432,26 @@ grpc::Status WorkerService::Reslab(grpc::ServerContext* ctx, const v1::ReslabReq
 }
 
 grpc::ServerUnaryReactor* WorkerService::PrepareFrame(grpc::CallbackServerContext* ctx,
-                                                      const v1::FrameSpec* spec, v1::FrameAck*) {
+                                                      const v1::FrameSpec* spec,
+                                                      v1::FrameAck* reply) {
   grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
   grpc::Status s = RequireRole(*ctx, "PrepareFrame", {Role::kRoot});
-  reactor->Finish(s.ok() ? Prepare(*spec) : s);
+  if (s.ok()) s = Prepare(*spec);
+  if (!s.ok() || !spec->run()) {
+    reactor->Finish(s);
+    return reactor;
+  }
+  // Prepared and started in one call (FrameSpec.run): the reply goes once
+  // the stream to the right neighbour is open, as RunFrame's does.
+  std::shared_ptr<Frame> frame = FindFrame(spec->frame_id());
+  if (!frame) {
+    reactor->Finish(NotHere(spec->frame_id(), "was dropped as soon as it was prepared"));
+    return reactor;
+  }
+  frame->Start([reactor, reply](absl::Status started) {
+    reply->set_running(started.ok());
+    reactor->Finish(ToGrpc(started));
+  });
   return reactor;
 }
 
@@ -489,14 +507,12 @@ grpc::Status WorkerService::Prepare(const v1::FrameSpec& spec) {
                                                    request->settings, fo));
   if (!added.ok()) return ToGrpc(added.status());
   if (*added) Drop(**std::move(added));
+  // A neighbour's rays that came first go in now.
+  early_.Notify(spec.frame_id());
   return grpc::Status::OK;
 }
 
-std::shared_ptr<Frame> WorkerService::FindFrame(uint64_t id) {
-  // The root prepares a frame on every worker before it starts any, so a
-  // neighbour's stream never comes before its frame.
-  return frames_.Find(id);
-}
+std::shared_ptr<Frame> WorkerService::FindFrame(uint64_t id) { return frames_.Find(id); }
 
 grpc::ServerUnaryReactor* WorkerService::RunFrame(grpc::CallbackServerContext* ctx,
                                                   const v1::FrameRef* req, v1::FrameAck*) {
@@ -552,7 +568,8 @@ grpc::ServerBidiReactor<v1::RayBatch, v1::RayBatch>* WorkerService::Rays(
   if (grpc::Status s = RequireRole(*ctx, "Rays", {Role::kWorker}); !s.ok()) {
     return new RefusedBidi<v1::RayBatch, v1::RayBatch>(s);
   }
-  return Frame::NewLeftStream(ctx, [this](uint64_t id) { return FindFrame(id); });
+  return Frame::NewLeftStream(
+      ctx, [this](uint64_t id) { return FindFrame(id); }, &early_);
 }
 
 }  // namespace transtick

@@ -27,6 +27,11 @@ struct WorkerOptions {
   std::chrono::microseconds linger = FrameOptions().linger;
   uint64_t max_slab_bytes = uint64_t{8} << 30;
   FrameLimits frames;  // how many frames, and how long idle ones are kept
+  // A neighbour's ray stream for a frame not prepared here yet waits this
+  // long for it (the root prepares every worker in one round, and a worker
+  // starts as soon as it has prepared); at most `early_streams` wait at once.
+  std::chrono::milliseconds early_stream_wait{5000};
+  size_t early_streams = 64;
 };
 
 // The frame's methods (PrepareFrame, RunFrame, EndFrame and the Rays
@@ -42,7 +47,8 @@ class WorkerService final
   ~WorkerService() override;
 
   void set_address(const std::string& address);
-  // Cancels every frame in progress (on shutdown).
+  // Cancels every frame in progress and refuses ray streams that come
+  // before their frame (on shutdown).
   void CancelAll();
   // The worker's metrics (docs/formats.md, "Metrics"), for /metrics.
   const std::shared_ptr<Metrics>& metrics() const { return metrics_; }
@@ -91,6 +97,8 @@ class WorkerService final
   std::string address_ ABSL_GUARDED_BY(mu_);
   std::map<std::string, std::shared_ptr<const Scene>> datasets_ ABSL_GUARDED_BY(mu_);
   FrameTable frames_;  // thread-safe by itself
+  // Ray streams that came before their frame (thread-safe by itself).
+  FrameWaiters early_;
   // Sweeps frames_ for idle frames; declared last, so that it stops first.
   Ticker sweeper_;
 };
