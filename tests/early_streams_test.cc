@@ -144,8 +144,25 @@ class EarlyStreamsTest : public testing::NodesTest {
     return s;
   }
 
-  // Every pixel of a kSize x kSize frame as a miss (a primary deposit with no
-  // shadow rays): they complete the frame.
+  // A worker's deposit stream to the display: the message naming `frame`,
+  // then every pixel of a kSize x kSize frame as a miss (a primary deposit
+  // with no shadow rays), which completes the frame.
+  struct DepositStream {
+    grpc::ClientContext ctx;
+    v1::FrameAck ack;
+    std::unique_ptr<grpc::ClientWriter<v1::DepositBatch>> writer;
+  };
+  std::unique_ptr<DepositStream> SendMisses(uint64_t frame) {
+    auto d = std::make_unique<DepositStream>();
+    d->ctx.set_deadline(Deadline(20));
+    d->writer = display_stub_->Deposits(&d->ctx, &d->ack);
+    v1::DepositBatch batch;
+    batch.set_frame_id(frame);
+    EXPECT_TRUE(d->writer->Write(batch));
+    batch.set_packed(AllMisses());
+    d->writer->Write(batch);  // fails when the display has refused the stream
+    return d;
+  }
   static std::string AllMisses() {
     std::string records, packed;
     for (uint32_t p = 0; p < kSize * kSize; ++p) {
@@ -226,21 +243,11 @@ TEST_F(EarlyStreamsTest, NoMoreThanTheCapWaitAndTheRestAreRefusedAtOnce) {
 
 TEST_F(EarlyStreamsTest, DepositsBeforeBeginFrameWaitAndCompleteTheFrame) {
   constexpr uint64_t kFrame = 51;
-  grpc::ClientContext ctx;
-  ctx.set_deadline(Deadline(20));
-  v1::FrameAck ack;
-  auto writer = display_stub_->Deposits(&ctx, &ack);
-  v1::DepositBatch first;
-  first.set_frame_id(kFrame);
-  ASSERT_TRUE(writer->Write(first));
-  v1::DepositBatch batch;
-  batch.set_frame_id(kFrame);
-  batch.set_packed(AllMisses());
-  ASSERT_TRUE(writer->Write(batch));
+  auto deposits = SendMisses(kFrame);
   std::this_thread::sleep_for(Ms(50));
   ASSERT_TRUE(Begin(kFrame).ok());
-  writer->WritesDone();
-  grpc::Status s = writer->Finish();
+  deposits->writer->WritesDone();
+  grpc::Status s = deposits->writer->Finish();
   EXPECT_TRUE(s.ok()) << s.error_message();
   // Every pixel came before the frame began, and the frame is complete.
   int rows = 0;
@@ -251,17 +258,9 @@ TEST_F(EarlyStreamsTest, DepositsBeforeBeginFrameWaitAndCompleteTheFrame) {
 
 TEST_F(EarlyStreamsTest, DepositsForAFrameNeverBegunOrAbortedAreRefused) {
   const auto send = [&](uint64_t frame) {
-    grpc::ClientContext ctx;
-    ctx.set_deadline(Deadline(20));
-    v1::FrameAck ack;
-    auto writer = display_stub_->Deposits(&ctx, &ack);
-    v1::DepositBatch batch;
-    batch.set_frame_id(frame);
-    EXPECT_TRUE(writer->Write(batch));
-    batch.set_packed(AllMisses());
-    writer->Write(batch);
-    writer->WritesDone();
-    return writer->Finish();
+    auto deposits = SendMisses(frame);
+    deposits->writer->WritesDone();
+    return deposits->writer->Finish();
   };
   auto t0 = std::chrono::steady_clock::now();
   grpc::Status s = send(52);
