@@ -73,6 +73,17 @@ void FrameWaiters::Expire() {
       }
       if (stopping_) return;
       const auto now = Clock::now();
+      // Woken more than a second past the deadline waited for: the process
+      // did not run meanwhile (a paused or stalled machine), and neither did
+      // the calls that would have added the frames. That time is not the
+      // streams' wait: their deadlines move on by it.
+      if (first != Clock::time_point::max() && now - first > std::chrono::seconds(1)) {
+        const auto late = now - first;
+        std::multimap<Clock::time_point, Waiter> moved;
+        for (auto& [deadline, w] : waiting_) moved.emplace(deadline + late, std::move(w));
+        waiting_.swap(moved);
+        continue;
+      }
       while (!waiting_.empty() && waiting_.begin()->first <= now) {
         overdue.push_back(std::move(waiting_.begin()->second.resume));
         waiting_.erase(waiting_.begin());

@@ -5,7 +5,8 @@
 // heard of the frame. Such a stream parks here, holding its first message
 // and reading no further (gRPC's flow control holds the sender), until the
 // frame is added (Notify) or a deadline passes. No thread waits per stream:
-// one thread per FrameWaiters expires the overdue.
+// one thread per FrameWaiters expires the overdue. Time the process did not
+// run (a pause of more than a second) does not count against the wait.
 #ifndef TRANSTICK_SERVICES_COMMON_FRAME_WAITERS_H_
 #define TRANSTICK_SERVICES_COMMON_FRAME_WAITERS_H_
 
