@@ -33,7 +33,7 @@ struct FrameCosts {
   double forward_cpu_us = 0.25;  // CPU to send and to receive one ray, both ends summed
   double imbalance = 1.1;        // a ring's slowest worker's tracing over its mean
   double fixed_ms = 28;          // a frame's start, end and image at no latency
-  double rounds = 3;             // root-worker and worker-display round trips in series
+  double rounds = 2;             // root-worker and worker-display round trips in series
   double deposit_bytes = 0;      // to the display while the frame runs, packed
   double image_bytes = 0;        // the image on to the root, after the last deposit
   double linger_ms = 1;          // a batch's wait for more rays (FrameOptions::linger)
