@@ -681,6 +681,16 @@ double ThreadCpuMs() {
   return ts.tv_sec * 1e3 + ts.tv_nsec / 1e6;
 }
 
+// A TraceRing `timed` that adds the thread CPU time of each of slab i's
+// shares to ms[i].
+auto CpuPerSlab(std::vector<double>& ms) {
+  return [&ms](int i, auto&& share) {
+    const double t0 = ThreadCpuMs();
+    share();
+    ms[i] += ThreadCpuMs() - t0;
+  };
+}
+
 // One slab's frame: its counts and its least tracer CPU time over repeats.
 struct SlabWork {
   std::string what;
@@ -769,12 +779,7 @@ int Weights(const Options& o) {
             std::vector<TraceCounters> counters(n);
             std::vector<uint64_t> taken(n, 0);
             TraceRing(
-                ring.layout, ring.tracers, camera,
-                [&](int i, auto&& share) {
-                  const double t0 = ThreadCpuMs();
-                  share();
-                  ms[i] += ThreadCpuMs() - t0;
-                },
+                ring.layout, ring.tracers, camera, CpuPerSlab(ms),
                 [&](int i, const RayDescriptor&, const RayDescriptor&,
                     const std::vector<RayDescriptor>&, const TraceCounters& c, Tracer::Outcome) {
                   ++taken[i];
@@ -993,15 +998,9 @@ std::vector<double> SlabCpuAlone(const Scene& whole, const std::vector<int>& cut
   std::vector<double> least(n, std::numeric_limits<double>::infinity());
   for (int r = 0; r < std::max(1, repeat); ++r) {
     std::vector<double> ms(n, 0.0);
-    TraceRing(
-        ring.layout, ring.tracers, camera,
-        [&](int i, auto&& share) {
-          const double t0 = ThreadCpuMs();
-          share();
-          ms[i] += ThreadCpuMs() - t0;
-        },
-        [](int, const RayDescriptor&, const RayDescriptor&, const std::vector<RayDescriptor>&,
-           const TraceCounters&, Tracer::Outcome) {});
+    TraceRing(ring.layout, ring.tracers, camera, CpuPerSlab(ms),
+              [](int, const RayDescriptor&, const RayDescriptor&, const std::vector<RayDescriptor>&,
+                 const TraceCounters&, Tracer::Outcome) {});
     for (size_t i = 0; i < n; ++i) least[i] = std::min(least[i], ms[i]);
   }
   return least;
