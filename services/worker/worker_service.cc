@@ -441,17 +441,8 @@ grpc::ServerUnaryReactor* WorkerService::PrepareFrame(grpc::CallbackServerContex
     reactor->Finish(s);
     return reactor;
   }
-  // Prepared and started in one call (FrameSpec.run): the reply goes once
-  // the stream to the right neighbour is open, as RunFrame's does.
-  std::shared_ptr<Frame> frame = FindFrame(spec->frame_id());
-  if (!frame) {
-    reactor->Finish(NotHere(spec->frame_id(), "was dropped as soon as it was prepared"));
-    return reactor;
-  }
-  frame->Start([reactor, reply](absl::Status started) {
-    reply->set_running(started.ok());
-    reactor->Finish(ToGrpc(started));
-  });
+  // Prepared and started in one call (FrameSpec.run), as RunFrame starts it.
+  Start(reactor, spec->frame_id(), reply, "was dropped as soon as it was prepared");
   return reactor;
 }
 
@@ -514,20 +505,27 @@ grpc::Status WorkerService::Prepare(const v1::FrameSpec& spec) {
 
 std::shared_ptr<Frame> WorkerService::FindFrame(uint64_t id) { return frames_.Find(id); }
 
+void WorkerService::Start(grpc::ServerUnaryReactor* reactor, uint64_t id, v1::FrameAck* reply,
+                          const char* missing) {
+  std::shared_ptr<Frame> frame = FindFrame(id);
+  if (!frame) {
+    reactor->Finish(NotHere(id, missing));
+    return;
+  }
+  frame->Start([reactor, reply](absl::Status s) {
+    reply->set_running(s.ok());
+    reactor->Finish(ToGrpc(s));
+  });
+}
+
 grpc::ServerUnaryReactor* WorkerService::RunFrame(grpc::CallbackServerContext* ctx,
-                                                  const v1::FrameRef* req, v1::FrameAck*) {
+                                                  const v1::FrameRef* req, v1::FrameAck* reply) {
   grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
   if (grpc::Status s = RequireRole(*ctx, "RunFrame", {Role::kRoot}); !s.ok()) {
     reactor->Finish(s);
     return reactor;
   }
-  std::shared_ptr<Frame> frame = FindFrame(req->frame_id());
-  if (!frame) {
-    reactor->Finish(NotHere(req->frame_id(), "was not prepared"));
-    return reactor;
-  }
-  // The reply goes once the stream to the right neighbour is open.
-  frame->Start([reactor](absl::Status s) { reactor->Finish(ToGrpc(s)); });
+  Start(reactor, req->frame_id(), reply, "was not prepared");
   return reactor;
 }
 

@@ -85,6 +85,11 @@ class WorkerService final
  private:
   std::shared_ptr<Frame> FindFrame(uint64_t id);
   grpc::Status Prepare(const v1::FrameSpec& spec);
+  // Starts frame `id` and finishes `reactor` once the stream to the right
+  // neighbour is open (`reply->running` set), or at once, NOT_FOUND with
+  // `missing`, when the frame is not held.
+  void Start(grpc::ServerUnaryReactor* reactor, uint64_t id, v1::FrameAck* reply,
+             const char* missing);
   // Ends, cancelled, a frame a limit took out of the table, and says why.
   static void Drop(FrameTable::Dropped dropped);
   // A frame's NOT_FOUND, saying why it is gone when a limit dropped it.
