@@ -12,6 +12,10 @@
 //                         [--workers 2,4] [--repeat N]
 //   cluster_bench deposits [--volume FILE] [--materials FILE] [--size WxH]
 //                          [--azimuth DEG] [--workers 1,2,4] [--repeat N]
+//   cluster_bench converge [--volume FILE] [--materials FILE] [--size WxH]
+//                          [--workers 4,8]
+//   cluster_bench refine  [--volume FILE] [--materials FILE] [--size WxH]
+//                         [--workers 4,8] [--repeat N] [--grid N]
 //
 // scaling: the in-process render on all cores, then an embedded cluster
 //   (root, display and N workers, real gRPC on 127.0.0.1) for each N. Each
@@ -63,6 +67,21 @@
 //   the median over the repeats). The framebuffer must complete every
 //   pixel and equal, bit for bit, one that took the deposits one at a
 //   time, else the exit status is 1.
+// converge: how far the work profile's cuts are from balanced, and how
+//   fast measured times close the gap. For N slabs, frontal and at 45
+//   degrees, every ray is traced in this process slab by slab, one thread,
+//   from equal slabs: each slab's CPU time (the least of 3 runs) and work
+//   profile; the cuts the profile's totals give (as a test-ray prerender
+//   cuts), then four times the cuts that each slab's measured time spread
+//   over its planes by its profile gives. Prints each step's max/mean CPU
+//   and each slab's share of the profile over its share of the time.
+// refine: balancing in the cluster over a long job. For N workers, frontal
+//   and at 45 degrees, each on a fresh embedded cluster: a job of `repeat`
+//   frames of the view balanced by test rays, and one balanced by the
+//   previous frame. Prints the first and the last frame's tracer CPU
+//   max/mean, in the cluster and with its cuts traced alone, and the frames
+//   whose cuts had moved (docs/balancing.md, "Refined by measured
+//   frames"). Every image must equal the in-process one bit for bit.
 //
 // Defaults: cthead.nrrd in $TRANSTICK_DATA_DIR (else ../shared/data),
 // examples/cthead_materials.json, 400x400, azimuth 45, shadows on, 5 repeats.
@@ -83,6 +102,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "bench_util.h"
 #include "client.h"
@@ -93,6 +113,7 @@
 #include "local_cluster.h"
 #include "transtick/camera.h"
 #include "transtick/image_io.h"
+#include "transtick/partition.h"
 #include "transtick/ray_codec.h"
 #include "transtick/render.h"
 #include "transtick/ring_layout.h"
@@ -113,8 +134,8 @@ namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
 constexpr char kUsage[] =
-    "usage: cluster_bench scaling|forward|tables|hops|weights|deposits [--volume FILE]\n"
-    "                     [--materials FILE]"
+    "usage: cluster_bench scaling|forward|tables|hops|weights|deposits|converge|refine\n"
+    "                     [--volume FILE] [--materials FILE]\n"
     "                     [--size WxH] [--azimuth DEG] [--repeat N] [--workers 1,2,4]\n"
     "                     [--rays N] [--grid N] [--threads N] [--balance MODE]\n";
 
@@ -147,7 +168,8 @@ std::string Parse(int argc, char** argv, Options* o) {
   o->mode = argv[1];
   if (o->mode == "--help" || o->mode == "-h") return "help";
   if (o->mode != "scaling" && o->mode != "forward" && o->mode != "tables" && o->mode != "hops" &&
-      o->mode != "weights" && o->mode != "deposits") {
+      o->mode != "weights" && o->mode != "deposits" && o->mode != "converge" &&
+      o->mode != "refine") {
     return "unknown mode '" + o->mode + "'";
   }
   for (int i = 2; i < argc; ++i) {
@@ -223,6 +245,19 @@ absl::StatusOr<Setup> Prepare(const Options& o) {
   return s;
 }
 
+// An embedded cluster of n workers for `setup`'s data, each with o.threads
+// tracer threads (one per core when 0).
+absl::StatusOr<std::unique_ptr<LocalCluster>> StartCluster(const Options& o, const Setup& setup,
+                                                           int n) {
+  LocalCluster::Options co;
+  co.workers = n;
+  co.threads_per_worker = o.threads > 0
+                              ? o.threads
+                              : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  co.data_dir = setup.data_dir;
+  return LocalCluster::Start(co);
+}
+
 v1::View MakeView(const Options& o, double azimuth) {
   v1::View v;
   v.set_azimuth(azimuth);
@@ -277,11 +312,7 @@ int Scaling(const Options& o) {
     Run run;
     run.workers = n;
     run.threads = o.threads > 0 ? o.threads : cores;
-    LocalCluster::Options co;
-    co.workers = n;
-    co.threads_per_worker = run.threads;
-    co.data_dir = setup->data_dir;
-    auto cluster = LocalCluster::Start(co);
+    auto cluster = StartCluster(o, *setup, n);
     if (!cluster.ok()) return Fail(cluster.status());
     run.cluster = *std::move(cluster);
     auto warm = RunFrames(run.cluster->root_address(), *setup, view, 1, out, o.balance, o.grid);
@@ -591,19 +622,31 @@ absl::Status ForEachEqualRing(const Options& o, const Setup& setup,
 // spawned, counters, outcome)` sees each Trace call.
 template <typename Timed, typename Traced>
 void TraceRing(const RingLayout& layout, const std::vector<Tracer>& tracers, const Camera& camera,
-               Timed timed, Traced traced) {
+               Timed timed, Traced traced, std::vector<std::vector<uint64_t>>* profiles = nullptr) {
   const int n = static_cast<int>(tracers.size());
   std::vector<std::vector<RayDescriptor>> queues(n);
   for (int i = 0; i < n; ++i) {
     timed(i, [&] {
-      for (int py = 0; py < camera.height(); ++py)
-        for (int px = 0; px < camera.width(); ++px) {
+      // As a worker makes them (Frame::NextPrimaries): the first slab looks
+      // at every pixel, for the misses of pixels in no footprint; the
+      // others at their footprint's columns only.
+      for (int py = 0; py < camera.height(); ++py) {
+        int from = 0, to = camera.width();
+        if (i != 0) {
+          const auto [first, last] = layout.Footprint(i).Row(py);
+          from = std::max(from, first);
+          to = std::min(to, last);
+        }
+        for (int px = from; px < to; ++px) {
           RayDescriptor ray;
-          if (layout.Primary(i, px, py, 0, 1, tracers[i], &ray) ==
-              RingLayout::PrimaryRole::kTrace) {
+          const RingLayout::PrimaryRole role = layout.Primary(i, px, py, 0, 1, tracers[i], &ray);
+          if (role == RingLayout::PrimaryRole::kTrace) {
             queues[i].push_back(ray);
+          } else if (profiles && role == RingLayout::PrimaryRole::kMiss) {
+            (*profiles)[i][0] += tracers[i].work_weights().ray;  // as a worker counts it
           }
         }
+      }
     });
   }
   std::vector<RayDescriptor> spawned;
@@ -619,6 +662,7 @@ void TraceRing(const RingLayout& layout, const std::vector<Tracer>& tracers, con
           spawned.clear();
           Deposit deposit;
           TraceCounters counters;
+          if (profiles) counters.plane_work = (*profiles)[i].data();
           const Tracer::Outcome outcome = tracers[i].Trace(ray, spawned, deposit, counters);
           traced(i, before, ray, spawned, counters, outcome);
           for (const RayDescriptor& r : spawned) queues[i].push_back(r);
@@ -1006,6 +1050,145 @@ std::vector<double> SlabCpuAlone(const Scene& whole, const std::vector<int>& cut
   return least;
 }
 
+// Each slab's work profile for one frame at `cuts`, traced in this process
+// as TraceRing routes it (per plane, and its total).
+struct SlabProfiles {
+  std::vector<std::vector<double>> planes;
+  std::vector<double> totals;
+};
+
+SlabProfiles ProfileAlone(const Scene& whole, const std::vector<int>& cuts, const v1::View& view,
+                          const Camera& camera) {
+  const SlabRing ring(whole, cuts, ToRenderSettings(view), camera);
+  const size_t n = ring.tracers.size();
+  std::vector<std::vector<uint64_t>> counted(n);
+  for (size_t i = 0; i < n; ++i) counted[i].assign(cuts[i + 1] - cuts[i], 0);
+  TraceRing(
+      ring.layout, ring.tracers, camera, [](int, auto&& share) { share(); },
+      [](int, const RayDescriptor&, const RayDescriptor&, const std::vector<RayDescriptor>&,
+         const TraceCounters&, Tracer::Outcome) {},
+      &counted);
+  SlabProfiles p;
+  p.planes.resize(n);
+  p.totals.assign(n, 0.0);
+  for (size_t i = 0; i < n; ++i) {
+    for (uint64_t w : counted[i]) p.planes[i].push_back(static_cast<double>(w)), p.totals[i] += w;
+  }
+  return p;
+}
+
+int Converge(const Options& o) {
+  auto setup = Prepare(o);
+  if (!setup.ok()) return Fail(setup.status());
+  const Scene& whole = *setup->scene;
+  const int planes = whole.dims()[1];
+  std::printf(
+      "volume %s, %dx%d, shadows on; each slab traced alone on one thread (the least of 3 runs)\n"
+      "step 0: equal slabs; 1: the cuts of step 0's profile totals (a test-ray prerender's); "
+      "2-5: the cuts of the last step's measured times spread by its profile\n\n",
+      o.volume.c_str(), o.width, o.height);
+  std::printf("%-8s %6s %5s %9s  %-40s %s\n", "view", "slabs", "step", "max/mean", "CPU ms",
+              "profile share / CPU share");
+  for (double azimuth : {0.0, 45.0}) {
+    const v1::View view = MakeView(o, azimuth);
+    auto camera = Camera::Create(*ToCameraSpec(view), setup->extent);
+    if (!camera.ok()) return Fail(camera.status());
+    for (int n : o.workers) {
+      if (n < 1 || n > planes) continue;
+      std::vector<int> cuts = UniformCuts(planes, n);
+      for (int step = 0; step <= 5; ++step) {
+        const std::vector<double> ms = SlabCpuAlone(whole, cuts, view, *camera, 3);
+        const SlabProfiles p = ProfileAlone(whole, cuts, view, *camera);
+        std::string times, shares;
+        for (int i = 0; i < n; ++i) {
+          absl::StrAppend(&times, i ? " " : "", absl::StrFormat("%.1f", ms[i]));
+          absl::StrAppend(
+              &shares, i ? " " : "",
+              absl::StrFormat("%.2f", (p.totals[i] / Sum(p.totals)) / (ms[i] / Sum(ms))));
+        }
+        std::printf("%-8s %6d %5d %9.3f  %-40s %s\n", azimuth == 0 ? "frontal" : "45 deg", n, step,
+                    Imbalance(ms), times.c_str(), shares.c_str());
+        std::fflush(stdout);
+        cuts = BalancedCuts(cuts, step == 0 ? p.totals : ms, BalanceRule::kCost, p.planes);
+      }
+    }
+  }
+  return 0;
+}
+
+// ---------------------------------------------------------------- refine
+
+// For each number of workers and view, each on a fresh embedded cluster: a
+// job of `repeat` frames of the view balanced by test rays, and one
+// balanced by the previous frame. Per mode: the first and the last frame's tracer
+// CPU max/mean in the cluster and of its cuts traced alone, and the frames
+// whose cuts moved.
+int Refine(const Options& o) {
+  auto setup = Prepare(o);
+  if (!setup.ok()) return Fail(setup.status());
+  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  std::printf(
+      "volume %s, %dx%d, shadows on, %d cores, %d frames a job; tracer CPU max/mean of the "
+      "first and the last frame, in the cluster and traced alone\n\n",
+      o.volume.c_str(), o.width, o.height, cores, o.repeat);
+  std::printf("%-8s %-8s %-15s %13s %13s %13s %13s  %s\n", "workers", "view", "balance",
+              "first, cluster", "first, alone", "last, cluster", "last, alone",
+              "cuts moved before frames");
+  bool identical = true;
+  for (int n : o.workers) {
+    for (double azimuth : {0.0, 45.0}) {
+      const v1::View view = MakeView(o, azimuth);
+      auto camera = Camera::Create(*ToCameraSpec(view), setup->extent);
+      if (!camera.ok()) return Fail(camera.status());
+      RenderStats rs;
+      auto want = RenderLocal(*setup->scene, *camera, ToRenderSettings(view), cores, &rs);
+      if (!want.ok()) return Fail(want.status());
+      for (const std::string balance : {"test-rays", "previous-frame"}) {
+        // Each mode on a fresh cluster: from uniform cuts, nothing learned.
+        auto cluster = StartCluster(o, *setup, n);
+        if (!cluster.ok()) return Fail(cluster.status());
+        const std::string out = (fs::temp_directory_path() / "cluster_bench_refine.exr").string();
+        auto stats =
+            RunFrames((*cluster)->root_address(), *setup, view, o.repeat, out, balance, o.grid);
+        if (!stats.ok()) return Fail(stats.status());
+        auto image = ReadImage(out);
+        if (!image.ok()) return Fail(image.status());
+        identical = identical && image->rgb == want->rgb;
+        auto cpu = [](const v1::ClusterFrameStats& f) {
+          std::vector<double> ms;
+          for (const auto& w : f.workers()) ms.push_back(w.cpu_ms());
+          return ms;
+        };
+        auto alone = [&](const v1::ClusterFrameStats& f) {
+          Series one;
+          one.frames = {f};
+          const std::vector<int> cuts = SeriesCuts(one);
+          return cuts.empty() ? 0.0
+                              : Imbalance(SlabCpuAlone(*setup->scene, cuts, view, *camera, 3));
+        };
+        std::string moved;
+        for (size_t k = 1; k < stats->size(); ++k) {
+          Series a, b;
+          a.frames = {(*stats)[k - 1]};
+          b.frames = {(*stats)[k]};
+          if (SeriesCuts(a) != SeriesCuts(b))
+            absl::StrAppend(&moved, moved.empty() ? "" : " ", k + 1);
+        }
+        std::printf("%-8d %-8s %-15s %13.2f %13.2f %13.2f %13.2f  %s\n", n,
+                    azimuth == 0 ? "frontal" : "45 deg", balance.c_str(),
+                    Imbalance(cpu(stats->front())), alone(stats->front()),
+                    Imbalance(cpu(stats->back())), alone(stats->back()),
+                    moved.empty() ? "-" : moved.c_str());
+        std::fflush(stdout);
+      }
+    }
+  }
+  std::printf("\n%s\n", identical
+                            ? "OK: every cluster image equals the in-process image bit for bit"
+                            : "FAIL: a cluster image differs");
+  return identical ? 0 : 1;
+}
+
 int Tables(const Options& o) {
   auto setup = Prepare(o);
   if (!setup.ok()) return Fail(setup.status());
@@ -1034,11 +1217,7 @@ int Tables(const Options& o) {
   // (workers, view, balance) -> series
   std::map<std::tuple<int, int, std::string>, Series> results;
   for (int n : {2, 4, 8}) {
-    LocalCluster::Options co;
-    co.workers = n;
-    co.threads_per_worker = o.threads > 0 ? o.threads : cores;
-    co.data_dir = setup->data_dir;
-    auto cluster = LocalCluster::Start(co);
+    auto cluster = StartCluster(o, *setup, n);
     if (!cluster.ok()) return Fail(cluster.status());
     for (size_t vi = 0; vi < views.size(); ++vi) {
       for (const std::string balance : {"off", "test-rays"}) {
@@ -1138,5 +1317,7 @@ int main(int argc, char** argv) {
   if (options.mode == "weights") return transtick::Weights(options);
   if (options.mode == "deposits") return transtick::Deposits(options);
   if (options.mode == "scaling") return transtick::Scaling(options);
+  if (options.mode == "converge") return transtick::Converge(options);
+  if (options.mode == "refine") return transtick::Refine(options);
   return transtick::Tables(options);
 }

@@ -43,6 +43,17 @@ std::vector<std::vector<double>> RingCosts(const FrameResult& frame,
   return costs;
 }
 
+// The workers' tracer CPU times, ring after ring, for the log.
+std::string FormatTimes(const FrameResult& frame, const Layout& layout,
+                        const absl::FormatSpec<double>& format) {
+  std::vector<std::string> times;
+  for (const auto& c : RingCosts(frame, layout.RingSizes())) {
+    times.push_back(absl::StrJoin(
+        c, " ", [&](std::string* o, double x) { absl::StrAppend(o, absl::StrFormat(format, x)); }));
+  }
+  return absl::StrJoin(times, " | ");
+}
+
 // The work profiles of the workers of each ring (docs/balancing.md, "The
 // work profile"), in ring order; empty for a worker that sent none or one
 // that does not fit its slab.
@@ -66,21 +77,25 @@ std::vector<std::vector<std::vector<double>>> RingProfiles(const FrameResult& fr
   return profiles;
 }
 
-std::vector<std::vector<int>> Recut(const Layout& layout, const FrameResult& frame,
-                                    BalanceRule rule) {
-  const auto sizes = layout.RingSizes();
-  auto costs = RingCosts(frame, sizes);
-  const auto profiles = RingProfiles(frame, sizes);
+// Where a slab's cost comes from under the cost rule: its work profile's
+// total (counted: the same rays give the same cuts on a busy machine), or
+// its tracers' measured CPU time, spread over its planes by the profile.
+enum class Costs { kProfile, kMeasured };
+
+// New cuts for every ring from each slab's cost (per ring and worker) and
+// the profiles to spread it over the slab's planes by.
+std::vector<std::vector<int>> Recut(const Layout& layout, std::vector<std::vector<double>> costs,
+                                    const std::vector<std::vector<std::vector<double>>>& profiles,
+                                    BalanceRule rule, Costs from) {
   if (rule == BalanceRule::kCost) {
-    // A slab's cost is its work profile's total when it sent one: counted,
-    // not timed, so the same rays give the same cuts on a busy machine,
-    // where a prerender's CPU times (a millisecond or two each) were
-    // mostly noise and each thread's fixed costs.
-    // A ring some of whose workers sent none keeps its CPU times.
-    for (size_t r = 0; r < sizes.size(); ++r) {
-      bool profiled = true;
+    // A ring some of whose workers sent no profile keeps its CPU times; one
+    // some of whose workers sent no CPU time (they failed to report) its
+    // profile's totals.
+    for (size_t r = 0; r < costs.size(); ++r) {
+      bool profiled = true, timed = true;
       for (const auto& p : profiles[r]) profiled = profiled && !p.empty();
-      if (!profiled) continue;
+      for (double c : costs[r]) timed = timed && c > 0;
+      if (!profiled || (from == Costs::kMeasured && timed)) continue;
       for (size_t i = 0; i < costs[r].size(); ++i) {
         double work = 0;
         for (double w : profiles[r][i]) work += w;
@@ -89,10 +104,17 @@ std::vector<std::vector<int>> Recut(const Layout& layout, const FrameResult& fra
     }
   }
   std::vector<std::vector<int>> cuts;
-  for (size_t r = 0; r < sizes.size(); ++r) {
+  for (size_t r = 0; r < costs.size(); ++r) {
     cuts.push_back(BalancedCuts(layout.rings[r].cuts, costs[r], rule, profiles[r]));
   }
   return cuts;
+}
+
+// The same from a frame's statistics alone.
+std::vector<std::vector<int>> Recut(const Layout& layout, const FrameResult& frame,
+                                    BalanceRule rule, Costs from) {
+  const auto sizes = layout.RingSizes();
+  return Recut(layout, RingCosts(frame, sizes), RingProfiles(frame, sizes), rule, from);
 }
 
 int Planes(const Layout& layout) {
@@ -107,6 +129,24 @@ class Off : public Balancer {
     return absl::OkStatus();
   }
 };
+
+// The largest share of a ring's frame its slowest worker spends beyond the
+// mean, 1 - mean / max of its workers' tracer CPU: what perfect cuts
+// would save of the frame.
+double MaxShare(const std::vector<std::vector<double>>& ring_costs) {
+  double share = 0;
+  for (const auto& ring : ring_costs) {
+    if (ring.empty()) continue;
+    double sum = 0, max = 0;
+    for (double c : ring) sum += c, max = std::max(max, c);
+    if (max > 0) share = std::max(share, 1 - sum / ring.size() / max);
+  }
+  return share;
+}
+
+double MaxImbalanceShare(const FrameResult& frame, const Layout& layout) {
+  return MaxShare(RingCosts(frame, layout.RingSizes()));
+}
 
 class TestRays : public Balancer {
  public:
@@ -136,41 +176,100 @@ class TestRays : public Balancer {
                                                              view.height() / view.width()))));
     auto probe = prerender(test, layout);
     if (!probe.ok()) return probe.status();
-    report->cuts_after = Recut(layout, *probe, rule_);
-    for (const auto& w : probe->workers) report->test_ray_ms[w.id()] = w.cpu_ms();
-    std::vector<std::string> times;
-    for (const auto& c : RingCosts(*probe, layout.RingSizes())) {
-      times.push_back(absl::StrJoin(c, " ", [](std::string* o, double x) {
-        absl::StrAppend(o, absl::StrFormat("%.2f", x));
-      }));
+    report->cuts_after = Recut(layout, *probe, rule_, Costs::kProfile);
+    // The profile, plane by plane, for refining the cuts from the view's
+    // frames (Learn): whole, or not at all.
+    const std::string key = ViewKey(view);
+    std::vector<std::vector<double>> per_plane;
+    for (const auto& ring : RingProfiles(*probe, layout.RingSizes())) {
+      std::vector<double> planes_work;
+      for (const auto& p : ring) planes_work.insert(planes_work.end(), p.begin(), p.end());
+      if (static_cast<int>(planes_work.size()) != planes) {
+        per_plane.clear();
+        break;
+      }
+      per_plane.push_back(std::move(planes_work));
     }
+    if (per_plane.empty()) {
+      memory.view_profiles.erase(key);
+    } else {
+      memory.view_profiles[key] = std::move(per_plane);
+    }
+    memory.view_costs.erase(key);
+    for (const auto& w : probe->workers) report->test_ray_ms[w.id()] = w.cpu_ms();
     spdlog::info("{} balance ({}x{} test rays, rule {}): test-ray CPU ms [{}]; cuts {} -> {}",
                  report->job_id, test.width(), test.height(),
-                 rule_ == BalanceRule::kPaper ? "paper" : "cost", absl::StrJoin(times, " | "),
-                 FormatCuts(report->cuts_before), FormatCuts(report->cuts_after));
+                 rule_ == BalanceRule::kPaper ? "paper" : "cost",
+                 FormatTimes(*probe, layout, "%.2f"), FormatCuts(report->cuts_before),
+                 FormatCuts(report->cuts_after));
     layout.SetCuts(report->cuts_after, planes);
-    memory.view_cuts[ViewKey(view)] = report->cuts_after;
+    memory.view_cuts[key] = report->cuts_after;
     return absl::OkStatus();
+  }
+
+  // Refined by measured frames: the test rays' profile is counted, and
+  // the kinds of work it counts cost a little more or less in some slabs
+  // than its weights say (docs/balancing.md). The view's frames measure
+  // what each slab really costs. Once the time they have lost to imbalance
+  // since the view's cuts were set (their summed frame time, times the
+  // share perfect cuts would save by their summed CPU times) exceeds what a
+  // move of planes costs (rent or buy: never more spent on moves than
+  // imbalance has cost), the cuts are re-cut from the summed CPU times,
+  // each slab's spread over its planes by the prerender's profile.
+  void Learn(const v1::View& view, const FrameResult& frame, const Layout& layout,
+             BalanceMemory& memory, BalanceReport* report) override {
+    memory.next_cuts = layout.Cuts();
+    if (layout.planes_moved > 0) memory.recut_ms = layout.load_ms;
+    const std::string key = ViewKey(view);
+    const auto profile = memory.view_profiles.find(key);
+    const auto cached = memory.view_cuts.find(key);
+    if (profile == memory.view_profiles.end() || cached == memory.view_cuts.end() ||
+        cached->second != layout.Cuts() || profile->second.size() != layout.rings.size()) {
+      return;
+    }
+    // Only frames every worker reported on count.
+    const auto costs = RingCosts(frame, layout.RingSizes());
+    for (const auto& ring : costs) {
+      for (double c : ring) {
+        if (!(c > 0)) return;
+      }
+    }
+    ViewCosts& measured = memory.view_costs[key];
+    if (measured.cpu_ms.size() != costs.size()) {
+      measured = ViewCosts{std::vector<std::vector<double>>(costs.size()), 0};
+    }
+    for (size_t r = 0; r < costs.size(); ++r) {
+      measured.cpu_ms[r].resize(costs[r].size(), 0.0);
+      for (size_t i = 0; i < costs[r].size(); ++i) measured.cpu_ms[r][i] += costs[r][i];
+    }
+    measured.frame_ms += frame.frame_ms;
+    // The loss from the summed times: what is noise in one frame's times
+    // averages out over several, and a view already balanced stops adding
+    // to it.
+    if (memory.recut_ms >= 0 && measured.frame_ms * MaxShare(measured.cpu_ms) <= memory.recut_ms) {
+      return;
+    }
+    std::vector<std::vector<std::vector<double>>> shapes(layout.rings.size());
+    for (size_t r = 0; r < layout.rings.size(); ++r) {
+      const std::vector<int>& cuts = layout.rings[r].cuts;
+      const std::vector<double>& planes_work = profile->second[r];
+      for (size_t i = 0; i + 1 < cuts.size(); ++i) {
+        shapes[r].emplace_back(planes_work.begin() + cuts[i], planes_work.begin() + cuts[i + 1]);
+      }
+    }
+    const auto refined = Recut(layout, measured.cpu_ms, shapes, rule_, Costs::kMeasured);
+    memory.view_costs.erase(key);
+    if (refined == layout.Cuts()) return;
+    spdlog::info("{} balance refined from its frames' tracer CPU ms [{}]: cuts {} -> {}",
+                 report->job_id, FormatTimes(frame, layout, "%.1f"), FormatCuts(layout.Cuts()),
+                 FormatCuts(refined));
+    memory.view_cuts[key] = refined;
   }
 
  private:
   const BalanceRule rule_;
   const int grid_;
 };
-
-// The largest share of a ring's frame its slowest worker spends beyond the
-// mean, 1 - mean / max of its workers' tracer CPU: what perfect cuts
-// would save of the frame.
-double MaxImbalanceShare(const FrameResult& frame, const Layout& layout) {
-  double share = 0;
-  for (const auto& ring : RingCosts(frame, layout.RingSizes())) {
-    if (ring.empty()) continue;
-    double sum = 0, max = 0;
-    for (double c : ring) sum += c, max = std::max(max, c);
-    if (max > 0) share = std::max(share, 1 - sum / ring.size() / max);
-  }
-  return share;
-}
 
 // A re-cut must pay for itself within this many frames.
 constexpr int kPaybackFrames = 3;
@@ -187,7 +286,7 @@ class PreviousFrame : public Balancer {
     return absl::OkStatus();
   }
   bool LearnsFromProfiles() const override { return true; }
-  void Learn(const FrameResult& frame, const Layout& layout, BalanceMemory& memory,
+  void Learn(const v1::View&, const FrameResult& frame, const Layout& layout, BalanceMemory& memory,
              BalanceReport* report) override {
     // What this frame's cut moves cost: the price of the next move.
     if (layout.planes_moved > 0) memory.recut_ms = layout.load_ms;
@@ -200,9 +299,10 @@ class PreviousFrame : public Balancer {
     // re-cut only when the time the next kPaybackFrames frames would gain
     // exceeds what the last move took. Until a move has been measured, the
     // first re-cut is made.
+    Calibrate(frame, layout, memory);
     const double gain_ms = frame.frame_ms * MaxImbalanceShare(frame, layout);
     const bool pays = memory.recut_ms < 0 || gain_ms * kPaybackFrames > memory.recut_ms;
-    memory.next_cuts = pays ? Recut(layout, frame, rule_) : layout.Cuts();
+    memory.next_cuts = pays ? CalibratedCuts(frame, layout, memory) : layout.Cuts();
     report->cuts_after = memory.next_cuts;
     if (!pays) {
       spdlog::debug("{} balance previous-frame: cuts kept (gain {:.1f} ms a frame, a re-cut took {:.0f} ms)",
@@ -211,13 +311,84 @@ class PreviousFrame : public Balancer {
   }
 
  private:
+  // How far one frame moves the calibration: halfway. A frame's times on
+  // a shared machine scatter by 5-10% a worker (docs/balancing.md), about
+  // as much as the profile errs in its dearest slabs.
+  static constexpr double kCalibrationStep = 0.5;
+
+  // Each plane's calibration: how much more or less than its profile says
+  // its work has cost, from the slab it was in, per frame the measured
+  // share of the ring's CPU time over the profile's share, averaged over
+  // the frames (each moves it kCalibrationStep of the way). A ring with a
+  // worker that sent no profile or no time is left as it was.
+  void Calibrate(const FrameResult& frame, const Layout& layout, BalanceMemory& memory) const {
+    const auto sizes = layout.RingSizes();
+    const auto costs = RingCosts(frame, sizes);
+    const auto profiles = RingProfiles(frame, sizes);
+    if (memory.plane_scale.size() != sizes.size()) memory.plane_scale.assign(sizes.size(), {});
+    for (size_t r = 0; r < sizes.size(); ++r) {
+      const std::vector<int>& cuts = layout.rings[r].cuts;
+      std::vector<double>& scale = memory.plane_scale[r];
+      if (scale.size() != static_cast<size_t>(cuts.back())) scale.assign(cuts.back(), 1.0);
+      double cpu = 0, work = 0;
+      std::vector<double> totals;
+      bool usable = true;
+      for (size_t i = 0; i < costs[r].size(); ++i) {
+        usable = usable && costs[r][i] > 0 && !profiles[r][i].empty();
+        double t = 0;
+        for (double w : profiles[r][i]) t += w;
+        totals.push_back(t);
+        cpu += costs[r][i];
+        work += t;
+      }
+      if (!usable || !(work > 0)) continue;
+      for (size_t i = 0; i < totals.size(); ++i) {
+        if (!(totals[i] > 0)) continue;
+        const double ratio = (costs[r][i] / cpu) / (totals[i] / work);
+        for (int p = cuts[i]; p < cuts[i + 1]; ++p) {
+          scale[p] += kCalibrationStep * (ratio - scale[p]);
+        }
+      }
+    }
+  }
+
+  // The cuts of the frame's profile with each plane's calibration: each
+  // slab's cost its calibrated profile's total. Without a calibration (a
+  // ring whose workers did not all report), the frame's own costs.
+  std::vector<std::vector<int>> CalibratedCuts(const FrameResult& frame, const Layout& layout,
+                                               const BalanceMemory& memory) const {
+    if (rule_ != BalanceRule::kCost) return Recut(layout, frame, rule_, Costs::kMeasured);
+    const auto sizes = layout.RingSizes();
+    auto costs = RingCosts(frame, sizes);
+    auto profiles = RingProfiles(frame, sizes);
+    for (size_t r = 0; r < sizes.size(); ++r) {
+      const std::vector<int>& cuts = layout.rings[r].cuts;
+      if (r >= memory.plane_scale.size() ||
+          memory.plane_scale[r].size() != static_cast<size_t>(cuts.back())) {
+        continue;
+      }
+      bool profiled = true;
+      for (const auto& p : profiles[r]) profiled = profiled && !p.empty();
+      if (!profiled) continue;
+      for (size_t i = 0; i < profiles[r].size(); ++i) {
+        double total = 0;
+        for (size_t k = 0; k < profiles[r][i].size(); ++k) {
+          profiles[r][i][k] *= memory.plane_scale[r][cuts[i] + k];
+          total += profiles[r][i][k];
+        }
+        costs[r][i] = total;
+      }
+    }
+    return Recut(layout, costs, profiles, rule_, Costs::kMeasured);
+  }
+
   const BalanceRule rule_;
 };
 
 }  // namespace
 
-void Balancer::Learn(const FrameResult&, const Layout& layout, BalanceMemory& memory,
-                     BalanceReport*) {
+void Balancer::Learn(const v1::View&, const FrameResult&, const Layout& layout,
+                     BalanceMemory& memory, BalanceReport*) {
   memory.next_cuts = layout.Cuts();
 }
 

@@ -48,9 +48,9 @@ class Balancer {
   // Whether Learn reads the frames' work profiles, so that the workers
   // must count them (FrameSpec.work_profile; a prerender always counts).
   virtual bool LearnsFromProfiles() const { return false; }
-  // After the frame: what the next frame starts from.
-  virtual void Learn(const FrameResult& frame, const Layout& layout, BalanceMemory& memory,
-                     BalanceReport* report);
+  // After a frame of `view`: what the next frame starts from.
+  virtual void Learn(const v1::View& view, const FrameResult& frame, const Layout& layout,
+                     BalanceMemory& memory, BalanceReport* report);
 };
 
 // The policy for `mode` (BALANCE_DEFAULT is OFF). `grid` is the test-ray

@@ -25,6 +25,12 @@
 namespace transtick {
 
 // What balancing remembers of a dataset between frames (balancer.h).
+// What the frames of one view measured on the same cuts.
+struct ViewCosts {
+  std::vector<std::vector<double>> cpu_ms;  // summed tracer CPU, per ring and worker
+  double frame_ms = 0;                      // summed frame time
+};
+
 struct BalanceMemory {
   // The ring members the cuts below belong to (Layout::Members).
   std::string members;
@@ -33,6 +39,15 @@ struct BalanceMemory {
   std::vector<std::vector<int>> next_cuts;
   // "test-rays" cuts by view (ViewKey), reused without a new prerender.
   std::map<std::string, std::vector<std::vector<int>>> view_cuts;
+  // "test-rays": each view's work profile from its prerender, per ring and
+  // plane (how a slab's measured cost spreads over its planes), and what
+  // its frames measured since its cuts were last set (docs/balancing.md,
+  // "Refined by measured frames").
+  std::map<std::string, std::vector<std::vector<double>>> view_profiles;
+  std::map<std::string, ViewCosts> view_costs;
+  // "previous-frame": per ring and plane, how much more or less its work
+  // has cost than the work profile counts (docs/balancing.md).
+  std::vector<std::vector<double>> plane_scale;
   // What moving cuts between frames took last ("previous-frame": the
   // slab transfers of a layout whose workers fetched planes), in ms; < 0
   // until measured.

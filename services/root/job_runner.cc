@@ -307,7 +307,7 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
     auto learn = [&](const FrameResult& result) {
       {
         absl::MutexLock lock(&task.data->mu);
-        task.balancer->Learn(result, layout, task.data->balance, &out.report);
+        task.balancer->Learn(*local_view, result, layout, task.data->balance, &out.report);
       }
       learned = true;
       if (task.on_learned) task.on_learned();
