@@ -43,11 +43,11 @@ std::vector<std::vector<double>> RingCosts(const FrameResult& frame,
   return costs;
 }
 
-// The workers' tracer CPU times, ring after ring, for the log.
-std::string FormatTimes(const FrameResult& frame, const Layout& layout,
+// Times per ring and worker, ring after ring, for the log.
+std::string FormatTimes(const std::vector<std::vector<double>>& ring_times,
                         const absl::FormatSpec<double>& format) {
   std::vector<std::string> times;
-  for (const auto& c : RingCosts(frame, layout.RingSizes())) {
+  for (const auto& c : ring_times) {
     times.push_back(absl::StrJoin(
         c, " ", [&](std::string* o, double x) { absl::StrAppend(o, absl::StrFormat(format, x)); }));
   }
@@ -200,8 +200,8 @@ class TestRays : public Balancer {
     spdlog::info("{} balance ({}x{} test rays, rule {}): test-ray CPU ms [{}]; cuts {} -> {}",
                  report->job_id, test.width(), test.height(),
                  rule_ == BalanceRule::kPaper ? "paper" : "cost",
-                 FormatTimes(*probe, layout, "%.2f"), FormatCuts(report->cuts_before),
-                 FormatCuts(report->cuts_after));
+                 FormatTimes(RingCosts(*probe, layout.RingSizes()), "%.2f"),
+                 FormatCuts(report->cuts_before), FormatCuts(report->cuts_after));
     layout.SetCuts(report->cuts_after, planes);
     memory.view_cuts[key] = report->cuts_after;
     return absl::OkStatus();
@@ -236,13 +236,14 @@ class TestRays : public Balancer {
     }
     ViewCosts& measured = memory.view_costs[key];
     if (measured.cpu_ms.size() != costs.size()) {
-      measured = ViewCosts{std::vector<std::vector<double>>(costs.size()), 0};
+      measured = ViewCosts{std::vector<std::vector<double>>(costs.size()), 0, 0};
     }
     for (size_t r = 0; r < costs.size(); ++r) {
       measured.cpu_ms[r].resize(costs[r].size(), 0.0);
       for (size_t i = 0; i < costs[r].size(); ++i) measured.cpu_ms[r][i] += costs[r][i];
     }
     measured.frame_ms += frame.frame_ms;
+    ++measured.frames;
     // The loss from the summed times: what is noise in one frame's times
     // averages out over several, and a view already balanced stops adding
     // to it.
@@ -258,10 +259,16 @@ class TestRays : public Balancer {
       }
     }
     const auto refined = Recut(layout, measured.cpu_ms, shapes, rule_, Costs::kMeasured);
+    const int frames = measured.frames;
+    const ViewCosts summed = std::move(measured);
     memory.view_costs.erase(key);
     if (refined == layout.Cuts()) return;
-    spdlog::info("{} balance refined from its frames' tracer CPU ms [{}]: cuts {} -> {}",
-                 report->job_id, FormatTimes(frame, layout, "%.1f"), FormatCuts(layout.Cuts()),
+    auto mean = summed.cpu_ms;
+    for (auto& ring : mean) {
+      for (double& ms : ring) ms /= frames;
+    }
+    spdlog::info("{} balance refined from {} frames' tracer CPU ms [{}] a frame: cuts {} -> {}",
+                 report->job_id, frames, FormatTimes(mean, "%.1f"), FormatCuts(layout.Cuts()),
                  FormatCuts(refined));
     memory.view_cuts[key] = refined;
   }

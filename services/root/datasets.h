@@ -29,6 +29,7 @@ namespace transtick {
 struct ViewCosts {
   std::vector<std::vector<double>> cpu_ms;  // summed tracer CPU, per ring and worker
   double frame_ms = 0;                      // summed frame time
+  int frames = 0;
 };
 
 struct BalanceMemory {
