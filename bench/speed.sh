@@ -12,7 +12,9 @@
 #      deposits and the display's ingest cost per deposit (cluster_bench
 #      deposits);
 #   3. balance: tracer CPU max/mean before and after balancing, 2, 4 and 8
-#      workers, frontal and 45 degrees (cluster_bench tables);
+#      workers, frontal and 45 degrees (cluster_bench tables), and over
+#      60-frame jobs of one view, as measured frames refine the cuts, 4 and
+#      8 workers (cluster_bench refine);
 #   4. a turntable through 2 worker daemons: steady frames/s, frame time,
 #      and the time a one-frame job on a loaded dataset spends outside its
 #      frame (bench/turntable.sh), smooth and voxel;
@@ -20,7 +22,7 @@
 #      (bench/paraview_compare.sh; installs ParaView when missing).
 #
 # Usage: bench/speed.sh [--paraview] [BUILD_DIR]
-# Takes about 9 minutes (13 with ParaView) on 2 cores.
+# Takes about 12 minutes (16 with ParaView) on 2 cores.
 set -euo pipefail
 src=$(cd "$(dirname "$0")/.." && pwd)
 paraview=0
@@ -61,6 +63,8 @@ section "2. deposits on their way to the display (cluster_bench deposits)"
 
 section "3. balance before and after (cluster_bench tables)"
 "$build/bench/cluster_bench" tables --volume "$volume"
+section "3. balance refined by measured frames over 60-frame jobs (cluster_bench refine)"
+"$build/bench/cluster_bench" refine --volume "$volume" --workers 4,8 --repeat 60
 
 section "4. turntable through 2 worker daemons (bench/turntable.sh)"
 "$src/bench/turntable.sh" "$build" 2 30 3 smooth
