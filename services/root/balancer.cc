@@ -360,33 +360,35 @@ class PreviousFrame : public Balancer {
   }
 
   // The cuts of the frame's profile with each plane's calibration: each
-  // slab's cost its calibrated profile's total. Without a calibration (a
-  // ring whose workers did not all report), the frame's own costs.
+  // slab's cost its calibrated profile's total. A ring without a
+  // calibration, or whose workers did not all send a profile, is cut by
+  // the frame's measured times (Recut).
   std::vector<std::vector<int>> CalibratedCuts(const FrameResult& frame, const Layout& layout,
                                                const BalanceMemory& memory) const {
-    if (rule_ != BalanceRule::kCost) return Recut(layout, frame, rule_, Costs::kMeasured);
-    const auto sizes = layout.RingSizes();
-    auto costs = RingCosts(frame, sizes);
-    auto profiles = RingProfiles(frame, sizes);
-    for (size_t r = 0; r < sizes.size(); ++r) {
-      const std::vector<int>& cuts = layout.rings[r].cuts;
+    std::vector<std::vector<int>> cuts = Recut(layout, frame, rule_, Costs::kMeasured);
+    if (rule_ != BalanceRule::kCost) return cuts;
+    auto profiles = RingProfiles(frame, layout.RingSizes());
+    for (size_t r = 0; r < profiles.size(); ++r) {
+      const std::vector<int>& ring_cuts = layout.rings[r].cuts;
       if (r >= memory.plane_scale.size() ||
-          memory.plane_scale[r].size() != static_cast<size_t>(cuts.back())) {
+          memory.plane_scale[r].size() != static_cast<size_t>(ring_cuts.back())) {
         continue;
       }
       bool profiled = true;
       for (const auto& p : profiles[r]) profiled = profiled && !p.empty();
       if (!profiled) continue;
+      std::vector<double> costs;
       for (size_t i = 0; i < profiles[r].size(); ++i) {
         double total = 0;
         for (size_t k = 0; k < profiles[r][i].size(); ++k) {
-          profiles[r][i][k] *= memory.plane_scale[r][cuts[i] + k];
+          profiles[r][i][k] *= memory.plane_scale[r][ring_cuts[i] + k];
           total += profiles[r][i][k];
         }
-        costs[r][i] = total;
+        costs.push_back(total);
       }
+      cuts[r] = BalancedCuts(ring_cuts, costs, rule_, profiles[r]);
     }
-    return Recut(layout, costs, profiles, rule_, Costs::kMeasured);
+    return cuts;
   }
 
   const BalanceRule rule_;
