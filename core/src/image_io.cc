@@ -118,7 +118,11 @@ absl::Status WriteImage(const std::string& path, const Image& image) {
     return absl::InvalidArgumentError(absl::StrCat(path, ": the image is empty or malformed"));
   }
   if (kExtensions[*format] == "png") {
-    auto png = EncodePng(image, /*level=*/6);
+    // zlib's fastest level: on cthead turntable frames at 400x400, level 6
+    // took 3.1 times as long (5.5 ms a frame against 1.75) for files 3%
+    // smaller (58 KiB against 60), and a client writing every frame of a
+    // job spent most of its CPU there.
+    auto png = EncodePng(image, /*level=*/1);
     if (!png.ok()) return absl::InvalidArgumentError(absl::StrCat(path, ": ", png.status().message()));
     FILE* f = std::fopen(path.c_str(), "wb");
     if (f == nullptr) return absl::UnavailableError(absl::StrCat(path, ": cannot be created"));
