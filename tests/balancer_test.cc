@@ -265,6 +265,47 @@ TEST(TestRaysTest, ABalancedViewsNoiseDoesNotAddUp) {
   EXPECT_EQ(t.memory.view_costs.at(ViewKey(t.view)).frame_ms, 4000);
 }
 
+TEST(TestRaysTest, EachRingIsRefinedByItsOwnProfileAndTimes) {
+  // Two rings of two workers over 100 planes: the prerender counts every
+  // plane alike in both; the frames measure 120/80 in ring 0 and 80/120 in
+  // ring 1 (the rings' rows see different parts of the volume).
+  auto balancer = MakeBalancer(v1::TEST_RAYS, BalanceRule::kCost, 16);
+  BalanceMemory memory;
+  Layout layout;
+  for (int r = 0; r < 2; ++r) {
+    Layout::Ring ring;
+    ring.workers.resize(2);
+    ring.cuts = {0, 50, 100};
+    layout.rings.push_back(ring);
+  }
+  v1::View view;
+  view.set_width(64);
+  view.set_height(64);
+  auto two_rings = [](const std::vector<double>& ring0, const std::vector<double>& ring1,
+                      double frame_ms) {
+    FrameResult f = MakeFrame({0, 50, 100}, ring0, {}, frame_ms);
+    for (const auto& w : MakeFrame({0, 50, 100}, ring1, {}, frame_ms).workers) {
+      f.workers.push_back(w);
+    }
+    return f;
+  };
+  BalanceReport report;
+  ASSERT_TRUE(balancer
+                  ->Plan(
+                      view, memory, layout,
+                      [&](const v1::View&, Layout&) -> absl::StatusOr<FrameResult> {
+                        return two_rings({100, 100}, {100, 100}, 1);
+                      },
+                      &report)
+                  .ok());
+  ASSERT_EQ(memory.view_cuts.at(ViewKey(view)),
+            (std::vector<std::vector<int>>{{0, 50, 100}, {0, 50, 100}}));
+  memory.recut_ms = 10;
+  balancer->Learn(view, two_rings({120, 80}, {80, 120}, 100), layout, memory, &report);
+  EXPECT_EQ(memory.view_cuts.at(ViewKey(view)),
+            (std::vector<std::vector<int>>{{0, 42, 100}, {0, 58, 100}}));
+}
+
 TEST(TestRaysTest, FramesOnOtherCutsOrWithoutTimesAreNotCounted) {
   TestRaysCase t = PlanTestRays(2, 100, {100, 100});
   t.memory.recut_ms = 10;
