@@ -306,6 +306,31 @@ TEST(TestRaysTest, EachRingIsRefinedByItsOwnProfileAndTimes) {
             (std::vector<std::vector<int>>{{0, 42, 100}, {0, 58, 100}}));
 }
 
+TEST(TestRaysTest, RemembersABoundedNumberOfViewsForgettingTheOldest) {
+  TestRaysCase t = PlanTestRays(2, 100, {300, 100});
+  for (size_t v = 1; v < kMaxBalancedViews + 100; ++v) {
+    v1::View view = t.view;
+    view.set_azimuth(static_cast<double>(v));
+    Layout layout = t.layout;
+    BalanceReport report;
+    ASSERT_TRUE(t.balancer
+                    ->Plan(
+                        view, t.memory, layout,
+                        [&](const v1::View&, Layout& probe) -> absl::StatusOr<FrameResult> {
+                          return MakeFrame(probe.rings[0].cuts, {300, 100}, {300, 100}, 1);
+                        },
+                        &report)
+                    .ok());
+  }
+  EXPECT_EQ(t.memory.view_cuts.size(), kMaxBalancedViews);
+  EXPECT_EQ(t.memory.view_profiles.size(), kMaxBalancedViews);
+  EXPECT_EQ(t.memory.view_order.size(), kMaxBalancedViews);
+  EXPECT_EQ(t.memory.view_cuts.count(ViewKey(t.view)), 0u);  // the first, forgotten
+  v1::View last = t.view;
+  last.set_azimuth(static_cast<double>(kMaxBalancedViews + 99));
+  EXPECT_EQ(t.memory.view_cuts.count(ViewKey(last)), 1u);
+}
+
 TEST(TestRaysTest, FramesOnOtherCutsOrWithoutTimesAreNotCounted) {
   TestRaysCase t = PlanTestRays(2, 100, {100, 100});
   t.memory.recut_ms = 10;

@@ -204,6 +204,18 @@ class TestRays : public Balancer {
                  FormatCuts(report->cuts_before), FormatCuts(report->cuts_after));
     layout.SetCuts(report->cuts_after, planes);
     memory.view_cuts[key] = report->cuts_after;
+    // At most kMaxBalancedViews views remembered, the oldest forgotten
+    // first: a service that renders ever new views (a session's camera,
+    // say) keeps a bounded memory, and a view forgotten costs a prerender
+    // again.
+    memory.view_order.push_back(key);
+    while (memory.view_order.size() > kMaxBalancedViews) {
+      const std::string& oldest = memory.view_order.front();
+      memory.view_cuts.erase(oldest);
+      memory.view_profiles.erase(oldest);
+      memory.view_costs.erase(oldest);
+      memory.view_order.pop_front();
+    }
     return absl::OkStatus();
   }
 

@@ -53,6 +53,11 @@ class Balancer {
                      BalanceMemory& memory, BalanceReport* report);
 };
 
+// "test-rays" remembers the cuts, profile and measured costs of at most
+// this many views per dataset and ring members (a few KB each), forgetting
+// the oldest first.
+inline constexpr size_t kMaxBalancedViews = 1024;
+
 // The policy for `mode` (BALANCE_DEFAULT is OFF). `grid` is the test-ray
 // grid (0: the default).
 std::unique_ptr<Balancer> MakeBalancer(v1::BalanceMode mode, BalanceRule rule, int grid);

@@ -5,6 +5,7 @@
 #ifndef TRANSTICK_SERVICES_ROOT_DATASETS_H_
 #define TRANSTICK_SERVICES_ROOT_DATASETS_H_
 
+#include <deque>
 #include <map>
 #include <memory>
 #include <optional>
@@ -46,6 +47,8 @@ struct BalanceMemory {
   // "Refined by measured frames").
   std::map<std::string, std::vector<std::vector<double>>> view_profiles;
   std::map<std::string, ViewCosts> view_costs;
+  // The views above, oldest first (at most kMaxBalancedViews, balancer.h).
+  std::deque<std::string> view_order;
   // "previous-frame": per ring and plane, how much more or less its work
   // has cost than the work profile counts (docs/balancing.md).
   std::vector<std::vector<double>> plane_scale;
