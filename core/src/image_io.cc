@@ -49,7 +49,9 @@ const Module& LoadModule() {
       candidates.push_back(absl::StrCat(dir, "/", kName));
     }
 #ifdef TRANSTICK_IMAGEIO_BUILD_PATH
-    candidates.push_back(TRANSTICK_IMAGEIO_BUILD_PATH);
+    // Through StrCat: a std::string made from the literal itself draws a
+    // false -Wstringop-overread from GCC 12 when linked with -flto.
+    candidates.push_back(absl::StrCat(TRANSTICK_IMAGEIO_BUILD_PATH));
 #endif
     candidates.push_back(kName);
     Module m;
