@@ -3,6 +3,8 @@
 // "test-rays" refines a view's cuts from its measured frames.
 #include "balancer.h"
 
+#include <cmath>
+#include <limits>
 #include <random>
 
 #include "gtest/gtest.h"
@@ -135,6 +137,21 @@ TEST(PreviousFrameTest, AWorkerWithoutATimeLeavesTheProfileToDecide) {
   BalanceMemory memory;
   const auto cuts = Learn(c, memory);
   EXPECT_GT(cuts[0][1], 50);  // toward the slab the profile says is dearer
+}
+
+TEST(PreviousFrameTest, ATimeThatIsNoNumberTeachesNothing) {
+  // A worker reporting an infinite or NaN CPU time (a defect, or a hostile
+  // peer) must not leave the calibration NaN, which would freeze the cuts.
+  for (double bad : {std::numeric_limits<double>::infinity(), std::nan("")}) {
+    Case c = MakeCase({bad, 50}, 100, 200, {100, 100});
+    BalanceMemory memory;
+    Learn(c, memory);
+    ASSERT_EQ(memory.plane_scale.size(), 1u);
+    for (double x : memory.plane_scale[0]) ASSERT_EQ(x, 1.0) << bad;
+    // A sound frame after it is learned from as usual.
+    Case next = MakeCase({150, 50}, 100, 200, {100, 100});
+    EXPECT_EQ(Learn(next, memory)[0][1], 40) << bad;
+  }
 }
 
 TEST(PreviousFrameTest, TheDecisionFollowsGainAgainstPriceOverRandomFrames) {
@@ -334,8 +351,11 @@ TEST(TestRaysTest, RemembersABoundedNumberOfViewsForgettingTheOldest) {
 TEST(TestRaysTest, FramesOnOtherCutsOrWithoutTimesAreNotCounted) {
   TestRaysCase t = PlanTestRays(2, 100, {100, 100});
   t.memory.recut_ms = 10;
-  // A worker that did not report: nothing learned, whatever the imbalance.
+  // A worker that did not report, or reported no number: nothing learned,
+  // whatever the imbalance.
   EXPECT_EQ(Frame(t, {300, 0}, 100)[0][1], 50);
+  EXPECT_EQ(Frame(t, {300, std::numeric_limits<double>::infinity()}, 100)[0][1], 50);
+  EXPECT_EQ(Frame(t, {std::nan(""), 100}, 100)[0][1], 50);
   EXPECT_TRUE(t.memory.view_costs.empty());
   // A frame on other cuts than the view's (a layout of other members, say).
   Layout other = t.layout;

@@ -239,11 +239,12 @@ class TestRays : public Balancer {
         cached->second != layout.Cuts() || profile->second.size() != layout.rings.size()) {
       return;
     }
-    // Only frames every worker reported on count.
+    // Only frames every worker reported on, with a time that is one (a
+    // worker's report is not trusted to be finite), count.
     const auto costs = RingCosts(frame, layout.RingSizes());
     for (const auto& ring : costs) {
       for (double c : ring) {
-        if (!(c > 0)) return;
+        if (!(c > 0 && std::isfinite(c))) return;
       }
     }
     ViewCosts& measured = memory.view_costs[key];
@@ -353,14 +354,14 @@ class PreviousFrame : public Balancer {
       std::vector<double> totals;
       bool usable = true;
       for (size_t i = 0; i < costs[r].size(); ++i) {
-        usable = usable && costs[r][i] > 0 && !profiles[r][i].empty();
+        usable = usable && costs[r][i] > 0 && std::isfinite(costs[r][i]) && !profiles[r][i].empty();
         double t = 0;
         for (double w : profiles[r][i]) t += w;
         totals.push_back(t);
         cpu += costs[r][i];
         work += t;
       }
-      if (!usable || !(work > 0)) continue;
+      if (!usable || !(work > 0) || !std::isfinite(cpu)) continue;
       for (size_t i = 0; i < totals.size(); ++i) {
         if (!(totals[i] > 0)) continue;
         const double ratio = (costs[r][i] / cpu) / (totals[i] / work);
