@@ -77,6 +77,14 @@ std::vector<std::vector<std::vector<double>>> RingProfiles(const FrameResult& fr
   return profiles;
 }
 
+// Whether every worker of a ring sent its profile.
+bool Profiled(const std::vector<std::vector<double>>& ring_profiles) {
+  for (const auto& p : ring_profiles) {
+    if (p.empty()) return false;
+  }
+  return true;
+}
+
 // Where a slab's cost comes from under the cost rule: its work profile's
 // total (counted: the same rays give the same cuts on a busy machine), or
 // its tracers' measured CPU time, spread over its planes by the profile.
@@ -92,10 +100,9 @@ std::vector<std::vector<int>> Recut(const Layout& layout, std::vector<std::vecto
     // some of whose workers sent no CPU time (they failed to report) its
     // profile's totals.
     for (size_t r = 0; r < costs.size(); ++r) {
-      bool profiled = true, timed = true;
-      for (const auto& p : profiles[r]) profiled = profiled && !p.empty();
+      bool timed = true;
       for (double c : costs[r]) timed = timed && c > 0;
-      if (!profiled || (from == Costs::kMeasured && timed)) continue;
+      if (!Profiled(profiles[r]) || (from == Costs::kMeasured && timed)) continue;
       for (size_t i = 0; i < costs[r].size(); ++i) {
         double work = 0;
         for (double w : profiles[r][i]) work += w;
@@ -387,9 +394,7 @@ class PreviousFrame : public Balancer {
           memory.plane_scale[r].size() != static_cast<size_t>(ring_cuts.back())) {
         continue;
       }
-      bool profiled = true;
-      for (const auto& p : profiles[r]) profiled = profiled && !p.empty();
-      if (!profiled) continue;
+      if (!Profiled(profiles[r])) continue;
       std::vector<double> costs;
       for (size_t i = 0; i < profiles[r].size(); ++i) {
         double total = 0;
