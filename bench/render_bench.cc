@@ -346,6 +346,11 @@ int Run(const Options& o) {
                   static_cast<unsigned long long>(counters.primary),
                   static_cast<unsigned long long>(counters.shadow));
       if (dvr) std::printf(", %llu", static_cast<unsigned long long>(counters.samples));
+      if (counters.cells) {
+        std::printf("; %llu cells solved, %llu hits",
+                    static_cast<unsigned long long>(counters.cells),
+                    static_cast<unsigned long long>(counters.surface_hits));
+      }
       std::printf("\n");
       std::fflush(stdout);
     }

@@ -7,10 +7,14 @@
 #include <mutex>
 #include <thread>
 
+#include "transtick/check.h"
+
 namespace transtick {
 
 void TraceRows(const Tracer& tracer, const Camera& camera, int row_begin, int row_end,
-               Framebuffer& fb, TraceCounters& counters) {
+               Framebuffer& fb, int fb_row, TraceCounters& counters) {
+  TRANSTICK_CHECK(fb_row <= row_begin && row_end <= fb_row + fb.height() &&
+                  fb.width() == camera.width());
   std::vector<RayDescriptor> pending;
   Deposit deposit;
   // Counted here and added once: the threads tracing other rows would
@@ -18,6 +22,11 @@ void TraceRows(const Tracer& tracer, const Camera& camera, int row_begin, int ro
   uint64_t completed = 0;
   const int width = camera.width();
   const int samples = fb.samples();
+  const uint32_t first = static_cast<uint32_t>(fb_row) * width;  // fb's pixel 0
+  auto add = [&](Deposit d) {
+    d.pixel -= first;
+    completed += fb.AddUncounted(d);
+  };
   for (int py = row_begin; py < row_end; ++py) {
     for (int px = 0; px < width; ++px) {
       const uint32_t pixel = static_cast<uint32_t>(py) * width + px;
@@ -25,7 +34,7 @@ void TraceRows(const Tracer& tracer, const Camera& camera, int row_begin, int ro
         const auto [ox, oy] = SampleOffset(s, samples);
         RayDescriptor ray;
         if (!tracer.MakePrimary(camera.GenerateAt(px, py, ox, oy), pixel, &ray)) {
-          completed += fb.AddUncounted(tracer.MissDeposit(pixel));
+          add(tracer.MissDeposit(pixel));
           continue;
         }
         ++counters.primary;
@@ -35,7 +44,7 @@ void TraceRows(const Tracer& tracer, const Camera& camera, int row_begin, int ro
           pending.pop_back();
           // A whole-volume scene has no slab planes: every ray finishes here.
           tracer.Trace(r, pending, deposit, counters);
-          completed += fb.AddUncounted(deposit);
+          add(deposit);
         }
       }
     }
@@ -57,7 +66,11 @@ absl::StatusOr<Image> RenderLocal(const Scene& scene, const Camera& camera,
   if (threads <= 0) threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   const auto start = std::chrono::steady_clock::now();
   const Tracer tracer(scene, settings, camera);
-  Framebuffer fb(camera.width(), camera.height(), settings.samples);
+  const int width = camera.width(), height = camera.height();
+  Image image;
+  image.width = width;
+  image.height = height;
+  image.rgb.resize(static_cast<size_t>(width) * height * 3);
   constexpr int kRowsPerTask = 2;
   std::atomic<int> next_row{0};
   std::atomic<int> rows_done{0};
@@ -66,11 +79,20 @@ absl::StatusOr<Image> RenderLocal(const Scene& scene, const Camera& camera,
     // Counted on the thread's stack: neighbouring counters in one vector
     // would share a cache line written at every traversal step.
     TraceCounters local;
+    // Every deposit of a pixel is made while its row is traced, so each
+    // task's rows are summed in a framebuffer of their own, which stays in
+    // the cache, and resolved into the image by this thread when they are
+    // done. A framebuffer of the whole image (32 bytes a pixel) was cleared
+    // and resolved on one thread: a 2048x2048 cthead frame on 2 threads took
+    // 1250-1285 ms with it against 1174-1215 now.
+    Framebuffer band(width, kRowsPerTask, settings.samples);
     while (true) {
       int r0 = next_row.fetch_add(kRowsPerTask);
-      if (r0 >= camera.height()) break;
-      int r1 = std::min(r0 + kRowsPerTask, camera.height());
-      TraceRows(tracer, camera, r0, r1, fb, local);
+      if (r0 >= height) break;
+      int r1 = std::min(r0 + kRowsPerTask, height);
+      band.Clear(settings.samples);
+      TraceRows(tracer, camera, r0, r1, band, r0, local);
+      band.ResolveRows(0, r1 - r0, image.rgb.data() + static_cast<size_t>(r0) * width * 3);
       rows_done.fetch_add(r1 - r0);
     }
     counters[id] = local;
@@ -98,7 +120,6 @@ absl::StatusOr<Image> RenderLocal(const Scene& scene, const Camera& camera,
     progress(total, total);
   }
   for (auto& t : pool) t.join();
-  Image image = fb.Resolve();
   if (stats) {
     stats->frame_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();

@@ -37,9 +37,13 @@ absl::StatusOr<Image> RenderLocal(const Scene& scene, const Camera& camera,
                                   const ProgressFn& progress = {});
 
 // Traces every ray of the pixels in rows [row_begin, row_end) to completion
-// in a scene that holds the whole volume, depositing into `fb`.
+// in a scene that holds the whole volume, depositing into `fb`, which holds
+// the image's rows from `fb_row` on (pixel p of the image is fb's pixel
+// p - fb_row * width): every deposit of a pixel is made here, so a band of
+// rows is all a caller needs.
+// REQUIRES: fb_row <= row_begin, row_end <= fb_row + fb.height().
 void TraceRows(const Tracer& tracer, const Camera& camera, int row_begin, int row_end,
-               Framebuffer& fb, TraceCounters& counters);
+               Framebuffer& fb, int fb_row, TraceCounters& counters);
 
 }  // namespace transtick
 
