@@ -144,6 +144,15 @@ class Tracer {
   int64_t max_segments() const { return max_segments_; }
   int64_t max_samples() const { return max_samples_; }
 
+  // World-space gradient at an index-space point, trilinearly interpolated
+  // from central differences at the 8 nearest voxel centres.
+  // REQUIRES: the planes the differences read are stored (a shading point
+  // of the slab, HitPoint's).
+  Vec3f Gradient(const Vec3& p) const;
+  // The same, one voxel at a time in plain float arithmetic, without the
+  // vector instructions Gradient may use: bit for bit the same. For tests.
+  Vec3f PortableGradient(const Vec3& p) const;
+
  private:
   struct TableEntry {
     std::array<float, 3> color;
@@ -207,9 +216,6 @@ class Tracer {
   Outcome TraceShadow(RayDescriptor& ray, TraceCounters& counters) const;
   Outcome TraceDvr(RayDescriptor& ray, TraceCounters& counters) const;
 
-  // World-space gradient at an index-space point, trilinearly interpolated
-  // from central differences at the 8 nearest voxel centres.
-  Vec3f Gradient(const Vec3& p) const;
   float Sample(const Vec3& p) const;  // trilinear, cell-centred
   const TableEntry& Lookup(float value) const;
   // Diffuse and specular terms at a point with (unnormalised) gradient g.
