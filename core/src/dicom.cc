@@ -1,5 +1,7 @@
 // DICOM series reader: a directory of single-frame CT or MR slices, read
-// with GDCM (Debian's libgdcm, the library DICOM toolkits and ITK build on).
+// with GDCM (Debian's libgdcm, the library DICOM toolkits and ITK build on),
+// which lives in the module libtranstick_dicom.so (dicom_gdcm.cc, loaded on
+// first use: dicom_module.h says why).
 //
 // Each file in the directory is one slice; DICOMDIR and names starting with
 // '.' are passed over. Every file is read through ReadOptions::open (so the
@@ -26,22 +28,16 @@
 // (to 1% or 0.01 mm). A gap that is a multiple of the others (a missing
 // slice), two slices at one position, positions off the normal (a tilted
 // gantry) and files of other series are refused, naming the files.
-#include <gdcmAttribute.h>
-#include <gdcmImage.h>
-#include <gdcmImageReader.h>
-#include <gdcmReader.h>
-#include <gdcmTrace.h>
 #include <dirent.h>
+#include <dlfcn.h>
 #include <fcntl.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <istream>
-#include <sstream>
 #include <memory>
-#include <set>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -52,6 +48,8 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
+#include "dicom_module.h"
+#include "module_loader.h"
 #include "transtick/orientation.h"
 #include "transtick/volume_io.h"
 #include "volume_io_internal.h"
@@ -84,37 +82,82 @@ struct Slice {
   uint64_t pixel_available = 0;  // bytes of the file from its value on
 };
 
+// The elements a slice's header is read for (group << 16 | element), in
+// the order of DicomHeader::values.
+enum Element : size_t {
+  kSeries,          // (0020,000E) SeriesInstanceUID
+  kRows,            // (0028,0010)
+  kColumns,         // (0028,0011)
+  kSamples,         // (0028,0002) SamplesPerPixel
+  kFrames,          // (0028,0008) NumberOfFrames
+  kBits,            // (0028,0100) BitsAllocated
+  kRepresentation,  // (0028,0103) PixelRepresentation
+  kPixelSpacing,    // (0028,0030)
+  kOrientation,     // (0020,0037) ImageOrientationPatient
+  kPosition,        // (0020,0032) ImagePositionPatient
+  kSlope,           // (0028,1053) RescaleSlope
+  kIntercept,       // (0028,1052) RescaleIntercept
+  kElements
+};
+constexpr uint32_t kTags[kElements] = {0x0020000e, 0x00280010, 0x00280011, 0x00280002,
+                                       0x00280008, 0x00280100, 0x00280103, 0x00280030,
+                                       0x00200037, 0x00200032, 0x00281053, 0x00281052};
+
+// libtranstick_dicom.so's functions, or why it could not be loaded.
+struct Gdcm {
+  TranstickDicomReadHeader read_header = nullptr;
+  TranstickDicomReadPixels read_pixels = nullptr;
+  absl::Status status;
+};
+
+const Gdcm& LoadGdcm() {
+  static const Gdcm gdcm = [] {
+    static constexpr const char* kSymbols[] = {"transtick_dicom_read_header",
+                                               "transtick_dicom_read_pixels", nullptr};
+#ifdef TRANSTICK_DICOM_BUILD_PATH
+    const char* build_path = TRANSTICK_DICOM_BUILD_PATH;
+#else
+    const char* build_path = nullptr;
+#endif
+    Gdcm g;
+    absl::StatusOr<void*> handle =
+        OpenModule("libtranstick_dicom.so", "TRANSTICK_DICOM_MODULE", build_path, "GDCM", kSymbols);
+    if (!handle.ok()) {
+      g.status = handle.status();
+      return g;
+    }
+    g.read_header = reinterpret_cast<TranstickDicomReadHeader>(::dlsym(*handle, kSymbols[0]));
+    g.read_pixels = reinterpret_cast<TranstickDicomReadPixels>(::dlsym(*handle, kSymbols[1]));
+    return g;
+  }();
+  return gdcm;
+}
+
 // A string element's value, trimmed of DICOM's padding; "" when absent.
-std::string Text(const gdcm::DataSet& ds, uint16_t group, uint16_t element) {
-  const gdcm::Tag tag(group, element);
-  if (!ds.FindDataElement(tag)) return "";
-  const gdcm::DataElement& de = ds.GetDataElement(tag);
-  const gdcm::ByteValue* bv = de.GetByteValue();
-  if (bv == nullptr) return "";
-  std::string s(bv->GetPointer(), bv->GetLength());
+std::string Text(const DicomHeader& h, Element e) {
+  if (!h.values[e]) return "";
+  std::string s = *h.values[e];
   while (!s.empty() && (s.back() == '\0' || s.back() == ' ')) s.pop_back();
   return std::string(absl::StripAsciiWhitespace(s));
 }
 
 // A US element's value, or -1 when absent or malformed.
-int Unsigned16(const gdcm::DataSet& ds, uint16_t group, uint16_t element) {
-  const gdcm::Tag tag(group, element);
-  if (!ds.FindDataElement(tag)) return -1;
-  const gdcm::ByteValue* bv = ds.GetDataElement(tag).GetByteValue();
-  if (bv == nullptr || bv->GetLength() < 2) return -1;
+int Unsigned16(const DicomHeader& h, Element e) {
+  if (!h.values[e] || h.values[e]->size() < 2) return -1;
   // Little endian: big-endian files are refused (ReadHeader).
-  const unsigned char* p = reinterpret_cast<const unsigned char*>(bv->GetPointer());
+  const unsigned char* p = reinterpret_cast<const unsigned char*>(h.values[e]->data());
   return p[0] | p[1] << 8;
 }
 
 // A decimal string's backslash-separated numbers.
-absl::StatusOr<std::vector<double>> Decimals(const std::string& path, const gdcm::DataSet& ds,
-                                             uint16_t group, uint16_t element, const char* name,
-                                             size_t want, bool required) {
-  const std::string text = Text(ds, group, element);
+absl::StatusOr<std::vector<double>> Decimals(const std::string& path, const DicomHeader& h,
+                                             Element e, const char* name, size_t want,
+                                             bool required) {
+  const std::string text = Text(h, e);
   if (text.empty()) {
     if (required) {
-      return Error(path, absl::StrFormat("has no %s (%04X,%04X)", name, group, element));
+      return Error(
+          path, absl::StrFormat("has no %s (%04X,%04X)", name, kTags[e] >> 16, kTags[e] & 0xffff));
     }
     return std::vector<double>{};
   }
@@ -383,68 +426,59 @@ absl::StatusOr<std::string> ReadChecked(const std::string& path, const ReadOptio
   return bytes;
 }
 
-absl::StatusOr<Slice> ReadHeader(const std::string& path, const ReadOptions& options) {
+absl::StatusOr<Slice> ReadHeader(const Gdcm& gdcm, const std::string& path,
+                                 const ReadOptions& options) {
   absl::StatusOr<std::string> contents = ReadChecked(path, options);
   if (!contents.ok()) return contents.status();
   const uint64_t file_size = contents->size();
-  std::istringstream stream(*std::move(contents));
-  gdcm::Reader reader;
-  reader.SetStream(stream);
-  // Skipping the pixel data leaves the stream at its value: nothing of it
-  // is read, and its length is checked below before GDCM reads it.
-  const gdcm::Tag pixel_tag(0x7fe0, 0x0010);
-  std::set<gdcm::Tag> skip = {pixel_tag};
-  if (!reader.ReadUpToTag(pixel_tag, skip)) {
-    return Error(path, "is not a DICOM file GDCM can read");
-  }
-  const gdcm::DataSet& ds = reader.GetFile().GetDataSet();
+  DicomHeader h;
+  // Up to the pixel data: nothing of it is read, and its length is checked
+  // below before GDCM reads it.
+  gdcm.read_header(&*contents, kTags, kElements, &h);
+  if (!h.read) return Error(path, "is not a DICOM file GDCM can read");
   Slice s;
   s.path = path;
-  const gdcm::TransferSyntax& syntax = reader.GetFile().GetHeader().GetDataSetTransferSyntax();
-  s.native = !syntax.IsEncapsulated();
-  if (syntax.GetSwapCode() == gdcm::SwapCode::BigEndian) {
+  s.native = !h.encapsulated;
+  if (h.big_endian) {
     // Retired since 2004; the attributes below are read little-endian.
     return Error(path, "uses the retired explicit VR big endian transfer syntax, not supported");
   }
-  stream.clear();
-  const std::streamoff value_at = stream.tellg();
+  const int64_t value_at = h.pixel_value_at;
   if (value_at < 4 || static_cast<uint64_t>(value_at) > file_size) {
     return Error(path, "has no pixel data (7FE0,0010)");
   }
   {
-    // The value length precedes the value, in either VR form.
-    unsigned char vl[4];
-    stream.seekg(value_at - 4);
-    if (!stream.read(reinterpret_cast<char*>(vl), 4)) return Error(path, "has no pixel data");
-    const bool big = syntax.GetSwapCode() == gdcm::SwapCode::BigEndian;
-    s.pixel_length = big ? (uint32_t{vl[0]} << 24 | vl[1] << 16 | vl[2] << 8 | vl[3])
-                         : (uint32_t{vl[3]} << 24 | vl[2] << 16 | vl[1] << 8 | vl[0]);
+    // The value length precedes the value, in either VR form (little
+    // endian: big-endian files are refused above).
+    const unsigned char* vl =
+        reinterpret_cast<const unsigned char*>(contents->data()) + value_at - 4;
+    s.pixel_length = uint32_t{vl[3]} << 24 | vl[2] << 16 | vl[1] << 8 | vl[0];
     s.pixel_available = file_size - static_cast<uint64_t>(value_at);
   }
-  s.series = Text(ds, 0x0020, 0x000e);
-  s.rows = Unsigned16(ds, 0x0028, 0x0010);
-  s.columns = Unsigned16(ds, 0x0028, 0x0011);
+  s.series = Text(h, kSeries);
+  s.rows = Unsigned16(h, kRows);
+  s.columns = Unsigned16(h, kColumns);
   if (s.rows <= 0 || s.columns <= 0) {
     return Error(path, absl::StrCat("has no image size (Rows ", s.rows, ", Columns ", s.columns, ")"));
   }
-  const int samples = Unsigned16(ds, 0x0028, 0x0002);
+  const int samples = Unsigned16(h, kSamples);
   if (samples != -1 && samples != 1) {
     return Error(path, absl::StrCat("has ", samples,
                                     " samples per pixel: only grey-level (1) images are supported"));
   }
-  const std::string frames = Text(ds, 0x0028, 0x0008);
+  const std::string frames = Text(h, kFrames);
   if (!frames.empty() && frames != "1") {
     return Error(path, absl::StrCat("has ", frames,
                                     " frames: only single-frame slices are supported"));
   }
-  s.bits = Unsigned16(ds, 0x0028, 0x0100);
+  s.bits = Unsigned16(h, kBits);
   if (s.bits != 8 && s.bits != 16 && s.bits != 32) {
     return Error(path, absl::StrCat("BitsAllocated ", s.bits, " is not 8, 16 or 32"));
   }
-  const int representation = Unsigned16(ds, 0x0028, 0x0103);
+  const int representation = Unsigned16(h, kRepresentation);
   s.is_signed = representation == 1;
   absl::StatusOr<std::vector<double>> v =
-      Decimals(path, ds, 0x0028, 0x0030, "PixelSpacing", 2, false);
+      Decimals(path, h, kPixelSpacing, "PixelSpacing", 2, false);
   if (!v.ok()) return v.status();
   if (!v->empty()) {
     if (!((*v)[0] > 0) || !((*v)[1] > 0)) {
@@ -452,16 +486,16 @@ absl::StatusOr<Slice> ReadHeader(const std::string& path, const ReadOptions& opt
     }
     s.pixel_spacing = {(*v)[0], (*v)[1]};
   }
-  v = Decimals(path, ds, 0x0020, 0x0037, "ImageOrientationPatient", 6, true);
+  v = Decimals(path, h, kOrientation, "ImageOrientationPatient", 6, true);
   if (!v.ok()) return v.status();
   std::copy(v->begin(), v->end(), s.orientation.begin());
-  v = Decimals(path, ds, 0x0020, 0x0032, "ImagePositionPatient", 3, true);
+  v = Decimals(path, h, kPosition, "ImagePositionPatient", 3, true);
   if (!v.ok()) return v.status();
   std::copy(v->begin(), v->end(), s.position.begin());
-  v = Decimals(path, ds, 0x0028, 0x1053, "RescaleSlope", 1, false);
+  v = Decimals(path, h, kSlope, "RescaleSlope", 1, false);
   if (!v.ok()) return v.status();
   if (!v->empty()) s.slope = (*v)[0];
-  v = Decimals(path, ds, 0x0028, 0x1052, "RescaleIntercept", 1, false);
+  v = Decimals(path, h, kIntercept, "RescaleIntercept", 1, false);
   if (!v.ok()) return v.status();
   if (!v->empty()) s.intercept = (*v)[0];
   // Before GDCM reads the pixels (and allocates their declared length):
@@ -491,47 +525,22 @@ ScalarType TypeOf(const Slice& s) {
 }
 
 // Appends the slice's pixels, rescaled, to `out`.
-absl::Status ReadPixels(const Slice& s, const ReadOptions& options, std::vector<float>* out) {
+absl::Status ReadPixels(const Gdcm& gdcm, const Slice& s, const ReadOptions& options,
+                        std::vector<float>* out) {
   // Read and walked again: the file may have changed since its header was.
   absl::StatusOr<std::string> contents = ReadChecked(s.path, options);
   if (!contents.ok()) return contents.status();
-  std::istringstream stream(*std::move(contents));
-  gdcm::ImageReader reader;
-  reader.SetStream(stream);
-  if (!reader.Read()) return Error(s.path, "GDCM cannot read its pixel data");
-  const gdcm::Image& image = reader.GetImage();
-  const unsigned int* dims = image.GetDimensions();
-  const gdcm::PixelFormat& pf = image.GetPixelFormat();
-  if (image.GetNumberOfDimensions() < 2 || dims[0] != static_cast<unsigned>(s.columns) ||
-      dims[1] != static_cast<unsigned>(s.rows) ||
-      (image.GetNumberOfDimensions() == 3 && dims[2] != 1) ||
-      pf.GetSamplesPerPixel() != 1 || pf.GetBitsAllocated() != s.bits) {
-    return Error(s.path, "its pixel data does not match its header");
-  }
-  const size_t bytes = static_cast<size_t>(s.rows) * s.columns * (s.bits / 8);
-  // GDCM accepts native pixel data cut short (it keeps what it read, and
-  // GetBuffer pads): check what the file held.
-  const gdcm::DataSet& ds = reader.GetFile().GetDataSet();
-  const gdcm::Tag pixel_tag(0x7fe0, 0x0010);
-  if (!ds.FindDataElement(pixel_tag)) return Error(s.path, "has no pixel data (7FE0,0010)");
-  const gdcm::DataElement& pixel_data = ds.GetDataElement(pixel_tag);
-  if (const gdcm::ByteValue* bv = pixel_data.GetByteValue();
-      bv != nullptr && bv->GetLength() < bytes) {
-    return Error(s.path, absl::StrCat("pixel data holds ", static_cast<uint32_t>(bv->GetLength()), " bytes, ",
-                                      s.columns, "x", s.rows, " ", s.bits,
-                                      "-bit pixels need ", bytes, " (truncated?)"));
-  }
-  if (image.GetBufferLength() != bytes) {
-    return Error(s.path, absl::StrCat("pixel data holds ", image.GetBufferLength(),
-                                      " bytes, the header says ", bytes));
-  }
-  std::vector<char> buffer(bytes);
-  if (!image.GetBuffer(buffer.data())) return Error(s.path, "GDCM cannot decode its pixel data");
+  DicomPixels pixels;
+  gdcm.read_pixels(&*contents, s.rows, s.columns, s.bits, &pixels);
+  if (!pixels.error.empty()) return Error(s.path, pixels.error);
   const size_t old = out->size();
   const size_t count = static_cast<size_t>(s.rows) * s.columns;
+  if (pixels.bytes.size() != count * (s.bits / 8)) {
+    return Error(s.path, "GDCM decoded a different number of pixels");
+  }
   out->resize(old + count);
   // GDCM hands pixels over in the host's byte order.
-  vi::ConvertSamples(reinterpret_cast<const unsigned char*>(buffer.data()), count, TypeOf(s),
+  vi::ConvertSamples(reinterpret_cast<const unsigned char*>(pixels.bytes.data()), count, TypeOf(s),
                      ByteOrder::kLittle, out->data() + old);
   if (s.slope != 1 || s.intercept != 0) {
     for (size_t i = old; i < out->size(); ++i) {
@@ -562,11 +571,11 @@ double Dot(const std::array<double, 3>& a, const std::array<double, 3>& b) {
 }  // namespace
 
 absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOptions& options) {
-  // GDCM's own warnings go to stderr; every problem that matters here is
-  // reported in the status instead.
-  gdcm::Trace::WarningOff();
-  gdcm::Trace::DebugOff();
-  gdcm::Trace::ErrorOff();
+  const Gdcm& gdcm = LoadGdcm();
+  if (!gdcm.status.ok()) {
+    return absl::UnavailableError(
+        absl::StrCat(path, ": cannot read DICOM: ", gdcm.status.message()));
+  }
   absl::StatusOr<std::vector<std::string>> names = ListDirectory(path, options);
   if (!names.ok()) return names.status();
   std::sort(names->begin(), names->end());
@@ -577,7 +586,7 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
     if (slices.size() >= kMaxSlices) {
       return Error(path, absl::StrCat("more than ", kMaxSlices, " files"));
     }
-    absl::StatusOr<Slice> s = ReadHeader(dir + name, options);
+    absl::StatusOr<Slice> s = ReadHeader(gdcm, dir + name, options);
     if (!s.ok()) return s.status();
     slices.push_back(*std::move(s));
   }
@@ -673,7 +682,7 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
   volume.source_type = TypeOf(first);
   volume.values.reserve(volume.VoxelCount());
   for (const Slice& s : slices) {
-    if (absl::Status st = ReadPixels(s, options, &volume.values); !st.ok()) return st;
+    if (absl::Status st = ReadPixels(gdcm, s, options, &volume.values); !st.ok()) return st;
   }
   if (absl::Status s = SetOrientation(path, {row, column, normal}, slices.front().position, &volume);
       !s.ok()) {

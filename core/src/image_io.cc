@@ -5,10 +5,8 @@
 #include "transtick/image_io.h"
 
 #include <dlfcn.h>
-#include <unistd.h>
 
 #include <array>
-#include <climits>
 #include <cstdio>
 #include <cstdlib>
 #include <optional>
@@ -16,6 +14,7 @@
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "image_io_module.h"
+#include "module_loader.h"
 #include "transtick/png.h"
 
 namespace transtick {
@@ -29,47 +28,26 @@ struct Module {
   std::string error;
 };
 
-// Where the module is looked for, in order: $TRANSTICK_IMAGEIO_MODULE;
-// beside the program (PROGRAM_DIR/../lib/transtick/, as the image installs
-// it, and PROGRAM_DIR itself); the build tree it was built in; the
-// library search path.
+// libtranstick_imageio.so, found as OpenModule says.
 const Module& LoadModule() {
   static const Module module = [] {
-    constexpr char kName[] = "libtranstick_imageio.so";
-    std::vector<std::string> candidates;
-    if (const char* env = std::getenv("TRANSTICK_IMAGEIO_MODULE"); env && *env) {
-      candidates.push_back(env);
-    }
-    char exe[PATH_MAX];
-    const ssize_t n = ::readlink("/proc/self/exe", exe, sizeof(exe) - 1);
-    if (n > 0) {
-      std::string dir(exe, static_cast<size_t>(n));
-      dir = dir.substr(0, dir.rfind('/'));
-      candidates.push_back(absl::StrCat(dir, "/../lib/transtick/", kName));
-      candidates.push_back(absl::StrCat(dir, "/", kName));
-    }
+    static constexpr const char* kSymbols[] = {"transtick_imageio_write", "transtick_imageio_read",
+                                               "transtick_imageio_free", nullptr};
 #ifdef TRANSTICK_IMAGEIO_BUILD_PATH
-    // Through StrCat: a std::string made from the literal itself draws a
-    // false -Wstringop-overread from GCC 12 when linked with -flto.
-    candidates.push_back(absl::StrCat(TRANSTICK_IMAGEIO_BUILD_PATH));
+    const char* build_path = TRANSTICK_IMAGEIO_BUILD_PATH;
+#else
+    const char* build_path = nullptr;
 #endif
-    candidates.push_back(kName);
     Module m;
-    std::string tried;
-    for (const std::string& path : candidates) {
-      void* handle = ::dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
-      if (handle == nullptr) {
-        absl::StrAppend(&tried, tried.empty() ? "" : "; ", ::dlerror());
-        continue;
-      }
-      m.write = reinterpret_cast<TranstickImageioWrite>(::dlsym(handle, "transtick_imageio_write"));
-      m.read = reinterpret_cast<TranstickImageioRead>(::dlsym(handle, "transtick_imageio_read"));
-      m.free = reinterpret_cast<TranstickImageioFree>(::dlsym(handle, "transtick_imageio_free"));
-      if (m.write && m.read && m.free) return m;
-      m = Module();
-      absl::StrAppend(&tried, tried.empty() ? "" : "; ", path, " lacks transtick_imageio_*");
+    absl::StatusOr<void*> handle = OpenModule("libtranstick_imageio.so", "TRANSTICK_IMAGEIO_MODULE",
+                                              build_path, "OpenImageIO", kSymbols);
+    if (!handle.ok()) {
+      m.error = std::string(handle.status().message());
+      return m;
     }
-    m.error = absl::StrCat(kName, " (OpenImageIO) could not be loaded: ", tried);
+    m.write = reinterpret_cast<TranstickImageioWrite>(::dlsym(*handle, kSymbols[0]));
+    m.read = reinterpret_cast<TranstickImageioRead>(::dlsym(*handle, kSymbols[1]));
+    m.free = reinterpret_cast<TranstickImageioFree>(::dlsym(*handle, kSymbols[2]));
     return m;
   }();
   return module;

@@ -1,0 +1,104 @@
+// libtranstick_dicom.so: what the DICOM reader (dicom.cc) asks of GDCM
+// (dicom_module.h). Loaded with dlopen only when a DICOM series is read.
+#include <gdcmImage.h>
+#include <gdcmImageReader.h>
+#include <gdcmReader.h>
+#include <gdcmTrace.h>
+
+#include <set>
+#include <sstream>
+
+#include "absl/strings/str_cat.h"
+#include "dicom_module.h"
+
+namespace {
+
+void Quiet() {
+  // GDCM's own warnings go to stderr; every problem that matters is
+  // reported by the reader instead.
+  gdcm::Trace::WarningOff();
+  gdcm::Trace::DebugOff();
+  gdcm::Trace::ErrorOff();
+}
+
+}  // namespace
+
+extern "C" __attribute__((visibility("default"))) void transtick_dicom_read_header(
+    const std::string* bytes, const uint32_t* tags, size_t count, transtick::DicomHeader* out) {
+  Quiet();
+  *out = transtick::DicomHeader();
+  std::istringstream stream(*bytes);
+  gdcm::Reader reader;
+  reader.SetStream(stream);
+  // Skipping the pixel data leaves the stream at its value: nothing of it
+  // is read, and its length is checked before GDCM reads it.
+  const gdcm::Tag pixel_tag(0x7fe0, 0x0010);
+  std::set<gdcm::Tag> skip = {pixel_tag};
+  if (!reader.ReadUpToTag(pixel_tag, skip)) return;
+  out->read = true;
+  const gdcm::TransferSyntax& syntax = reader.GetFile().GetHeader().GetDataSetTransferSyntax();
+  out->encapsulated = syntax.IsEncapsulated();
+  out->big_endian = syntax.GetSwapCode() == gdcm::SwapCode::BigEndian;
+  stream.clear();
+  const std::streamoff at = stream.tellg();
+  out->pixel_value_at = at >= 0 ? static_cast<int64_t>(at) : -1;
+  const gdcm::DataSet& ds = reader.GetFile().GetDataSet();
+  out->values.resize(count);
+  for (size_t i = 0; i < count; ++i) {
+    const gdcm::Tag tag(static_cast<uint16_t>(tags[i] >> 16), static_cast<uint16_t>(tags[i]));
+    if (!ds.FindDataElement(tag)) continue;
+    const gdcm::ByteValue* bv = ds.GetDataElement(tag).GetByteValue();
+    if (bv == nullptr) continue;
+    out->values[i] = std::string(bv->GetPointer(), bv->GetLength());
+  }
+}
+
+extern "C" __attribute__((visibility("default"))) void transtick_dicom_read_pixels(
+    const std::string* bytes, int rows, int columns, int bits, transtick::DicomPixels* out) {
+  Quiet();
+  *out = transtick::DicomPixels();
+  std::istringstream stream(*bytes);
+  gdcm::ImageReader reader;
+  reader.SetStream(stream);
+  if (!reader.Read()) {
+    out->error = "GDCM cannot read its pixel data";
+    return;
+  }
+  const gdcm::Image& image = reader.GetImage();
+  const unsigned int* dims = image.GetDimensions();
+  const gdcm::PixelFormat& pf = image.GetPixelFormat();
+  if (image.GetNumberOfDimensions() < 2 || dims[0] != static_cast<unsigned>(columns) ||
+      dims[1] != static_cast<unsigned>(rows) ||
+      (image.GetNumberOfDimensions() == 3 && dims[2] != 1) || pf.GetSamplesPerPixel() != 1 ||
+      pf.GetBitsAllocated() != bits) {
+    out->error = "its pixel data does not match its header";
+    return;
+  }
+  const size_t want = static_cast<size_t>(rows) * columns * (bits / 8);
+  // GDCM accepts native pixel data cut short (it keeps what it read, and
+  // GetBuffer pads): check what the file held.
+  const gdcm::DataSet& ds = reader.GetFile().GetDataSet();
+  const gdcm::Tag pixel_tag(0x7fe0, 0x0010);
+  if (!ds.FindDataElement(pixel_tag)) {
+    out->error = "has no pixel data (7FE0,0010)";
+    return;
+  }
+  const gdcm::DataElement& pixel_data = ds.GetDataElement(pixel_tag);
+  if (const gdcm::ByteValue* bv = pixel_data.GetByteValue();
+      bv != nullptr && bv->GetLength() < want) {
+    out->error =
+        absl::StrCat("pixel data holds ", static_cast<uint32_t>(bv->GetLength()), " bytes, ",
+                     columns, "x", rows, " ", bits, "-bit pixels need ", want, " (truncated?)");
+    return;
+  }
+  if (image.GetBufferLength() != want) {
+    out->error = absl::StrCat("pixel data holds ", image.GetBufferLength(),
+                              " bytes, the header says ", want);
+    return;
+  }
+  out->bytes.resize(want);
+  if (!image.GetBuffer(out->bytes.data())) {
+    out->bytes.clear();
+    out->error = "GDCM cannot decode its pixel data";
+  }
+}

@@ -1,0 +1,24 @@
+// Finds and loads one of transtick's own modules (a shared library built
+// with it, opened with dlopen only when first needed), so that a program
+// that never uses what a module wraps never loads that module's libraries.
+#ifndef TRANSTICK_CORE_MODULE_LOADER_H_
+#define TRANSTICK_CORE_MODULE_LOADER_H_
+
+#include <string>
+
+#include "absl/status/statusor.h"
+
+namespace transtick {
+
+// Opens the module `file_name` (e.g. "libtranstick_imageio.so") from the
+// first of: $`env_var` when set; beside the program (PROGRAM_DIR/../lib/
+// transtick/, as the image installs it, and PROGRAM_DIR itself);
+// `build_path`, where the build tree put it (may be null); the library
+// search path. Returns its handle, or an error naming `what` and every
+// path tried. Every symbol in `symbols` (null-terminated) must resolve.
+absl::StatusOr<void*> OpenModule(const char* file_name, const char* env_var, const char* build_path,
+                                 const char* what, const char* const* symbols);
+
+}  // namespace transtick
+
+#endif  // TRANSTICK_CORE_MODULE_LOADER_H_
