@@ -240,7 +240,8 @@ int Run(const Options& o) {
 
   std::printf("%-9s %7s %10s %10s %14s %8s %8s %9s %10s %9s  %s%s\n", "view", "threads",
               "median ms", "min ms", "rays/s", "Mrays/s", "speedup", "Mrays/s/c", "steps/ray",
-              "ns/step", "rays/frame (primary + shadow)", dvr ? ", samples/frame" : "");
+              "ns/step", "rays/frame (primary + shadow)",
+              dvr ? ", samples/frame" : "; smooth surfaces: cells solved, hits");
   std::fflush(stdout);
 
   Vec3 extent{volume->dims[0] * volume->spacing[0], volume->dims[1] * volume->spacing[1],
