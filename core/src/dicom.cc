@@ -433,7 +433,7 @@ absl::StatusOr<Slice> ReadHeader(const Gdcm& gdcm, const std::string& path,
   const uint64_t file_size = contents->size();
   DicomHeader h;
   // Up to the pixel data: nothing of it is read, and its length is checked
-  // below before GDCM reads it.
+  // below before GDCM reads it. The module takes the bytes.
   gdcm.read_header(&*contents, kTags, kElements, &h);
   if (!h.read) return Error(path, "is not a DICOM file GDCM can read");
   Slice s;
@@ -447,14 +447,9 @@ absl::StatusOr<Slice> ReadHeader(const Gdcm& gdcm, const std::string& path,
   if (value_at < 4 || static_cast<uint64_t>(value_at) > file_size) {
     return Error(path, "has no pixel data (7FE0,0010)");
   }
-  {
-    // The value length precedes the value, in either VR form (little
-    // endian: big-endian files are refused above).
-    const unsigned char* vl =
-        reinterpret_cast<const unsigned char*>(contents->data()) + value_at - 4;
-    s.pixel_length = uint32_t{vl[3]} << 24 | vl[2] << 16 | vl[1] << 8 | vl[0];
-    s.pixel_available = file_size - static_cast<uint64_t>(value_at);
-  }
+  // As stored, little endian: big-endian files are refused above.
+  s.pixel_length = h.pixel_length;
+  s.pixel_available = file_size - static_cast<uint64_t>(value_at);
   s.series = Text(h, kSeries);
   s.rows = Unsigned16(h, kRows);
   s.columns = Unsigned16(h, kColumns);

@@ -7,6 +7,7 @@
 
 #include <set>
 #include <sstream>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "dicom_module.h"
@@ -24,10 +25,11 @@ void Quiet() {
 }  // namespace
 
 extern "C" __attribute__((visibility("default"))) void transtick_dicom_read_header(
-    const std::string* bytes, const uint32_t* tags, size_t count, transtick::DicomHeader* out) {
+    std::string* bytes, const uint32_t* tags, size_t count, transtick::DicomHeader* out) {
   Quiet();
   *out = transtick::DicomHeader();
-  std::istringstream stream(*bytes);
+  const uint64_t file_size = bytes->size();
+  std::istringstream stream(std::move(*bytes));
   gdcm::Reader reader;
   reader.SetStream(stream);
   // Skipping the pixel data leaves the stream at its value: nothing of it
@@ -41,7 +43,15 @@ extern "C" __attribute__((visibility("default"))) void transtick_dicom_read_head
   out->big_endian = syntax.GetSwapCode() == gdcm::SwapCode::BigEndian;
   stream.clear();
   const std::streamoff at = stream.tellg();
-  out->pixel_value_at = at >= 0 ? static_cast<int64_t>(at) : -1;
+  if (at >= 4 && static_cast<uint64_t>(at) <= file_size) {
+    // The value length precedes the value, in either VR form.
+    unsigned char vl[4];
+    stream.seekg(at - 4);
+    if (stream.read(reinterpret_cast<char*>(vl), 4)) {
+      out->pixel_value_at = at;
+      out->pixel_length = uint32_t{vl[3]} << 24 | vl[2] << 16 | vl[1] << 8 | vl[0];
+    }
+  }
   const gdcm::DataSet& ds = reader.GetFile().GetDataSet();
   out->values.resize(count);
   for (size_t i = 0; i < count; ++i) {
@@ -54,10 +64,10 @@ extern "C" __attribute__((visibility("default"))) void transtick_dicom_read_head
 }
 
 extern "C" __attribute__((visibility("default"))) void transtick_dicom_read_pixels(
-    const std::string* bytes, int rows, int columns, int bits, transtick::DicomPixels* out) {
+    std::string* bytes, int rows, int columns, int bits, transtick::DicomPixels* out) {
   Quiet();
   *out = transtick::DicomPixels();
-  std::istringstream stream(*bytes);
+  std::istringstream stream(std::move(*bytes));
   gdcm::ImageReader reader;
   reader.SetStream(stream);
   if (!reader.Read()) {

@@ -25,9 +25,10 @@ struct DicomHeader {
   bool read = false;          // GDCM could read it
   bool encapsulated = false;  // the pixel data is compressed (its transfer syntax's)
   bool big_endian = false;    // the retired explicit VR big endian syntax
-  // Where the pixel data's value begins in the file (its length precedes
-  // it), or -1 when there is none.
+  // Where the pixel data's value begins in the file, or -1 when there is
+  // none; and the value length before it, as stored (little endian).
   int64_t pixel_value_at = -1;
+  uint32_t pixel_length = 0;
   // The byte value of each element asked for, in order (tags as group <<
   // 16 | element); nullopt when absent or without a byte value.
   std::vector<std::optional<std::string>> values;
@@ -40,12 +41,13 @@ struct DicomPixels {
 };
 
 extern "C" {
-// Reads the header of the file in `bytes`.
-typedef void (*TranstickDicomReadHeader)(const std::string* bytes, const uint32_t* tags,
-                                         size_t count, DicomHeader* out);
-// Decodes the pixels of the file in `bytes`, which must be one frame of
-// `rows` x `columns` grey samples of `bits` bits.
-typedef void (*TranstickDicomReadPixels)(const std::string* bytes, int rows, int columns, int bits,
+// Reads the header of the file in `bytes`, which it may move from (a
+// slice's whole file: not copied).
+typedef void (*TranstickDicomReadHeader)(std::string* bytes, const uint32_t* tags, size_t count,
+                                         DicomHeader* out);
+// Decodes the pixels of the file in `bytes`, which it may move from, and
+// which must be one frame of `rows` x `columns` grey samples of `bits` bits.
+typedef void (*TranstickDicomReadPixels)(std::string* bytes, int rows, int columns, int bits,
                                          DicomPixels* out);
 }
 
