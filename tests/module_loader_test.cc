@@ -10,8 +10,11 @@
 #include <fstream>
 #include <string>
 
+#include "absl/strings/str_cat.h"
+#include "dicom_module.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "image_io_module.h"
 #include "testing.h"
 
 namespace transtick {
@@ -47,8 +50,8 @@ TEST_F(ModuleLoaderTest, MissingEverywhereNamesTheModuleWhatItWrapsAndEveryPathT
   const std::string env_path = dir_ + "/from-env/libtranstick_nothing.so";
   const std::string build_path = dir_ + "/from-build/libtranstick_nothing.so";
   ::setenv(kEnv, env_path.c_str(), 1);
-  absl::StatusOr<void*> h =
-      OpenModule("libtranstick_nothing.so", kEnv, build_path.c_str(), "Nothing", kDicomSymbols);
+  absl::StatusOr<void*> h = OpenModule("libtranstick_nothing.so", kEnv, build_path.c_str(),
+                                       "Nothing", kDicomSymbols, kDicomModuleAbi);
   ASSERT_FALSE(h.ok());
   EXPECT_EQ(h.status().code(), absl::StatusCode::kUnavailable);
   EXPECT_THAT(
@@ -63,11 +66,12 @@ TEST_F(ModuleLoaderTest, AFileThatIsNotALibraryIsNamedAndPassedOver) {
   ::setenv(kEnv, junk.c_str(), 1);
   // Only the junk and paths where nothing is: the error says why each failed.
   absl::StatusOr<void*> h =
-      OpenModule("libtranstick_nothing.so", kEnv, nullptr, "GDCM", kDicomSymbols);
+      OpenModule("libtranstick_nothing.so", kEnv, nullptr, "GDCM", kDicomSymbols, kDicomModuleAbi);
   ASSERT_FALSE(h.ok());
   EXPECT_THAT(std::string(h.status().message()), HasSubstr(junk));
   // With a good module further down the list, the junk is passed over.
-  h = OpenModule("libtranstick_dicom.so", kEnv, TRANSTICK_DICOM_MODULE_PATH, "GDCM", kDicomSymbols);
+  h = OpenModule("libtranstick_dicom.so", kEnv, TRANSTICK_DICOM_MODULE_PATH, "GDCM", kDicomSymbols,
+                 kDicomModuleAbi);
   ASSERT_TRUE(h.ok()) << h.status();
   EXPECT_EQ(PathOf(*h, kDicomSymbols[0]),
             fs::weakly_canonical(TRANSTICK_DICOM_MODULE_PATH).string());
@@ -77,11 +81,28 @@ TEST_F(ModuleLoaderTest, ALibraryWithoutTheFunctionsIsRefusedByName) {
   // OpenImageIO's module is a real library, but not GDCM's.
   ::setenv(kEnv, TRANSTICK_IMAGEIO_MODULE_PATH, 1);
   absl::StatusOr<void*> h =
-      OpenModule("libtranstick_nothing.so", kEnv, nullptr, "GDCM", kDicomSymbols);
+      OpenModule("libtranstick_nothing.so", kEnv, nullptr, "GDCM", kDicomSymbols, kDicomModuleAbi);
   ASSERT_FALSE(h.ok());
-  EXPECT_THAT(
-      std::string(h.status().message()),
-      HasSubstr(std::string(TRANSTICK_IMAGEIO_MODULE_PATH) + " lacks a function it should have"));
+  EXPECT_THAT(std::string(h.status().message()),
+              HasSubstr(std::string(TRANSTICK_IMAGEIO_MODULE_PATH) +
+                        ": lacks the function transtick_dicom_read_header"));
+}
+
+TEST_F(ModuleLoaderTest, AModuleOfAnotherInterfaceVersionIsPassedOver) {
+  // The build's module, as a program built for the next version of the
+  // interface sees it: refused, with both versions named.
+  absl::StatusOr<void*> h = OpenModule("libtranstick_nothing.so", kEnv, TRANSTICK_DICOM_MODULE_PATH,
+                                       "GDCM", kDicomSymbols, kDicomModuleAbi + 1);
+  ASSERT_FALSE(h.ok());
+  EXPECT_THAT(std::string(h.status().message()),
+              HasSubstr(absl::StrCat(TRANSTICK_DICOM_MODULE_PATH, ": is interface version ",
+                                     kDicomModuleAbi, ", this program needs ", kDicomModuleAbi + 1,
+                                     ": built by another transtick")));
+  // And the OpenImageIO module answers its own version.
+  static constexpr const char* kNone[] = {nullptr};
+  h = OpenModule("libtranstick_nothing.so", kEnv, TRANSTICK_IMAGEIO_MODULE_PATH, "OpenImageIO",
+                 kNone, kTranstickImageioAbi);
+  EXPECT_TRUE(h.ok()) << h.status();
 }
 
 TEST_F(ModuleLoaderTest, TheEnvironmentComesBeforeTheBuildTree) {
@@ -91,13 +112,14 @@ TEST_F(ModuleLoaderTest, TheEnvironmentComesBeforeTheBuildTree) {
   fs::create_directories(dir_ + "/elsewhere");
   fs::copy_file(TRANSTICK_DICOM_MODULE_PATH, copy);
   ::setenv(kEnv, copy.c_str(), 1);
-  absl::StatusOr<void*> h =
-      OpenModule("libtranstick_dicom.so", kEnv, TRANSTICK_DICOM_MODULE_PATH, "GDCM", kDicomSymbols);
+  absl::StatusOr<void*> h = OpenModule("libtranstick_dicom.so", kEnv, TRANSTICK_DICOM_MODULE_PATH,
+                                       "GDCM", kDicomSymbols, kDicomModuleAbi);
   ASSERT_TRUE(h.ok()) << h.status();
   EXPECT_EQ(PathOf(*h, kDicomSymbols[0]), fs::weakly_canonical(copy).string());
   // Unset, the build tree's.
   ::unsetenv(kEnv);
-  h = OpenModule("libtranstick_dicom.so", kEnv, TRANSTICK_DICOM_MODULE_PATH, "GDCM", kDicomSymbols);
+  h = OpenModule("libtranstick_dicom.so", kEnv, TRANSTICK_DICOM_MODULE_PATH, "GDCM", kDicomSymbols,
+                 kDicomModuleAbi);
   ASSERT_TRUE(h.ok()) << h.status();
   EXPECT_EQ(PathOf(*h, kDicomSymbols[0]),
             fs::weakly_canonical(TRANSTICK_DICOM_MODULE_PATH).string());

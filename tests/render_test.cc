@@ -396,9 +396,6 @@ TEST(RenderTest, DvrOfExtremeValuesGivesAFiniteImage) {
   EXPECT_GT(traced, 100);
 }
 
-// Transfer function points more than FLT_MAX apart: the interpolation
-// weight was (value - a) / (b - a) in float, inf / inf near the top, so
-// the dvr table and every deposit were NaN (found by volume_fuzzer).
 // Gradient reads most points' 4^3 voxels with vector instructions, four
 // corners at a time; PortableGradient one voxel at a time. They must give the
 // same bits, or nodes built for different processors would shade apart: at
@@ -462,6 +459,9 @@ TEST(RenderTest, VectorGradientEqualsPortableBitForBit) {
   EXPECT_EQ(compared, 8 * 3 * 3000);
 }
 
+// Transfer function points more than FLT_MAX apart: the interpolation
+// weight was (value - a) / (b - a) in float, inf / inf near the top, so
+// the dvr table and every deposit were NaN (found by volume_fuzzer).
 TEST(RenderTest, TransferFunctionPointsFarApartInterpolate) {
   TransferFunction tf;
   tf.points = {{-3e38f, {0, 0, 0, 0}}, {3.1e38f, {1, 1, 1, 1}}};

@@ -120,8 +120,8 @@ const Gdcm& LoadGdcm() {
     const char* build_path = nullptr;
 #endif
     Gdcm g;
-    absl::StatusOr<void*> handle =
-        OpenModule("libtranstick_dicom.so", "TRANSTICK_DICOM_MODULE", build_path, "GDCM", kSymbols);
+    absl::StatusOr<void*> handle = OpenModule("libtranstick_dicom.so", "TRANSTICK_DICOM_MODULE",
+                                              build_path, "GDCM", kSymbols, kDicomModuleAbi);
     if (!handle.ok()) {
       g.status = handle.status();
       return g;

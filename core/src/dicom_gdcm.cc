@@ -22,11 +22,8 @@ void Quiet() {
   gdcm::Trace::ErrorOff();
 }
 
-}  // namespace
-
-extern "C" __attribute__((visibility("default"))) void transtick_dicom_read_header(
-    std::string* bytes, const uint32_t* tags, size_t count, transtick::DicomHeader* out) {
-  Quiet();
+void ReadHeader(std::string* bytes, const uint32_t* tags, size_t count,
+                transtick::DicomHeader* out) {
   *out = transtick::DicomHeader();
   const uint64_t file_size = bytes->size();
   std::istringstream stream(std::move(*bytes));
@@ -63,9 +60,7 @@ extern "C" __attribute__((visibility("default"))) void transtick_dicom_read_head
   }
 }
 
-extern "C" __attribute__((visibility("default"))) void transtick_dicom_read_pixels(
-    std::string* bytes, int rows, int columns, int bits, transtick::DicomPixels* out) {
-  Quiet();
+void ReadPixels(std::string* bytes, int rows, int columns, int bits, transtick::DicomPixels* out) {
   *out = transtick::DicomPixels();
   std::istringstream stream(std::move(*bytes));
   gdcm::ImageReader reader;
@@ -110,5 +105,37 @@ extern "C" __attribute__((visibility("default"))) void transtick_dicom_read_pixe
   if (!image.GetBuffer(out->bytes.data())) {
     out->bytes.clear();
     out->error = "GDCM cannot decode its pixel data";
+  }
+}
+
+}  // namespace
+
+// The entry points (dicom_module.h): nothing thrown inside, by GDCM or an
+// allocation, crosses into the program.
+extern "C" __attribute__((visibility("default"))) int transtick_module_abi() {
+  return transtick::kDicomModuleAbi;
+}
+
+extern "C" __attribute__((visibility("default"))) void transtick_dicom_read_header(
+    std::string* bytes, const uint32_t* tags, size_t count, transtick::DicomHeader* out) {
+  Quiet();
+  try {
+    ReadHeader(bytes, tags, count, out);
+  } catch (...) {
+    *out = transtick::DicomHeader();  // not read
+  }
+}
+
+extern "C" __attribute__((visibility("default"))) void transtick_dicom_read_pixels(
+    std::string* bytes, int rows, int columns, int bits, transtick::DicomPixels* out) {
+  Quiet();
+  try {
+    ReadPixels(bytes, rows, columns, bits, out);
+  } catch (const std::exception& e) {
+    *out = transtick::DicomPixels();
+    out->error = absl::StrCat("GDCM failed on its pixel data (", e.what(), ")");
+  } catch (...) {
+    *out = transtick::DicomPixels();
+    out->error = "GDCM failed on its pixel data";
   }
 }

@@ -7,8 +7,9 @@
 //
 // The module is built with the rest of transtick by the same compiler, so
 // the functions take C++ types; they are extern "C" only to be found by
-// name. They never throw and never abort on a file's content (ElementWalk
-// in dicom.cc has checked its element lengths before either is called).
+// name. They never throw (an exception inside, even GDCM's or an
+// allocation's, becomes an unreadable file or an error) and never abort on a file's content
+// (ElementWalk in dicom.cc has checked its element lengths before either is called).
 #ifndef TRANSTICK_CORE_DICOM_MODULE_H_
 #define TRANSTICK_CORE_DICOM_MODULE_H_
 
@@ -19,6 +20,12 @@
 #include <vector>
 
 namespace transtick {
+
+// The version of the interface below, which the module returns from
+// transtick_module_abi (module_loader.h): a program refuses a module of
+// another version, built by another transtick (its types may differ).
+// Bump it with any change to the types or functions below.
+inline constexpr int kDicomModuleAbi = 2;
 
 // A slice file's header, up to its pixel data, as GDCM reads it.
 struct DicomHeader {

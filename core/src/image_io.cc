@@ -39,8 +39,9 @@ const Module& LoadModule() {
     const char* build_path = nullptr;
 #endif
     Module m;
-    absl::StatusOr<void*> handle = OpenModule("libtranstick_imageio.so", "TRANSTICK_IMAGEIO_MODULE",
-                                              build_path, "OpenImageIO", kSymbols);
+    absl::StatusOr<void*> handle =
+        OpenModule("libtranstick_imageio.so", "TRANSTICK_IMAGEIO_MODULE", build_path, "OpenImageIO",
+                   kSymbols, kTranstickImageioAbi);
     if (!handle.ok()) {
       m.error = std::string(handle.status().message());
       return m;

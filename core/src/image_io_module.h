@@ -6,6 +6,10 @@
 #include <cstddef>
 #include <cstdint>
 
+// The version of the interface below, which the module returns from
+// transtick_module_abi (module_loader.h). Bump it with any change to it.
+inline constexpr int kTranstickImageioAbi = 1;
+
 enum {
   kTranstickImageioOk = 0,
   kTranstickImageioFormat = 1,  // not a format it can write or read

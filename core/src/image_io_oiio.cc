@@ -23,12 +23,8 @@ void SetError(char* error, size_t size, const std::string& message) {
   error[size - 1] = '\0';
 }
 
-}  // namespace
-
-extern "C" {
-
-int transtick_imageio_write(const char* path, int width, int height, const float* rgb,
-                            const uint8_t* bytes, char* error, size_t error_size) {
+int Write(const char* path, int width, int height, const float* rgb, const uint8_t* bytes,
+          char* error, size_t error_size) {
   auto out = OIIO::ImageOutput::create(path);
   if (!out) {
     SetError(error, error_size, "cannot write this image format (" + OIIO::geterror() + ")");
@@ -49,8 +45,7 @@ int transtick_imageio_write(const char* path, int width, int height, const float
   return kTranstickImageioOk;
 }
 
-int transtick_imageio_read(const char* path, int* width, int* height, float** rgb, char* error,
-                           size_t error_size) {
+int Read(const char* path, int* width, int* height, float** rgb, char* error, size_t error_size) {
   auto in = OIIO::ImageInput::open(path);
   if (!in) {
     SetError(error, error_size, OIIO::geterror());
@@ -76,6 +71,38 @@ int transtick_imageio_read(const char* path, int* width, int* height, float** rg
   *height = spec.height;
   *rgb = out;
   return kTranstickImageioOk;
+}
+
+}  // namespace
+
+// The entry points (image_io_module.h): nothing thrown inside, by
+// OpenImageIO or an allocation, crosses into the program.
+extern "C" {
+
+int transtick_module_abi() { return kTranstickImageioAbi; }
+
+int transtick_imageio_write(const char* path, int width, int height, const float* rgb,
+                            const uint8_t* bytes, char* error, size_t error_size) {
+  try {
+    return Write(path, width, height, rgb, bytes, error, error_size);
+  } catch (const std::exception& e) {
+    SetError(error, error_size, std::string("OpenImageIO failed: ") + e.what());
+  } catch (...) {
+    SetError(error, error_size, "OpenImageIO failed");
+  }
+  return kTranstickImageioIo;
+}
+
+int transtick_imageio_read(const char* path, int* width, int* height, float** rgb, char* error,
+                           size_t error_size) {
+  try {
+    return Read(path, width, height, rgb, error, error_size);
+  } catch (const std::exception& e) {
+    SetError(error, error_size, std::string("OpenImageIO failed: ") + e.what());
+  } catch (...) {
+    SetError(error, error_size, "OpenImageIO failed");
+  }
+  return kTranstickImageioIo;
 }
 
 void transtick_imageio_free(float* rgb) { std::free(rgb); }

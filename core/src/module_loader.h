@@ -15,9 +15,15 @@ namespace transtick {
 // transtick/, as the image installs it, and PROGRAM_DIR itself);
 // `build_path`, where the build tree put it (may be null); the library
 // search path. Returns its handle, or an error naming `what` and every
-// path tried. Every symbol in `symbols` (null-terminated) must resolve.
+// path tried, each with why it failed. Every symbol in `symbols`
+// (null-terminated) must resolve, and the module's
+// `int transtick_module_abi(void)` must return `abi`, the version of the
+// interface the program was built with: a module left from another
+// transtick (an older install, a stale copy on the search path) is passed
+// over, since the types it takes may differ.
+inline constexpr const char* kModuleAbiSymbol = "transtick_module_abi";
 absl::StatusOr<void*> OpenModule(const char* file_name, const char* env_var, const char* build_path,
-                                 const char* what, const char* const* symbols);
+                                 const char* what, const char* const* symbols, int abi);
 
 }  // namespace transtick
 

@@ -42,8 +42,10 @@ void TraceRows(const Tracer& tracer, const Camera& camera, int row_begin, int ro
         while (!pending.empty()) {
           RayDescriptor r = pending.back();
           pending.pop_back();
-          // A whole-volume scene has no slab planes: every ray finishes here.
-          tracer.Trace(r, pending, deposit, counters);
+          // A whole-volume scene has no slab planes: every ray finishes
+          // here, with a deposit for its own pixel, in fb's rows.
+          TRANSTICK_CHECK(tracer.Trace(r, pending, deposit, counters) ==
+                          Tracer::Outcome::kFinished);
           add(deposit);
         }
       }
