@@ -7,6 +7,8 @@
 #include <string>
 #include <thread>
 
+#include "absl/strings/str_cat.h"
+#include "grpcpp/grpcpp.h"
 #include "gtest/gtest.h"
 
 namespace transtick {
@@ -107,6 +109,57 @@ TEST(RegistryTest, WorkersWaitsForAFirstWorkerAndHonoursCancel) {
   ASSERT_EQ(got->size(), 1u);
   EXPECT_EQ((*got)[0]->id, "w");
   EXPECT_FALSE(registry.Register(Request("", "x")).ok());
+}
+
+// A call that could not reach a worker drops it only when a new connection
+// fails too: a worker that is gone goes, one that takes the connection
+// (its first attempt met a passing failure) keeps its place.
+TEST(RegistryTest, AFailedConnectDropsOnlyAWorkerThatRefusesANewOne) {
+  // A loopback port with nothing on it: a server's, stopped.
+  int port = 0;
+  v1::Worker::CallbackService unimplemented;  // a server needs a service
+  {
+    grpc::ServerBuilder b;
+    b.RegisterService(&unimplemented);
+    b.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port);
+    auto server = b.BuildAndStart();
+    ASSERT_NE(server, nullptr);
+    server->Shutdown();
+  }
+  ASSERT_GT(port, 0);
+  const std::string address = absl::StrCat("127.0.0.1:", port);
+  Registry registry(std::chrono::seconds(60));
+  ASSERT_TRUE(registry.Register(Request("gone", address)).ok());
+  const auto t0 = std::chrono::steady_clock::now();
+  registry.Drop("gone", "failed to connect", std::chrono::milliseconds(300));
+  EXPECT_FALSE(registry.Alive("gone"));
+  EXPECT_GE(std::chrono::steady_clock::now() - t0, std::chrono::milliseconds(299));
+
+  ASSERT_TRUE(registry.Register(Request("back", address)).ok());
+  auto workers = registry.Workers(std::chrono::milliseconds(0), [] { return false; });
+  ASSERT_TRUE(workers.ok()) << workers.status();
+  ASSERT_EQ(workers->size(), 1u);
+  // Its first connection fails, as a call's would ...
+  const auto& channel = (*workers)[0]->channel;
+  EXPECT_FALSE(channel->WaitForConnected(std::chrono::system_clock::now() +
+                                         std::chrono::milliseconds(200)));
+  EXPECT_NE(channel->GetState(false), GRPC_CHANNEL_READY);
+  // ... and by the time the root drops it, the worker listens.
+  grpc::ServerBuilder b;
+  b.RegisterService(&unimplemented);
+  int again = 0;
+  b.AddListeningPort(address, grpc::InsecureServerCredentials(), &again);
+  auto server = b.BuildAndStart();
+  ASSERT_NE(server, nullptr);
+  ASSERT_EQ(again, port);
+  registry.Drop("back", "failed to connect", std::chrono::seconds(10));
+  EXPECT_TRUE(registry.Alive("back"));
+  EXPECT_EQ(channel->GetState(false), GRPC_CHANNEL_READY);
+  // Reached and silent (a paused worker) is not given that chance: with
+  // the channel connected, the drop is at once.
+  registry.Drop("back", "deadline exceeded", std::chrono::seconds(10));
+  EXPECT_FALSE(registry.Alive("back"));
+  server->Shutdown();
 }
 
 }  // namespace

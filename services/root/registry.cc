@@ -87,7 +87,8 @@ absl::Status Registry::Register(const v1::RegisterRequest& req) {
   w->cpus = req.cpus();
   w->machine_cpus = req.machine_cpus();
   w->order = next_order_++;
-  w->stub = v1::Worker::NewStub(MakeChannel(w->address, Role::kWorker));
+  w->channel = MakeChannel(w->address, Role::kWorker);
+  w->stub = v1::Worker::NewStub(w->channel);
   workers_[w->id] = w;
   last_seen_[w->id] = std::chrono::steady_clock::now();
   spdlog::info("worker {} registered at {} ({} threads); {} workers", w->id, w->address, w->threads,
@@ -106,13 +107,27 @@ absl::Status Registry::Unregister(const std::string& id) {
   return absl::OkStatus();
 }
 
-void Registry::Drop(const std::string& id, const std::string& why) {
+void Registry::Drop(const std::string& id, const std::string& why,
+                    std::chrono::milliseconds recheck) {
+  std::shared_ptr<WorkerEntry> w;
+  {
+    absl::MutexLock lock(&mu_);
+    if (auto it = workers_.find(id); it != workers_.end()) w = it->second;
+  }
+  if (w == nullptr) return;
+  if (w->channel != nullptr && w->channel->GetState(false) != GRPC_CHANNEL_READY &&
+      w->channel->WaitForConnected(std::chrono::system_clock::now() + recheck)) {
+    spdlog::warn("worker {} at {} failed a call ({}) but took a new connection: it stays", id,
+                 w->address, why);
+    return;
+  }
   absl::MutexLock lock(&mu_);
+  // Not one that registered anew under the id while this one was tried.
+  if (auto it = workers_.find(id); it == workers_.end() || it->second != w) return;
   held_.erase(id);
   last_seen_.erase(id);
-  if (workers_.erase(id)) {
-    spdlog::warn("dropping worker {}: {}; {} workers left", id, why, workers_.size());
-  }
+  workers_.erase(id);
+  spdlog::warn("dropping worker {}: {}; {} workers left", id, why, workers_.size());
 }
 
 absl::StatusOr<std::vector<std::shared_ptr<WorkerEntry>>> Registry::Workers(

@@ -33,6 +33,7 @@ struct WorkerEntry {
   double cpus = 0;
   int machine_cpus = 0;
   uint64_t order = 0;  // registration order: rings are formed in it
+  std::shared_ptr<grpc::Channel> channel;  // the stub's
   std::unique_ptr<v1::Worker::Stub> stub;
 };
 
@@ -59,8 +60,14 @@ class Registry {
   // address (and then fails ALREADY_EXISTS, as for any known id).
   absl::Status Register(const v1::RegisterRequest& req);
   absl::Status Unregister(const std::string& id);
-  // A worker that failed a call: forgotten with what it held.
-  void Drop(const std::string& id, const std::string& why);
+  // A worker that failed a call: forgotten with what it held. When the
+  // call could not reach it (its channel is not connected), it is first
+  // given up to `recheck` to take a new connection, and keeps its place if
+  // it does: one failed connect on a loaded machine is not a death, while a
+  // worker that is gone refuses again. One that was reached and did not
+  // answer in time (paused, stalled) goes at once. Blocks up to `recheck`.
+  void Drop(const std::string& id, const std::string& why,
+            std::chrono::milliseconds recheck = std::chrono::seconds(1));
 
   // The registered workers in registration order. Waits up to `wait` for
   // at least one; fails UNAVAILABLE when none came, CANCELLED when
