@@ -245,6 +245,7 @@ absl::StatusOr<v1::Dataset> ResolvePreset(const v1::Dataset& dataset,
     auto c = PresetMaterials(preset.name(), range);
     if (!c.ok()) return c.status();
     v1::MaterialSet& set = *out.mutable_materials();
+    set.set_surface(preset.surface());
     for (const Material& m : c->materials) {
       v1::Material& pm = *set.add_materials();
       pm.set_name(m.name);
@@ -258,6 +259,10 @@ absl::StatusOr<v1::Dataset> ResolvePreset(const v1::Dataset& dataset,
       pm.set_shininess(m.shininess);
     }
   } else if (mode == v1::DVR) {
+    if (preset.surface() != v1::SURFACE_DEFAULT) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "preset '", preset.name(), "': a surface model is for surfaces mode, not dvr"));
+    }
     auto tf = PresetTransfer(preset.name(), range);
     if (!tf.ok()) return tf.status();
     v1::TransferFunction& t = *out.mutable_transfer();

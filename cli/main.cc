@@ -110,7 +110,7 @@ const CommandDoc kRenderDoc = {
                    "with a --preset that has materials"},
                   {"surface", "smooth|voxel",
                    "surfaces on the trilinear field, hit exactly (default), or the\n"
-                   "paper's voxel faces (overrides the materials file's \"surface\")"},
+                   "paper's voxel faces (overrides the materials' or the preset's)"},
                   {"azimuth", "DEG", "orbit: rotation about the world's Y axis (0 looks along -Z)"},
                   {"elevation", "DEG", "orbit: tilt toward +Y"},
                   {"zoom", "F", "magnification: in an orbit 1 frames the whole volume; with --eye\n"
@@ -579,7 +579,7 @@ absl::Status CheckRenderFlags(const Flags& f) {
   std::vector<absl::Status> checks = {
       Exclusive(f, "materials", {"transfer"},
                 "surfaces mode takes --materials, dvr mode --transfer"),
-      Exclusive(f, "preset", {"materials", "transfer", "surface"},
+      Exclusive(f, "preset", {"materials", "transfer"},
                 "--preset stands for the classification"),
       // --zoom goes with either: it narrows the field of view of an explicit
       // view as it does an orbit's.
@@ -701,9 +701,20 @@ int Render(int argc, char** argv) {
     text = ReadTextFile(settings_file);
     if (!text.ok()) return fail(text.status());
   }
+  // --surface overrides the materials' or the preset's surface model
+  // (CheckRenderFlags has refused it for dvr).
+  v1::SurfaceModel surface = v1::SURFACE_DEFAULT;
+  if (flags->Has("surface")) {
+    auto s = ParseEnum<v1::SurfaceModel>(flags->Get("surface"), "--surface");
+    if (!s.ok() || *s == v1::SURFACE_DEFAULT) {
+      return fail(absl::InvalidArgumentError("--surface must be smooth or voxel"));
+    }
+    surface = *s;
+  }
   if (preset) {
     dataset.mutable_preset()->set_name(flags->Get("preset"));
     dataset.mutable_preset()->set_mode(dvr ? v1::DVR : v1::SURFACES);
+    dataset.mutable_preset()->set_surface(surface);
     if (auto r = ResolvePreset(dataset, {0.0f, 1.0f}); !r.ok()) {
       return fail(absl::InvalidArgumentError(absl::StrCat("--preset: ", r.status().message())));
     }
@@ -718,13 +729,7 @@ int Render(int argc, char** argv) {
   } else {
     if (auto s = ParseJson(*text, settings_file, dataset.mutable_materials()); !s.ok())
       return fail(s);
-    if (flags->Has("surface")) {
-      auto surface = ParseEnum<v1::SurfaceModel>(flags->Get("surface"), "--surface");
-      if (!surface.ok() || *surface == v1::SURFACE_DEFAULT) {
-        return fail(absl::InvalidArgumentError("--surface must be smooth or voxel"));
-      }
-      dataset.mutable_materials()->set_surface(*surface);
-    }
+    if (surface != v1::SURFACE_DEFAULT) dataset.mutable_materials()->set_surface(surface);
     auto c = ToClassification(dataset.materials());
     if (!c.ok())
       return fail(

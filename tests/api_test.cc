@@ -1,4 +1,7 @@
 #include <fstream>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "convert.h"
@@ -71,6 +74,42 @@ TEST(ApiTest, EnumsReadAsJobFilesWroteThem) {
   future.set_projection(static_cast<v1::Projection>(9));
   EXPECT_FALSE(ToCameraSpec(future).ok());
   EXPECT_FALSE(ToBalanceRule(static_cast<v1::BalanceRule>(9)).ok());
+}
+
+// A preset takes a surface model as a materials file does; dvr has none.
+TEST(ApiTest, PresetsTakeASurfaceModel) {
+  for (const auto& [name, expect] : std::vector<std::pair<std::string, v1::SurfaceModel>>{
+           {"", v1::SURFACE_DEFAULT}, {"voxel", v1::VOXEL}, {"smooth", v1::SMOOTH}}) {
+    v1::Dataset ds;
+    const std::string surface = name.empty() ? "" : absl::StrCat(R"(,"surface":")", name, R"(")");
+    ASSERT_TRUE(
+        ParseJson(absl::StrCat(R"({"volume":"v","preset":{"name":"ct-bone")", surface, "}}"),
+                  "job.json", &ds)
+            .ok())
+        << name;
+    auto resolved = ResolvePreset(ds, {-1000, 3000});
+    ASSERT_TRUE(resolved.ok()) << resolved.status();
+    ASSERT_TRUE(resolved->has_materials());
+    EXPECT_EQ(resolved->materials().surface(), expect) << name;
+    auto c = ToClassification(resolved->materials());
+    ASSERT_TRUE(c.ok()) << c.status();
+    EXPECT_EQ(c->surface, expect == v1::VOXEL ? SurfaceModel::kVoxel : SurfaceModel::kSmooth);
+  }
+  v1::Dataset dvr;
+  dvr.mutable_preset()->set_name("ct-bone");
+  dvr.mutable_preset()->set_mode(v1::DVR);
+  dvr.mutable_preset()->set_surface(v1::VOXEL);
+  auto refused = ResolvePreset(dvr, {0, 1});
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().message(),
+            "preset 'ct-bone': a surface model is for surfaces mode, not dvr");
+  // A value this build does not know is refused where the materials are.
+  v1::Dataset future;
+  future.mutable_preset()->set_name("ct-bone");
+  future.mutable_preset()->set_surface(static_cast<v1::SurfaceModel>(9));
+  auto resolved = ResolvePreset(future, {0, 1});
+  ASSERT_TRUE(resolved.ok());
+  EXPECT_FALSE(ToClassification(resolved->materials()).ok());
 }
 
 TEST(ApiTest, BadMaterialsNameTheProblem) {

@@ -192,6 +192,16 @@ expect 2 "colormap for dvr" -- render --volume "$dir/cube.nrrd" --preset hot --m
   --out "$dir/p.png"
 expect 2 "contradict" -- render --volume "$dir/cube.nrrd" --preset ct-bone --materials "$dir/m.json" \
   --out "$dir/p.png"
+# A preset's surfaces in the paper's voxel model: the cluster's image is the
+# in-process one, and not the smooth one.
+expect 0 "48x48 surfaces" -- render --volume "$dir/oriented.nrrd" --preset mr-brain --surface voxel \
+  --size 48x48 --azimuth 30 --elevation 20 --local 2 --out "$dir/v2.png"
+expect 0 "48x48 surfaces" -- render --volume "$dir/oriented.nrrd" --preset mr-brain --surface voxel \
+  --size 48x48 --azimuth 30 --elevation 20 --local 0 --out "$dir/v0.png"
+cmp "$dir/v2.png" "$dir/v0.png" || { echo "FAIL: voxel preset: cluster and in-process images differ"; fails=$((fails + 1)); }
+cmp -s "$dir/v0.png" "$dir/o0.png" && { echo "FAIL: --surface voxel left the preset's image smooth"; fails=$((fails + 1)); }
+expect 2 "surfaces mode" -- render --volume "$dir/cube.nrrd" --preset hot --surface voxel \
+  --out "$dir/p.png"
 
 echo "cli_test: $fails failed"
 [[ $fails == 0 ]]
