@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
+#include <exception>
 #include <string>
 #include <vector>
 
@@ -73,6 +74,20 @@ int Read(const char* path, int* width, int* height, float** rgb, char* error, si
   return kTranstickImageioOk;
 }
 
+// Runs `call`, an entry point's body; whatever it throws becomes an I/O
+// error with its message.
+template <typename Call>
+int Guarded(char* error, size_t error_size, const Call& call) {
+  try {
+    return call();
+  } catch (const std::exception& e) {
+    SetError(error, error_size, std::string("OpenImageIO failed: ") + e.what());
+  } catch (...) {
+    SetError(error, error_size, "OpenImageIO failed");
+  }
+  return kTranstickImageioIo;
+}
+
 }  // namespace
 
 // The entry points (image_io_module.h): nothing thrown inside, by
@@ -83,26 +98,14 @@ int transtick_module_abi() { return kTranstickImageioAbi; }
 
 int transtick_imageio_write(const char* path, int width, int height, const float* rgb,
                             const uint8_t* bytes, char* error, size_t error_size) {
-  try {
-    return Write(path, width, height, rgb, bytes, error, error_size);
-  } catch (const std::exception& e) {
-    SetError(error, error_size, std::string("OpenImageIO failed: ") + e.what());
-  } catch (...) {
-    SetError(error, error_size, "OpenImageIO failed");
-  }
-  return kTranstickImageioIo;
+  return Guarded(error, error_size,
+                 [&] { return Write(path, width, height, rgb, bytes, error, error_size); });
 }
 
 int transtick_imageio_read(const char* path, int* width, int* height, float** rgb, char* error,
                            size_t error_size) {
-  try {
-    return Read(path, width, height, rgb, error, error_size);
-  } catch (const std::exception& e) {
-    SetError(error, error_size, std::string("OpenImageIO failed: ") + e.what());
-  } catch (...) {
-    SetError(error, error_size, "OpenImageIO failed");
-  }
-  return kTranstickImageioIo;
+  return Guarded(error, error_size,
+                 [&] { return Read(path, width, height, rgb, error, error_size); });
 }
 
 void transtick_imageio_free(float* rgb) { std::free(rgb); }
