@@ -45,12 +45,7 @@ class ExpiryTest : public testing::NodesTest {
   // Renders one whole frame as the root does and checks its image arrived.
   void RenderOne(uint64_t id) {
     ASSERT_TRUE(Prepare(id).ok());
-    ASSERT_TRUE(Run(id).ok());
-    int rows = 0;
-    grpc::Status s = Await(id, &rows);
-    EXPECT_TRUE(s.ok()) << s.error_message();
-    EXPECT_EQ(rows, kSize);
-    EXPECT_TRUE(End(id).ok());
+    RunToImage(id);
   }
 };
 
@@ -84,6 +79,24 @@ TEST_F(ExpiryTest, PreparedFramesNeverRunAreDroppedAndTheNodesGoOn) {
 
   RenderOne(4);
   // The finished frame's framebuffer, kept for reuse, goes too when unused.
+  EXPECT_TRUE(Eventually([&] { return display_service_->framebuffer_bytes() == 0; }));
+}
+
+// Finished frames' framebuffers are kept for the next frames (pipelined
+// frames need more than one), at most three, and freed when unused.
+TEST_F(ExpiryTest, FinishedFramebuffersAreKeptAtMostThreeUntilIdle) {
+  const uint64_t framebuffer = Framebuffer::MemoryBytes(kSize, kSize);
+  const auto t0 = Clock::now();
+  for (uint64_t id : {41, 42, 43, 44}) ASSERT_TRUE(Begin(id).ok());
+  for (uint64_t id : {41, 42, 43, 44}) {
+    ASSERT_TRUE(PrepareOnly(Spec(id)).ok());
+    RunToImage(id);
+  }
+  EXPECT_EQ(display_service_->open_frames(), 0u);
+  // Unless the spares were idle long enough to go already.
+  if (Clock::now() - t0 < kDisplayIdle) {
+    EXPECT_EQ(display_service_->framebuffer_bytes(), 3 * framebuffer);
+  }
   EXPECT_TRUE(Eventually([&] { return display_service_->framebuffer_bytes() == 0; }));
 }
 
@@ -215,11 +228,7 @@ TEST_F(LimitsTest, TheLeastRecentlyActiveFrameIsEvicted) {
       << s.error_message();
 
   // The newest frame renders.
-  ASSERT_TRUE(Run(13).ok());
-  int rows = 0;
-  EXPECT_TRUE(Await(13, &rows).ok());
-  EXPECT_EQ(rows, kSize);
-  EXPECT_TRUE(End(13).ok());
+  RunToImage(13);
 }
 
 TEST_F(LimitsTest, TheDisplayRefusesAFramebufferPastItsByteLimit) {
@@ -243,6 +252,25 @@ TEST_F(LimitsTest, TheDisplayRefusesAFramebufferPastItsByteLimit) {
   EXPECT_EQ(s.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << s.error_message();
   EXPECT_NE(s.error_message().find("0 open frame(s)"), std::string::npos) << s.error_message();
   EXPECT_TRUE(Begin(22, 2 * kSize, kSize).ok());
+}
+
+// Spares count against the byte limit: two frames' framebuffers are kept,
+// and a larger frame that needs their room frees them.
+TEST_F(LimitsTest, SparesAreKeptWithinTheByteLimit) {
+  const uint64_t framebuffer = Framebuffer::MemoryBytes(kSize, kSize);
+  for (uint64_t round : {0, 1}) {
+    const uint64_t a = 31 + 2 * round, b = a + 1;
+    ASSERT_TRUE(Prepare(a).ok());
+    ASSERT_TRUE(Prepare(b).ok());
+    // The second round's frames take the first round's spares.
+    EXPECT_EQ(display_service_->framebuffer_bytes(), 2 * framebuffer);
+    for (uint64_t id : {a, b}) RunToImage(id);
+    EXPECT_EQ(display_service_->open_frames(), 0u);
+    EXPECT_EQ(display_service_->framebuffer_bytes(), 2 * framebuffer);
+  }
+  // 2 framebuffers' worth: with the two spares it would pass 2.5.
+  ASSERT_TRUE(Begin(35, 2 * kSize, kSize).ok());
+  EXPECT_EQ(display_service_->framebuffer_bytes(), 2 * framebuffer);
 }
 
 }  // namespace

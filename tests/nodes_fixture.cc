@@ -201,6 +201,16 @@ absl::StatusOr<v1::WorkerFrameStats> NodesTest::End(uint64_t frame_id, bool canc
   return stats;
 }
 
+void NodesTest::RunToImage(uint64_t frame_id) {
+  grpc::Status s = Run(frame_id);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  int rows = 0;
+  s = Await(frame_id, &rows);
+  EXPECT_TRUE(s.ok()) << s.error_message();
+  EXPECT_EQ(rows, kSize);
+  EXPECT_TRUE(End(frame_id).ok());
+}
+
 grpc::Status NodesTest::Evict(const std::string& key) {
   v1::DatasetRef ref;
   ref.set_dataset_key(key);

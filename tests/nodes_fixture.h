@@ -53,6 +53,9 @@ class NodesTest : public ::testing::Test {
   // AwaitFrame to the end; counts the image rows received in `rows`.
   grpc::Status Await(uint64_t frame_id, int* rows = nullptr);
   absl::StatusOr<v1::WorkerFrameStats> End(uint64_t frame_id, bool cancel = false);
+  // Run, the whole image awaited, and End: a prepared frame rendered as the
+  // root renders it (a failure is the test's).
+  void RunToImage(uint64_t frame_id);
   // Evict at the worker.
   grpc::Status Evict(const std::string& key);
 

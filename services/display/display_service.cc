@@ -69,8 +69,32 @@ size_t DisplayService::open_frames() const {
 
 uint64_t DisplayService::framebuffer_bytes() const {
   absl::MutexLock lock(&mu_);
-  return OpenBytesLocked() +
-         (spare_ ? Framebuffer::MemoryBytes(spare_->width(), spare_->height()) : 0);
+  return OpenBytesLocked() + SpareBytesLocked();
+}
+
+uint64_t DisplayService::SpareBytesLocked() const {
+  uint64_t bytes = 0;
+  for (const Spare& s : spares_) bytes += Framebuffer::MemoryBytes(s.fb->width(), s.fb->height());
+  return bytes;
+}
+
+std::unique_ptr<Framebuffer> DisplayService::TakeFramebufferLocked(int width, int height,
+                                                                   int samples, uint64_t open) {
+  // The most recently used of this size (cleared when it was put aside,
+  // off this frame's start).
+  for (auto it = spares_.rbegin(); it != spares_.rend(); ++it) {
+    if (it->fb->width() == width && it->fb->height() == height) {
+      std::unique_ptr<Framebuffer> fb = std::move(it->fb);
+      spares_.erase(std::next(it).base());
+      fb->SetSamples(samples);
+      return fb;
+    }
+  }
+  const uint64_t bytes = Framebuffer::MemoryBytes(width, height);
+  while (!spares_.empty() && open + bytes + SpareBytesLocked() > options_.max_bytes) {
+    spares_.erase(spares_.begin());
+  }
+  return std::make_unique<Framebuffer>(width, height, samples);
 }
 
 uint64_t DisplayService::OpenBytesLocked() const {
@@ -150,20 +174,9 @@ grpc::Status DisplayService::Begin(const v1::DisplayFrame& req) {
       aborted_.Remember(evicted->id, why);
     }
     // A framebuffer of a finished frame of the same size is cleared and used
-    // again: faulting in fresh pages for every frame costs more. A spare of
-    // another size goes when keeping it would pass the limit.
-    std::unique_ptr<Framebuffer> fb;
-    if (spare_ && spare_->width() == req.width() && spare_->height() == req.height()) {
-      // Cleared when it was put aside, off this frame's start.
-      fb = std::move(spare_);
-      fb->SetSamples(samples);
-    } else {
-      if (spare_ && open + bytes + Framebuffer::MemoryBytes(spare_->width(), spare_->height()) >
-                        options_.max_bytes) {
-        spare_.reset();
-      }
-      fb = std::make_unique<Framebuffer>(req.width(), req.height(), samples);
-    }
+    // again: faulting in fresh pages for every frame costs more.
+    std::unique_ptr<Framebuffer> fb =
+        TakeFramebufferLocked(req.width(), req.height(), samples, open);
     frames_[req.frame_id()] = std::make_shared<FrameState>(req.frame_id(), std::move(fb));
   }
   if (evicted) {
@@ -548,8 +561,14 @@ void DisplayService::Release(const std::shared_ptr<FrameState>& frame) {
     frames_.erase(it);
   }
   if (fb) {
-    spare_ = std::move(fb);
-    spare_since_ = Clock::now();
+    spares_.push_back({std::move(fb), Clock::now()});
+    // The oldest go past the count, or past the byte limit with the open
+    // frames.
+    const uint64_t open = OpenBytesLocked();
+    while (spares_.size() > kMaxSpares ||
+           (!spares_.empty() && open + SpareBytesLocked() > options_.max_bytes)) {
+      spares_.erase(spares_.begin());
+    }
   }
 }
 
@@ -625,7 +644,7 @@ void DisplayService::ExpireIdle() {
       expired.emplace_back(std::move(it->second), std::move(why));
       it = frames_.erase(it);
     }
-    if (spare_ && now - spare_since_ > options_.idle) spare_.reset();
+    std::erase_if(spares_, [&](const Spare& s) { return now - s.since > options_.idle; });
   }
   for (auto& [frame, why] : expired) {
     spdlog::warn("display: frame {} {}; its {:.1f} MB framebuffer is freed", frame->id, why,
