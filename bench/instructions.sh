@@ -32,10 +32,17 @@ count() {
     --azimuth 45 --threads 1 --repeat 1 --size "$size" --shadows on >"$dir/log" 2>&1 ||
     { cat "$dir/log" >&2; exit 1; }
   # One warm-up frame and one timed: two frames in the totals.
-  awk '/^totals:/ {printf "%.0f %.0f %.0f\n", $2 / 2, $3 / 2, $4 / 2}' "$dir/out"
+  local counts
+  counts=$(awk '/^totals:/ {printf "%.0f %.0f %.0f\n", $2 / 2, $3 / 2, $4 / 2}' "$dir/out")
+  # Nothing counted: the binary has no TraceRows symbol to collect in.
+  [[ -n $counts && ${counts%% *} != 0 ]] ||
+    { echo "instructions: nothing counted inside transtick::TraceRows in $build/bench/render_bench" >&2; exit 1; }
+  echo "$counts"
 }
-read -r si sb sm < <(count "$here/examples/cthead_materials.json")
-read -r vi vb vm < <(count "$dir/voxel.json")
+smooth=$(count "$here/examples/cthead_materials.json")
+voxel=$(count "$dir/voxel.json")
+read -r si sb sm <<<"$smooth"
+read -r vi vb vm <<<"$voxel"
 echo "instructions per frame: cthead $size, azimuth 45, shadows on, inside TraceRows"
 printf '%-8s %14s %14s %14s\n' surface instructions branches mispredicts
 printf '%-8s %14s %14s %14s\n' smooth "$si" "$sb" "$sm"
