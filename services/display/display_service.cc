@@ -90,11 +90,15 @@ std::unique_ptr<Framebuffer> DisplayService::TakeFramebufferLocked(int width, in
       return fb;
     }
   }
-  const uint64_t bytes = Framebuffer::MemoryBytes(width, height);
-  while (!spares_.empty() && open + bytes + SpareBytesLocked() > options_.max_bytes) {
+  TrimSparesLocked(open + Framebuffer::MemoryBytes(width, height), kMaxSpares);
+  return std::make_unique<Framebuffer>(width, height, samples);
+}
+
+void DisplayService::TrimSparesLocked(uint64_t held, size_t most) {
+  while (!spares_.empty() &&
+         (spares_.size() > most || held + SpareBytesLocked() > options_.max_bytes)) {
     spares_.erase(spares_.begin());
   }
-  return std::make_unique<Framebuffer>(width, height, samples);
 }
 
 uint64_t DisplayService::OpenBytesLocked() const {
@@ -562,13 +566,7 @@ void DisplayService::Release(const std::shared_ptr<FrameState>& frame) {
   }
   if (fb) {
     spares_.push_back({std::move(fb), Clock::now()});
-    // The oldest go past the count, or past the byte limit with the open
-    // frames.
-    const uint64_t open = OpenBytesLocked();
-    while (spares_.size() > kMaxSpares ||
-           (!spares_.empty() && open + SpareBytesLocked() > options_.max_bytes)) {
-      spares_.erase(spares_.begin());
-    }
+    TrimSparesLocked(OpenBytesLocked(), kMaxSpares);
   }
 }
 

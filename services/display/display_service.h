@@ -133,12 +133,15 @@ class DisplayService final
   void ExpireIdle() ABSL_LOCKS_EXCLUDED(mu_);
   uint64_t OpenBytesLocked() const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
   uint64_t SpareBytesLocked() const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
-  // A spare framebuffer of this size, cleared, or a new one; frees spares
-  // of other sizes, the oldest first, while keeping them and making one
-  // would pass the byte limit with `open` bytes open.
+  // A spare framebuffer of this size, cleared, or a new one, for which
+  // spares of other sizes make room (TrimSparesLocked) beside the `open`
+  // bytes of open frames.
   std::unique_ptr<Framebuffer> TakeFramebufferLocked(int width, int height, int samples,
                                                      uint64_t open)
       ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+  // Frees spares, the oldest first, while more than `most` are kept or they
+  // and `held` bytes besides would pass the byte limit.
+  void TrimSparesLocked(uint64_t held, size_t most) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
   // Adds a batch's deposits to its frame; `frame` caches the frame of the
   // stream's last batch.
   grpc::Status Accumulate(const v1::DepositBatch& batch, std::shared_ptr<FrameState>* frame);
