@@ -2,7 +2,7 @@
 //
 //   render_bench [--volume FILE] [--materials FILE | --transfer FILE [--step S]
 //                [--skip on|off]] [--size WxH] [--repeat N] [--azimuth DEG]
-//                [--shadows on|off] [--etr on|off] [--threads N]
+//                [--elevation DEG] [--shadows on|off] [--etr on|off] [--threads N]
 //
 // Loads the volume and builds the surfaces scene (or, with --transfer, the
 // dvr scene of that transfer function, sampled every S world units) once, then for each view
@@ -56,12 +56,13 @@ using bench::ParseSize;
 constexpr char kUsage[] =
     "usage: render_bench [--volume FILE] [--materials FILE | --transfer FILE [--step S]\n"
     "                    [--skip on|off]] [--size WxH] [--repeat N] [--azimuth DEG]\n"
-    "                    [--shadows on|off] [--etr on|off] [--threads N]\n"
+    "                    [--elevation DEG] [--shadows on|off] [--etr on|off] [--threads N]\n"
     "  --transfer FILE dvr with this transfer function (JSON, docs/formats.md)\n"
     "  --step S        dvr sample step in world units (default half the smallest spacing)\n"
     "  --skip on|off   dvr: skip empty space (default on; off also checks the image)\n"
     "  --etr on|off    early ray termination (default on)\n"
     "  --azimuth DEG   only this view (default: azimuth 0 and 45)\n"
+    "  --elevation DEG every view from this elevation (default 0; bench/turntable.sh: 15)\n"
     "  --shadows       shadow rays (default on)\n"
     "  --threads N     only N threads, 0 = one per core (default: 1 and one per core)\n";
 
@@ -76,6 +77,7 @@ struct Options {
   int height = 400;
   int repeat = 5;
   std::vector<double> azimuths = {0, 45};
+  double elevation = 0;
   bool shadows = true;
   std::vector<int> threads;  // filled in Parse
 };
@@ -123,6 +125,12 @@ std::string Parse(int argc, char** argv, Options* o) {
       double a = std::strtod(value.c_str(), &end);
       if (value.empty() || *end != '\0') return "--azimuth must be a number, got '" + value + "'";
       o->azimuths = {a};
+    } else if (flag == "--elevation") {
+      char* end = nullptr;
+      o->elevation = std::strtod(value.c_str(), &end);
+      if (value.empty() || *end != '\0' || !(o->elevation >= -90 && o->elevation <= 90)) {
+        return "--elevation must be a number of degrees in [-90, 90], got '" + value + "'";
+      }
     } else if (flag == "--shadows") {
       if (value != "on" && value != "off") return "--shadows must be on or off";
       o->shadows = value == "on";
@@ -254,6 +262,7 @@ int Run(const Options& o) {
   for (double azimuth : o.azimuths) {
     CameraSpec spec;
     spec.azimuth_deg = azimuth;
+    spec.elevation_deg = o.elevation;
     spec.width = o.width;
     spec.height = o.height;
     auto camera = Camera::Create(spec, extent);
