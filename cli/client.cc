@@ -51,7 +51,7 @@ absl::Status CheckDirectory(const fs::path& dir, const std::string& what) {
 }  // namespace
 
 absl::Status ImageRows::Add(const v1::ImageChunk& c) {
-  if (image_.rgb.empty()) {
+  if (!sized_) {
     if (c.width() <= 0 || c.height() <= 0 || c.width() > CameraSpec::kMaxImageSize ||
         c.height() > CameraSpec::kMaxImageSize) {
       return absl::DataLossError("the root sent an image chunk of an impossible size");
@@ -60,6 +60,7 @@ absl::Status ImageRows::Add(const v1::ImageChunk& c) {
     image_.height = c.height();
     image_.rgb.resize(static_cast<size_t>(c.width()) * c.height() * 3);
     have_.assign(c.height(), false);
+    sized_ = true;
   }
   const size_t floats = static_cast<size_t>(c.row_end() - c.row_begin()) * c.width() * 3;
   if (c.width() != image_.width || c.height() != image_.height || c.row_begin() < 0 ||
@@ -133,6 +134,7 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> WatchJob(const std::string& r
   absl::Status save_error;
   auto last_contact = std::chrono::steady_clock::now();
   auto backoff = std::chrono::milliseconds(250);
+  std::vector<float> spare;  // the image buffer of the frame saved last
   while (true) {
     grpc::ClientContext ctx;
     v1::WatchRequest request;
@@ -163,7 +165,12 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> WatchJob(const std::string& r
         }
         // Rows of a frame already saved (a second rendering's) are left.
         if (have.count(frame)) continue;
-        ImageRows& img = images[frame];
+        auto [at, fresh] = images.try_emplace(frame);
+        if (fresh) {
+          at->second = ImageRows(std::move(spare));
+          spare = {};
+        }
+        ImageRows& img = at->second;
         if (absl::Status s = img.Add(c); !s.ok()) return s;
         if (img.whole()) {
           const fs::path path = ImagePath(c.output(), job_id, e.dataset(), e.view(), options.out_dir);
@@ -176,6 +183,7 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> WatchJob(const std::string& r
                                           have.size(), e.frames_total(), path.string(),
                                           e.has_stats() ? e.stats().frame_ms() : 0.0));
           }
+          spare = img.TakeBuffer();
           images.erase(frame);
         }
       } else if (progress && e.pixels_total() > 0 && e.frames_total() > 0) {

@@ -39,16 +39,24 @@ struct WatchOptions {
 // held count toward the whole.
 class ImageRows {
  public:
+  ImageRows() = default;
+  // Holds the image in `spare`, the buffer of a frame saved before
+  // (TakeBuffer): a job's frames then reuse one buffer instead of each
+  // zeroing and faulting in a fresh one. Its values are overwritten: the
+  // image is whole only once every row has come.
+  explicit ImageRows(std::vector<float> spare) { image_.rgb = std::move(spare); }
   // Adds `chunk`'s rows (the first chunk sizes the image); DATA_LOSS for a
   // chunk of an impossible size or one that does not fit the image.
   absl::Status Add(const v1::ImageChunk& chunk);
   bool whole() const { return image_.height > 0 && rows_ == image_.height; }
   Image& image() { return image_; }
+  std::vector<float> TakeBuffer() { return std::move(image_.rgb); }
 
  private:
   Image image_;
   std::vector<bool> have_;  // per row
   int rows_ = 0;            // rows held
+  bool sized_ = false;      // by the first chunk
 };
 
 // Submits `job` to the root; UNAVAILABLE naming the root when it cannot
