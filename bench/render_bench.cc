@@ -1,12 +1,12 @@
 // render_bench: times RenderLocal on a real volume.
 //
 //   render_bench [--volume FILE] [--materials FILE | --transfer FILE [--step S]
-//                [--skip on|off]] [--size WxH] [--repeat N] [--azimuth DEG]
+//                [--skip on|off]] [--size WxH] [--repeat N] [--azimuth DEG[,DEG...]]
 //                [--elevation DEG] [--shadows on|off] [--etr on|off] [--threads N]
 //
 // Loads the volume and builds the surfaces scene (or, with --transfer, the
 // dvr scene of that transfer function, sampled every S world units) once, then for each view
-// (frontal = azimuth 0, and azimuth 45; or only --azimuth) and for 1 thread
+// (frontal = azimuth 0, and azimuth 45; or the views --azimuth names) and for 1 thread
 // and one per core (or only --threads N), renders once to warm up and then
 // `repeat` timed frames. Prints a table of median and minimum frame times,
 // rays per second (primary + shadow, from the tracer's counters) and the
@@ -28,6 +28,7 @@
 // shadows on.
 
 #include <algorithm>
+#include <cmath>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -55,13 +56,13 @@ using bench::ParseSize;
 
 constexpr char kUsage[] =
     "usage: render_bench [--volume FILE] [--materials FILE | --transfer FILE [--step S]\n"
-    "                    [--skip on|off]] [--size WxH] [--repeat N] [--azimuth DEG]\n"
+    "                    [--skip on|off]] [--size WxH] [--repeat N] [--azimuth DEG[,DEG...]]\n"
     "                    [--elevation DEG] [--shadows on|off] [--etr on|off] [--threads N]\n"
     "  --transfer FILE dvr with this transfer function (JSON, docs/formats.md)\n"
     "  --step S        dvr sample step in world units (default half the smallest spacing)\n"
     "  --skip on|off   dvr: skip empty space (default on; off also checks the image)\n"
     "  --etr on|off    early ray termination (default on)\n"
-    "  --azimuth DEG   only this view (default: azimuth 0 and 45)\n"
+    "  --azimuth DEG   only this view, or these views: DEG,DEG,... (default: 0 and 45)\n"
     "  --elevation DEG every view from this elevation (default 0; bench/turntable.sh: 15)\n"
     "  --shadows       shadow rays (default on)\n"
     "  --threads N     only N threads, 0 = one per core (default: 1 and one per core)\n";
@@ -121,10 +122,19 @@ std::string Parse(int argc, char** argv, Options* o) {
         return "--repeat must be a positive integer, got '" + value + "'";
       }
     } else if (flag == "--azimuth") {
-      char* end = nullptr;
-      double a = std::strtod(value.c_str(), &end);
-      if (value.empty() || *end != '\0') return "--azimuth must be a number, got '" + value + "'";
-      o->azimuths = {a};
+      o->azimuths.clear();
+      for (size_t at = 0; at <= value.size();) {
+        size_t comma = value.find(',', at);
+        if (comma == std::string::npos) comma = value.size();
+        const std::string one = value.substr(at, comma - at);
+        char* end = nullptr;
+        const double a = std::strtod(one.c_str(), &end);
+        if (one.empty() || *end != '\0' || !std::isfinite(a)) {
+          return "--azimuth takes numbers separated by commas, got '" + value + "'";
+        }
+        o->azimuths.push_back(a);
+        at = comma + 1;
+      }
     } else if (flag == "--elevation") {
       char* end = nullptr;
       o->elevation = std::strtod(value.c_str(), &end);

@@ -8,7 +8,11 @@
 # at the root, the workers' summed tracer CPU per frame, and for the
 # one-frame job the time outside its frame (client start, submit, queue,
 # slab checks, image and statistics back) and the time from the root
-# accepting it to its frame's start (since_submit_ms).
+# accepting it to its frame's start (since_submit_ms). Each round then
+# renders the turntable's views in-process (render_bench, one thread per
+# core, one timed frame each after a warm-up), so the cluster's rate is set
+# against the in-process rate of the same frames measured minutes apart,
+# not days.
 #
 # Usage: bench/turntable.sh [BUILD_DIR] [WORKERS] [FRAMES] [ROUNDS] [SURFACE] [BALANCE]
 #   defaults: build 2 30 3 smooth off; SURFACE smooth|voxel; BALANCE
@@ -43,6 +47,8 @@ def view(az, out):
             "output": out}
 turn = [view(360.0 * i / frames, f"turn{i:03d}.png") for i in range(frames)]
 json.dump(job("turntable", turn), open(f"{d}/turntable.json", "w"))
+json.dump(materials, open(f"{d}/materials.json", "w"))
+open(f"{d}/azimuths", "w").write(",".join(f"{360.0 * i / frames:g}" for i in range(frames)))
 json.dump(job("one frame", [view(30, "one.png")]), open(f"{d}/one.json", "w"))
 EOF
 
@@ -73,6 +79,12 @@ submit one.json warm.json >/dev/null  # loads the slabs
 for ((i = 0; i < rounds; ++i)); do
   submit turntable.json "turn-$i.json" >"$dir/turn-$i.wall"
   submit one.json "one-$i.json" >"$dir/one-$i.wall"
+  # The same views in-process: the sum of their frame times (medians of one).
+  "$build/bench/render_bench" --volume "$data/cthead.nrrd" --materials "$dir/materials.json" \
+    --size 400x400 --elevation 15 --azimuth "$(cat "$dir/azimuths")" --shadows on --threads 0 \
+    --repeat 1 >"$dir/local-$i.log" 2>&1 || { cat "$dir/local-$i.log" >&2; exit 1; }
+  awk '/^(frontal|az)/ {sum += $3; n++} END {if (n == 0) exit 1; print sum}' "$dir/local-$i.log" \
+    >"$dir/local-$i.ms" || { echo "turntable: render_bench printed no frames" >&2; exit 1; }
 done
 
 python3 - "$dir" "$rounds" "$frames" "$workers" "$surface" "$balance" <<'EOF'
@@ -81,7 +93,7 @@ d, rounds, frames, workers, surface, balance = sys.argv[1], int(sys.argv[2]), in
 print(f"turntable: {workers} worker daemons, cthead 400x400, {surface} surfaces, shadows, "
       f"balance {balance}, {frames} frames a job, {rounds} rounds")
 print(f"{'round':>5} {'frames/s':>9} {'frame ms':>9} {'tracer CPU ms':>14} {'1-frame job ms':>15} "
-      f"{'its frame ms':>13} {'outside':>8} {'to start':>9}")
+      f"{'its frame ms':>13} {'outside':>8} {'to start':>9} {'in-process f/s':>15} {'ratio':>6}")
 rows = []
 for i in range(rounds):
     wall = float(open(f"{d}/turn-{i}.wall").read())
@@ -91,11 +103,15 @@ for i in range(rounds):
     one_wall = float(open(f"{d}/one-{i}.wall").read()) * 1e3
     first = json.load(open(f"{d}/one-{i}.json"))[0]
     one, start = first["frame_ms"], first.get("since_submit_ms", 0)
-    rows.append((frames / wall, fms, cpu, one_wall, one, one_wall - one, start))
+    local = frames / (float(open(f"{d}/local-{i}.ms").read()) / 1e3)
+    rows.append((frames / wall, fms, cpu, one_wall, one, one_wall - one, start, local,
+                 local / (frames / wall)))
     print(f"{i:>5} {rows[-1][0]:>9.1f} {fms:>9.1f} {cpu:>14.1f} {one_wall:>15.0f} {one:>13.1f} "
-          f"{one_wall - one:>8.0f} {start:>9.1f}")
-med = [statistics.median(r[k] for r in rows) for k in range(7)]
+          f"{one_wall - one:>8.0f} {start:>9.1f} {local:>15.1f} {rows[-1][8]:>6.2f}")
+med = [statistics.median(r[k] for r in rows) for k in range(9)]
 print(f"median: {med[0]:.1f} frames/s steady, frame {med[1]:.1f} ms, tracer CPU {med[2]:.1f} ms a frame; "
       f"a one-frame job on the loaded dataset takes {med[3]:.0f} ms, {med[5]:.0f} ms of it outside the frame, "
       f"and its frame starts {med[6]:.1f} ms after the root accepts it")
+print(f"in-process, the same {frames} views one after another: {med[7]:.1f} frames/s; "
+      f"a cluster frame takes {med[8]:.2f}x an in-process one (the round's ratio, median)")
 EOF
