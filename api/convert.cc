@@ -389,6 +389,49 @@ RenderSettings ToRenderSettings(const v1::View& v) {
   return s;
 }
 
+absl::StatusOr<v1::ImageEncoding> ToImageEncoding(v1::ImageEncoding encoding,
+                                                  std::string_view what) {
+  switch (encoding) {
+    case v1::IMAGE_ENCODING_DEFAULT:
+    case v1::FLOAT32:
+      return v1::FLOAT32;
+    case v1::RGB8:
+      return v1::RGB8;
+    default:
+      return absl::InvalidArgumentError(absl::StrCat(std::string(what), " ",
+                                                     static_cast<int>(encoding),
+                                                     " is not an encoding (float32 or rgb8)"));
+  }
+}
+
+int PixelBytes(v1::ImageEncoding encoding) { return encoding == v1::RGB8 ? 3 : 12; }
+
+const std::string& ChunkBytes(const v1::ImageChunk& chunk, v1::ImageEncoding encoding) {
+  return encoding == v1::RGB8 ? chunk.rgb8() : chunk.rgb();
+}
+
+std::string* MutableChunkBytes(v1::ImageChunk* chunk, v1::ImageEncoding encoding) {
+  return encoding == v1::RGB8 ? chunk->mutable_rgb8() : chunk->mutable_rgb();
+}
+
+bool ChunkBytesFit(const v1::ImageChunk& chunk, v1::ImageEncoding encoding) {
+  const int64_t rows = int64_t{chunk.row_end()} - chunk.row_begin();
+  if (rows < 0 || chunk.width() < 0) return false;
+  const std::string& other = encoding == v1::RGB8 ? chunk.rgb() : chunk.rgb8();
+  return other.empty() && ChunkBytes(chunk, encoding).size() ==
+                              static_cast<uint64_t>(rows) * chunk.width() * PixelBytes(encoding);
+}
+
+absl::StatusOr<v1::ImageEncoding> ChunkEncoding(const v1::ImageChunk& chunk) {
+  for (v1::ImageEncoding e : {v1::FLOAT32, v1::RGB8}) {
+    if (ChunkBytesFit(chunk, e)) return e;
+  }
+  return absl::InvalidArgumentError(
+      absl::StrCat("image chunk of rows [", chunk.row_begin(), ", ", chunk.row_end(), ") of width ",
+                   chunk.width(), " with ", chunk.rgb().size(), " bytes of float32 and ",
+                   chunk.rgb8().size(), " of rgb8: not the rows' size in exactly one of them"));
+}
+
 std::string ToJson(const google::protobuf::Message& message, bool indent) {
   google::protobuf::util::JsonPrintOptions options;
   options.add_whitespace = indent;

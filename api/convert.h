@@ -82,6 +82,23 @@ std::string EnumName(E value) {
 absl::StatusOr<v1::BalanceMode> EffectiveBalance(const v1::Job& job, const v1::View& view);
 absl::StatusOr<BalanceRule> ToBalanceRule(v1::BalanceRule rule);
 
+// Image chunks (docs/formats.md, "Image chunks"). The encoding a job or a
+// session asked for: DEFAULT is FLOAT32; INVALID_ARGUMENT naming `what` for
+// a value this build does not know.
+absl::StatusOr<v1::ImageEncoding> ToImageEncoding(v1::ImageEncoding encoding,
+                                                  std::string_view what);
+// A pixel's bytes in a chunk of `encoding` (12 or 3).
+int PixelBytes(v1::ImageEncoding encoding);
+// The field holding a chunk's rows in `encoding`: rgb or rgb8.
+const std::string& ChunkBytes(const v1::ImageChunk& chunk, v1::ImageEncoding encoding);
+std::string* MutableChunkBytes(v1::ImageChunk* chunk, v1::ImageEncoding encoding);
+// Whether `chunk` holds its rows in `encoding` and only there, in exactly
+// (row_end - row_begin) * width pixels (a negative span or width: no).
+bool ChunkBytesFit(const v1::ImageChunk& chunk, v1::ImageEncoding encoding);
+// The encoding of a chunk whose rows fit one of them (ChunkBytesFit); an
+// error naming what is wrong otherwise.
+absl::StatusOr<v1::ImageEncoding> ChunkEncoding(const v1::ImageChunk& chunk);
+
 // Protobuf JSON with the field names as written in the .proto and every
 // field present; indented, or on one line without `indent`.
 std::string ToJson(const google::protobuf::Message& message, bool indent = true);

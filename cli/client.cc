@@ -62,17 +62,37 @@ absl::Status ImageRows::Add(const v1::ImageChunk& c) {
     have_.assign(c.height(), false);
     sized_ = true;
   }
-  const size_t floats = static_cast<size_t>(c.row_end() - c.row_begin()) * c.width() * 3;
+  // Rows in either encoding (docs/formats.md, "Image chunks"), exactly.
+  auto encoding = ChunkEncoding(c);
   if (c.width() != image_.width || c.height() != image_.height || c.row_begin() < 0 ||
-      c.row_end() > image_.height || c.row_end() < c.row_begin() || c.rgb().size() != floats * 4) {
+      c.row_end() > image_.height || c.row_end() < c.row_begin() || !encoding.ok()) {
     return absl::DataLossError("the root sent a malformed image chunk");
   }
-  DecodeFloats(c.rgb(), image_.rgb.data() + static_cast<size_t>(c.row_begin()) * image_.width * 3);
+  float* rows = image_.rgb.data() + static_cast<size_t>(c.row_begin()) * image_.width * 3;
+  if (*encoding == v1::RGB8) {
+    const std::string& bytes = c.rgb8();
+    for (size_t i = 0; i < bytes.size(); ++i) rows[i] = FromByte(static_cast<uint8_t>(bytes[i]));
+  } else {
+    DecodeFloats(c.rgb(), rows);
+  }
   for (int y = c.row_begin(); y < c.row_end(); ++y) {
     rows_ += !have_[y];
     have_[y] = true;
   }
   return absl::OkStatus();
+}
+
+void ChooseImageEncoding(v1::Job* job) {
+  if (job->image_encoding() != v1::IMAGE_ENCODING_DEFAULT) return;
+  bool bytes = true;
+  for (int d = 0; d < job->datasets_size(); ++d) {
+    for (int v = 0; v < job->datasets(d).views_size(); ++v) {
+      bytes = bytes && IsByteImagePath(ImagePath(job->datasets(d).views(v).output(), "job", d, v,
+                                                 /*out_dir=*/"")
+                                           .string());
+    }
+  }
+  job->set_image_encoding(bytes ? v1::RGB8 : v1::FLOAT32);
 }
 
 absl::Status CheckOutputDirectories(const v1::Job& job, const std::string& out_dir) {
@@ -233,7 +253,8 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> WatchJob(const std::string& r
 absl::StatusOr<std::unique_ptr<SessionClient>> SessionClient::Open(const std::string& root,
                                                                    const v1::Dataset& dataset,
                                                                    int preview,
-                                                                   const std::string& bearer) {
+                                                                   const std::string& bearer,
+                                                                   v1::ImageEncoding encoding) {
   auto c = std::unique_ptr<SessionClient>(new SessionClient());
   c->stub_ = v1::Root::NewStub(MakeChannel(root, Role::kRoot));
   if (!bearer.empty()) c->ctx_.AddMetadata("authorization", "Bearer " + bearer);
@@ -241,6 +262,7 @@ absl::StatusOr<std::unique_ptr<SessionClient>> SessionClient::Open(const std::st
   v1::SessionRequest open;
   *open.mutable_open() = dataset;
   open.set_preview(preview);
+  open.set_image_encoding(encoding);
   auto seq = c->Send(std::move(open));
   if (!seq.ok()) {
     // The stream broke before the open went out: its status says why.

@@ -74,6 +74,13 @@ absl::StatusOr<std::vector<v1::ClusterFrameStats>> WatchJob(const std::string& r
                                                             const std::string& job_id,
                                                             const WatchOptions& options);
 
+// The image encoding a client that writes the job's images to files needs,
+// set on `job` when it leaves it to the client (IMAGE_ENCODING_DEFAULT):
+// RGB8 when every view's output (or the default, a .png) is an 8-bit format,
+// whose files then come out the same from a quarter of the bytes, else
+// FLOAT32. An encoding the job names stays.
+void ChooseImageEncoding(v1::Job* job);
+
 // SubmitJob, then WatchJob.
 absl::StatusOr<std::vector<v1::ClusterFrameStats>> SubmitAndWatch(const std::string& root,
                                                                   const v1::Job& job,
@@ -106,11 +113,12 @@ class SessionClient {
   // preview at 1/preview of the size before each frame (0: none). The first
   // event Next returns is the dataset's ready notice, or the open fails.
   // A `bearer` token is sent with the call (a gateway forwarding its
-  // browser's), besides any the process's security sends.
-  static absl::StatusOr<std::unique_ptr<SessionClient>> Open(const std::string& root,
-                                                             const v1::Dataset& dataset,
-                                                             int preview = 0,
-                                                             const std::string& bearer = "");
+  // browser's), besides any the process's security sends. Frames travel in
+  // `encoding` (docs/formats.md, "Image chunks"); Next gives float images
+  // either way, RGB8's as FromByte of each byte.
+  static absl::StatusOr<std::unique_ptr<SessionClient>> Open(
+      const std::string& root, const v1::Dataset& dataset, int preview = 0,
+      const std::string& bearer = "", v1::ImageEncoding encoding = v1::IMAGE_ENCODING_DEFAULT);
   ~SessionClient();
 
   // A new camera; returns its seq. Thread-safe.

@@ -805,6 +805,7 @@ int Render(int argc, char** argv) {
   auto rule = ParseEnum<v1::BalanceRule>(flags->Get("balance-rule", "cost"), "--balance-rule");
   if (!rule.ok()) return fail(rule.status());
   job.set_balance_rule(*rule);
+  ChooseImageEncoding(&job);
   Progress progress(Progress::ForStderr(flags->Has("quiet")));
   WatchOptions wo;
   wo.progress = &progress;
@@ -859,6 +860,7 @@ int FollowJob(int argc, char** argv, const CommandDoc& doc, const char* command,
     auto job = LoadJobFile(flags->positional()[0]);
     if (!job.ok()) return fail(job.status());
     if (absl::Status s = CheckOutputDirectories(*job, out_dir); !s.ok()) return fail(s);
+    ChooseImageEncoding(&*job);
     stats = SubmitAndWatch(flags->Get("root"), *job, wo);
   } else {
     if (absl::Status s = CheckOutputDirectories(v1::Job(), out_dir); !s.ok()) return fail(s);

@@ -76,6 +76,48 @@ TEST(ApiTest, EnumsReadAsJobFilesWroteThem) {
   EXPECT_FALSE(ToBalanceRule(static_cast<v1::BalanceRule>(9)).ok());
 }
 
+TEST(ApiTest, ImageEncodingsInJobFilesAndChunks) {
+  for (const char* name : {"rgb8", "RGB8", "float32"}) {
+    v1::Job job;
+    ASSERT_TRUE(
+        ParseJson(absl::StrCat(R"({"image_encoding":")", name, R"("})"), "job.json", &job).ok())
+        << name;
+    EXPECT_EQ(job.image_encoding(), std::string(name) == "float32" ? v1::FLOAT32 : v1::RGB8);
+  }
+  EXPECT_EQ(*ToImageEncoding(v1::IMAGE_ENCODING_DEFAULT, "x"), v1::FLOAT32);
+  EXPECT_EQ(*ToImageEncoding(v1::RGB8, "x"), v1::RGB8);
+  auto bad = ToImageEncoding(static_cast<v1::ImageEncoding>(3), "job: image_encoding");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().message(), "job: image_encoding 3 is not an encoding (float32 or rgb8)");
+  // A chunk's rows fit one encoding exactly, and only in its own field.
+  v1::ImageChunk c;
+  c.set_width(5);
+  c.set_height(9);
+  c.set_row_begin(2);
+  c.set_row_end(4);
+  c.set_rgb(std::string(2 * 5 * 12, '\0'));
+  EXPECT_TRUE(ChunkBytesFit(c, v1::FLOAT32));
+  EXPECT_FALSE(ChunkBytesFit(c, v1::RGB8));
+  EXPECT_EQ(*ChunkEncoding(c), v1::FLOAT32);
+  c.set_rgb8(std::string(2 * 5 * 3, '\0'));
+  EXPECT_FALSE(ChunkBytesFit(c, v1::FLOAT32)) << "both fields set";
+  EXPECT_FALSE(ChunkBytesFit(c, v1::RGB8)) << "both fields set";
+  EXPECT_FALSE(ChunkEncoding(c).ok());
+  c.clear_rgb();
+  EXPECT_EQ(*ChunkEncoding(c), v1::RGB8);
+  EXPECT_EQ(ChunkBytes(c, v1::RGB8).size(), 30u);
+  c.set_row_end(1);  // rows backwards
+  EXPECT_FALSE(ChunkEncoding(c).ok());
+  c.set_row_end(4);
+  c.set_width(-5);
+  EXPECT_FALSE(ChunkEncoding(c).ok());
+  c.set_width(5);
+  c.mutable_rgb8()->push_back('\1');
+  auto why = ChunkEncoding(c);
+  ASSERT_FALSE(why.ok());
+  EXPECT_NE(why.status().message().find("31 of rgb8"), std::string::npos) << why.status();
+}
+
 // A preset takes a surface model as a materials file does; dvr has none.
 TEST(ApiTest, PresetsTakeASurfaceModel) {
   for (const auto& [name, expect] : std::vector<std::pair<std::string, v1::SurfaceModel>>{

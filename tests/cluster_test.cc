@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <random>
 #include <thread>
 
@@ -166,6 +167,51 @@ TEST_F(ClusterTest, ImagesEqualTheInProcessRender) {
   // Pipelined: a frame starts once the one before it has traced, while
   // that one's image and reports are still on their way (20 chances).
   EXPECT_GT(overlapped, 0);
+}
+
+std::string FileBytes(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+}
+
+// A job whose images travel in 8 bits (Job.image_encoding RGB8): every
+// file the client writes is the file of the in-process image, byte for
+// byte, whatever the workers, with early chunks of a quarter of the bytes.
+TEST_F(ClusterTest, ByteImagesGiveTheFilesOfTheInProcessRender) {
+  std::vector<v1::View> views = {View(45, 0, true, "a.png"), View(0, 90, true, "b.jpg"),
+                                 View(200, 25, false, "c.png")};
+  views[1].set_samples(4);
+  std::vector<std::string> want;
+  for (size_t i = 0; i < views.size(); ++i) {
+    const std::string path = dir_ + "/want" + std::to_string(i) + (i == 1 ? ".jpg" : ".png");
+    ASSERT_TRUE(WriteImage(path, Reference(dir_ + "/" + volume_, Materials(), views[i])).ok());
+    want.push_back(FileBytes(path));
+    ASSERT_FALSE(want.back().empty());
+  }
+  for (int workers : {1, 2, 3}) {
+    auto cluster = StartCluster(workers);
+    ASSERT_TRUE(cluster.ok()) << cluster.status();
+    v1::Job job = MakeJob(views);
+    ChooseImageEncoding(&job);
+    ASSERT_EQ(job.image_encoding(), v1::RGB8);
+    auto stats = SubmitAndWatch((*cluster)->root_address(), job, WatchOptions{});
+    ASSERT_TRUE(stats.ok()) << stats.status();
+    for (size_t i = 0; i < views.size(); ++i) {
+      EXPECT_EQ(FileBytes(views[i].output()), want[i]) << workers << " workers, view " << i;
+      fs::remove(views[i].output());
+    }
+  }
+}
+
+TEST_F(ClusterTest, AnImageEncodingThisBuildDoesNotKnowIsRefused) {
+  auto cluster = StartCluster(1);
+  ASSERT_TRUE(cluster.ok()) << cluster.status();
+  v1::Job job = MakeJob({View(0, 0, true, "x.png")});
+  job.set_image_encoding(static_cast<v1::ImageEncoding>(9));
+  auto stats = SubmitAndWatch((*cluster)->root_address(), job, WatchOptions{});
+  ASSERT_FALSE(stats.ok());
+  EXPECT_EQ(stats.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(stats.status().message().find("image_encoding 9"), std::string::npos) << stats.status();
 }
 
 // A volume whose axes are a permutation with a flip (read with x reversed),

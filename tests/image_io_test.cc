@@ -44,6 +44,28 @@ TEST(ImageIoTest, SupportedPathsGoByTheExtensionInAnyCase) {
   }
 }
 
+TEST(ImageIoTest, ByteFormatsArePngAndJpegOnly) {
+  for (const char* path : {"a.png", "dir/b.PNG", "c.jpg", "d.JPEG"}) {
+    EXPECT_TRUE(IsByteImagePath(path)) << path;
+  }
+  for (const char* path : {"e.tif", "f.tiff", "g.exr", "h.hdr", "", "png", "a.bmp", "a.png/"}) {
+    EXPECT_FALSE(IsByteImagePath(path)) << path;
+  }
+}
+
+// An image that travels in 8 bits (docs/formats.md, "Image chunks") is
+// written from FromByte of its bytes: every byte must come back.
+TEST(ImageIoTest, FromByteGivesEveryByteBack) {
+  for (int b = 0; b < 256; ++b) {
+    const float v = FromByte(static_cast<uint8_t>(b));
+    EXPECT_EQ(ToByte(v), b);
+    EXPECT_GE(v, 0.0f);
+    EXPECT_LE(v, 1.0f);
+  }
+  EXPECT_EQ(FromByte(0), 0.0f);
+  EXPECT_EQ(FromByte(255), 1.0f);
+}
+
 TEST(ImageIoTest, EverySupportedFormatRoundTrips) {
   const std::string dir = testing::TempDir();
   const Image want = Gradient(7, 5);

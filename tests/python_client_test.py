@@ -141,6 +141,23 @@ class ClientTest(unittest.TestCase):
             again = s.set_view(view(55))
             self.assertEqual(s.frame(again).seq, again)
 
+    def test_byte_jobs_and_sessions_give_the_bytes_of_the_float_frames(self):
+        # RGB8 rows (docs/formats.md, "Image chunks"): each value is b / 255,
+        # and to_uint8 gives back the bytes of the float frame.
+        floats = self.client.render(job([view(35), view(120, -10, 32, 24)]))
+        byte_frames = self.client.render(job([view(35), view(120, -10, 32, 24)], image_encoding="RGB8"))
+        for f, b in zip(floats, byte_frames):
+            self.assertEqual(b.image.dtype, np.float32)
+            np.testing.assert_array_equal(b.to_uint8(), f.to_uint8())
+            np.testing.assert_array_equal(b.image, f.to_uint8().astype(np.float32) / np.float32(255))
+        first = view(30)
+        with self.client.session({"volume": "box.nrrd", "materials": MATERIALS, "views": [first]},
+                                 image_encoding="rgb8") as s:
+            self.assertIsNotNone(s.next().ready)
+            full = s.frame(1)
+            want = self.client.render(job([first]))[0]
+            np.testing.assert_array_equal(full.image, want.to_uint8().astype(np.float32) / np.float32(255))
+
     def test_tokens_need_tls(self):
         with self.assertRaises(ValueError):
             transtick.Client(ROOT, token="a-token-of-sixteen-chars")
@@ -169,6 +186,11 @@ class RowsTest(unittest.TestCase):
                         stream.append(cluster_pb2.ImageChunk(width=w, height=h, row_begin=y, row_end=end,
                                                              rgb=truth[y:end].tobytes()))
                     y = end
+            if rng.random() < 0.5:  # the same rows in RGB8
+                for c in stream:
+                    c.rgb8 = (np.frombuffer(c.rgb, dtype="<f4").astype(np.uint32) % 256).astype(np.uint8).tobytes()
+                    c.ClearField("rgb")
+                truth = (truth.astype(np.uint32) % 256).astype(np.float32) / np.float32(255)
             rows, covered = _Rows(), np.zeros(h, dtype=bool)
             for c in stream:
                 whole = rows.add(c)

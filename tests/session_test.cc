@@ -111,6 +111,54 @@ TEST_F(SessionTest, FramesAreTheInProcessRenderOfTheirCamera) {
   EXPECT_TRUE((*s)->Close().ok());
 }
 
+// A session that asked for RGB8 frames (as the web gateway does): each
+// frame, preview too, holds FromByte of the bytes of the in-process image.
+TEST_F(SessionTest, ByteFramesAreTheBytesOfTheInProcessRender) {
+  auto s = SessionClient::Open(cluster_->root_address(), Dataset(Camera(30)), /*preview=*/4, "",
+                               v1::RGB8);
+  ASSERT_TRUE(s.ok()) << s.status();
+  ASSERT_TRUE((*s)->Next()->ready);
+  auto same_bytes = [](const Image& got, const Image& want) {
+    if (got.width != want.width || got.height != want.height || got.rgb.size() != want.rgb.size()) {
+      return false;
+    }
+    for (size_t i = 0; i < got.rgb.size(); ++i) {
+      if (got.rgb[i] != FromByte(ToByte(want.rgb[i]))) return false;
+    }
+    return true;
+  };
+  std::vector<SessionClient::Event> seen;
+  auto first = NextFull(**s, &seen);
+  EXPECT_TRUE(same_bytes(first.image, Reference(Camera(30))));
+  bool previewed = false;
+  for (const auto& e : seen) previewed = previewed || (e.has_frame && e.preview);
+  EXPECT_TRUE(previewed);
+  for (double az : {75.0, 250.0}) {
+    auto seq = (*s)->SetView(Camera(az, 48, 40));
+    ASSERT_TRUE(seq.ok());
+    auto frame = NextFull(**s);
+    EXPECT_EQ(frame.seq, *seq);
+    EXPECT_TRUE(same_bytes(frame.image, Reference(Camera(az, 48, 40)))) << "azimuth " << az;
+  }
+  // The encoding is the first request's: a later one is an error event.
+  v1::SessionRequest late;
+  late.set_image_encoding(v1::FLOAT32);
+  *late.mutable_view() = Camera(10);
+  auto seq = (*s)->Send(late);
+  ASSERT_TRUE(seq.ok());
+  auto e = (*s)->Next();
+  ASSERT_TRUE(e.ok()) << e.status();
+  EXPECT_EQ(e->seq, *seq);
+  EXPECT_NE(e->error.find("image_encoding belong"), std::string::npos) << e->error;
+  EXPECT_TRUE((*s)->Close().ok());
+  // One the build does not know ends the session at once, saying so.
+  auto bad = SessionClient::Open(cluster_->root_address(), Dataset(Camera(30)), 0, "",
+                                 static_cast<v1::ImageEncoding>(5));
+  absl::Status why = bad.ok() ? (*bad)->Next().status() : bad.status();
+  EXPECT_EQ(why.code(), absl::StatusCode::kInvalidArgument) << why;
+  EXPECT_NE(why.message().find("image_encoding 5"), std::string::npos) << why;
+}
+
 TEST_F(SessionTest, ABurstOfCamerasEndsOnTheNewestWithoutRenderingEach) {
   auto s = SessionClient::Open(cluster_->root_address(), Dataset(Camera(0, 96, 80)));
   ASSERT_TRUE(s.ok());

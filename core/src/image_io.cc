@@ -78,6 +78,11 @@ std::span<const std::string_view> SupportedImageExtensions() { return kExtension
 
 bool IsSupportedImagePath(std::string_view path) { return FormatOf(path).has_value(); }
 
+bool IsByteImagePath(std::string_view path) {
+  const std::optional<size_t> format = FormatOf(path);
+  return format && *format < kFirstFloat;
+}
+
 std::string SupportedImageList() {
   std::string list;
   for (std::string_view ext : kExtensions) {

@@ -8,26 +8,30 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/time/time.h"
+#include "convert.h"
 #include "refused.h"
 #include "rpc_status.h"
 #include "security.h"
 #include "transtick/camera.h"
+#include "transtick/image_io.h"
 #include "transtick/ray_codec.h"
 
 namespace transtick {
 namespace {
 
 // Image rows per chunk: keeps messages near 1 MB whatever the width.
-int RowsPerChunk(int width) { return std::max(1, (1 << 20) / (width * 12)); }
+int RowsPerChunk(int width, int pixel_bytes) {
+  return std::max(1, (1 << 20) / (width * pixel_bytes));
+}
 // Rows complete before the frame go out once there are about 256 KB of
 // them, or an eighth of a smaller image (or the image's last rows): a few
 // chunks a frame, not one per row or per deposit batch. Each message wakes
 // threads in the display, the root, the client and the kernel: a 400x400
 // turntable's frames reached the client in 8-13 chunks at 64 KB, 3-5 now.
-int EarlyChunkRows(int width, int height) {
-  return std::max(1, std::min((1 << 18) / (width * 12), height / 8));
+int EarlyChunkRows(int width, int height, int pixel_bytes) {
+  return std::max(1, std::min((1 << 18) / (width * pixel_bytes), height / 8));
 }
-uint64_t RowBytes(int width) { return static_cast<uint64_t>(width) * 12; }
+uint64_t RowBytes(int width, int pixel_bytes) { return static_cast<uint64_t>(width) * pixel_bytes; }
 
 double Mb(uint64_t bytes) { return bytes / 1048576.0; }
 double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
@@ -317,7 +321,7 @@ grpc::Status DisplayService::AddDeposits(const v1::DepositBatch& batch, FrameSta
     metrics_->Add("transtick_display_frames_total", 1, {{"result", "complete"}});
     metrics_->Observe("transtick_display_frame_assembly_seconds", Seconds(Clock::now() - f.begun));
   } else if (const int rows = f.fb->CompleteRows();
-             rows >= f.woken_rows + EarlyChunkRows(f.width, f.height)) {
+             rows >= f.woken_rows + EarlyChunkRows(f.width, f.height, f.pixel_bytes)) {
     // Enough rows complete for an early chunk.
     f.woken_rows = rows;
     *wake = true;
@@ -353,20 +357,23 @@ grpc::Status DisplayService::ImageStatus(const FrameState& f) {
 class DisplayService::AwaitStream : public grpc::ServerWriteReactor<v1::FrameProgress> {
  public:
   AwaitStream(DisplayService* service, std::shared_ptr<FrameState> frame, bool no_image,
-              uint64_t early_bytes)
+              uint64_t early_bytes, v1::ImageEncoding encoding)
       : service_(service),
         frame_(std::move(frame)),
         no_image_(no_image),
+        rgb8_(encoding == v1::RGB8),
+        pixel_bytes_(PixelBytes(encoding)),
         early_left_(no_image ? 0 : early_bytes) {}
 
   // Joins `frame`'s watchers and takes the first step.
   static AwaitStream* Start(DisplayService* service, std::shared_ptr<FrameState> frame,
-                            bool no_image, uint64_t early_bytes) {
-    auto stream = std::make_shared<AwaitStream>(service, frame, no_image, early_bytes);
+                            bool no_image, uint64_t early_bytes, v1::ImageEncoding encoding) {
+    auto stream = std::make_shared<AwaitStream>(service, frame, no_image, early_bytes, encoding);
     stream->self_ = stream;
     {
       absl::MutexLock lock(&frame->mu);
       frame->watchers.push_back(stream);
+      if (!no_image) frame->pixel_bytes = stream->pixel_bytes_;
     }
     stream->Step(/*tick=*/false);
     return stream.get();
@@ -391,7 +398,8 @@ class DisplayService::AwaitStream : public grpc::ServerWriteReactor<v1::FramePro
           act = Act::kFinish;
         } else if (!frame_->fb->Complete()) {
           if (const int r1 = EarlyChunkEnd(); r1 > next_row_) {
-            early_left_ -= static_cast<uint64_t>(r1 - next_row_) * RowBytes(frame_->width);
+            early_left_ -=
+                static_cast<uint64_t>(r1 - next_row_) * RowBytes(frame_->width, pixel_bytes_);
             Chunk(r1, false);
             act = Act::kWrite;
           } else if (tick_) {
@@ -413,7 +421,8 @@ class DisplayService::AwaitStream : public grpc::ServerWriteReactor<v1::FramePro
         status = s;
         act = Act::kFinish;
       } else {
-        Chunk(std::min(frame_->height, next_row_ + RowsPerChunk(frame_->width)), true);
+        Chunk(std::min(frame_->height, next_row_ + RowsPerChunk(frame_->width, pixel_bytes_)),
+              true);
         act = Act::kWrite;
       }
       if (act == Act::kWrite) {
@@ -466,15 +475,16 @@ class DisplayService::AwaitStream : public grpc::ServerWriteReactor<v1::FramePro
   // there, at most a chunk's and what is left of the bytes asked for; at
   // next_row_ when that is too few to send yet.
   int EarlyChunkEnd() ABSL_EXCLUSIVE_LOCKS_REQUIRED(frame_->mu) {
-    const uint64_t row_bytes = RowBytes(frame_->width);
+    const uint64_t row_bytes = RowBytes(frame_->width, pixel_bytes_);
     if (no_image_ || early_left_ < row_bytes) return next_row_;
     const int complete = frame_->fb->CompleteRows();
     const uint64_t fit = early_left_ / row_bytes;
-    const int r1 = static_cast<int>(
-        std::min<uint64_t>({static_cast<uint64_t>(complete), next_row_ + fit,
-                            static_cast<uint64_t>(next_row_ + RowsPerChunk(frame_->width))}));
+    const int r1 = static_cast<int>(std::min<uint64_t>(
+        {static_cast<uint64_t>(complete), next_row_ + fit,
+         static_cast<uint64_t>(next_row_ + RowsPerChunk(frame_->width, pixel_bytes_))}));
     const bool enough =
-        r1 - next_row_ >= EarlyChunkRows(frame_->width, frame_->height) || r1 == frame_->height;
+        r1 - next_row_ >= EarlyChunkRows(frame_->width, frame_->height, pixel_bytes_) ||
+        r1 == frame_->height;
     return enough ? r1 : next_row_;
   }
   // The image's rows [next_row_, r1) into msg_, resolved from the
@@ -487,9 +497,15 @@ class DisplayService::AwaitStream : public grpc::ServerWriteReactor<v1::FramePro
     c->set_height(frame_->height);
     c->set_row_begin(r0);
     c->set_row_end(r1);
-    std::vector<float> rgb(static_cast<size_t>(r1 - r0) * frame_->width * 3);
-    frame_->fb->ResolveRows(r0, r1, rgb.data());
-    AppendFloats(rgb.data(), rgb.size(), c->mutable_rgb());
+    rows_.resize(static_cast<size_t>(r1 - r0) * frame_->width * 3);
+    frame_->fb->ResolveRows(r0, r1, rows_.data());
+    if (rgb8_) {
+      std::string* out = c->mutable_rgb8();
+      out->resize(rows_.size());
+      for (size_t i = 0; i < rows_.size(); ++i) (*out)[i] = static_cast<char>(ToByte(rows_[i]));
+    } else {
+      AppendFloats(rows_.data(), rows_.size(), c->mutable_rgb());
+    }
     next_row_ = r1;
   }
   v1::FrameProgress Progress(uint64_t done, bool complete) const {
@@ -503,6 +519,10 @@ class DisplayService::AwaitStream : public grpc::ServerWriteReactor<v1::FramePro
   DisplayService* const service_;
   const std::shared_ptr<FrameState> frame_;
   const bool no_image_;
+  const bool rgb8_;        // rows as RGB8, not FLOAT32
+  const int pixel_bytes_;  // a pixel's bytes in a chunk
+  // A chunk's rows, resolved (kept from chunk to chunk).
+  std::vector<float> rows_ ABSL_GUARDED_BY(frame_->mu);
   // Bytes of image rows it may still send before the frame is complete.
   uint64_t early_left_ ABSL_GUARDED_BY(frame_->mu);
   std::shared_ptr<AwaitStream> self_;  // set by Start, dropped by OnDone
@@ -529,7 +549,10 @@ grpc::ServerWriteReactor<v1::FrameProgress>* DisplayService::AwaitFrame(
     return new RefusedWrite<v1::FrameProgress>(ToGrpc(
         absl::NotFoundError(absl::StrCat("display: frame ", req->frame_id(), " was not begun"))));
   }
-  return AwaitStream::Start(this, std::move(frame), req->no_image(), req->early_image_bytes());
+  auto encoding = ToImageEncoding(req->image_encoding(), "display: image_encoding");
+  if (!encoding.ok()) return new RefusedWrite<v1::FrameProgress>(ToGrpc(encoding.status()));
+  return AwaitStream::Start(this, std::move(frame), req->no_image(), req->early_image_bytes(),
+                            *encoding);
 }
 
 void DisplayService::Wake(FrameState& frame, bool tick) {

@@ -100,8 +100,10 @@ class DisplayService final
     std::string abort_reason ABSL_GUARDED_BY(mu);
     uint64_t deposits ABSL_GUARDED_BY(mu) = 0;
     // The rows complete from the top when the AwaitFrame streams were last
-    // woken for them (early image chunks).
+    // woken for them (early image chunks), and the bytes a pixel of those
+    // chunks takes (the encoding the last AwaitFrame asked for).
     int woken_rows ABSL_GUARDED_BY(mu) = 0;
+    int pixel_bytes ABSL_GUARDED_BY(mu) = 12;
     // The AwaitFrame streams in progress; each leaves when it is done.
     std::vector<std::weak_ptr<AwaitStream>> watchers ABSL_GUARDED_BY(mu);
     Clock::time_point last_activity ABSL_GUARDED_BY(mu) = Clock::now();

@@ -55,6 +55,9 @@ absl::StatusOr<JobPlan> Datasets::Plan(const v1::Job& job) const {
   } else {
     plan.rule = *r;
   }
+  if (auto e = ToImageEncoding(job.image_encoding(), "job: image_encoding"); !e.ok()) {
+    return e.status();
+  }
   if (!job.rings().empty()) {
     auto rings = ParseRings(job.rings());
     if (!rings.ok()) {

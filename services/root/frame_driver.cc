@@ -9,6 +9,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/synchronization/notification.h"
 #include "clock.h"
+#include "convert.h"
 #include "daemon.h"
 #include "fanout.h"
 
@@ -47,7 +48,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(
     const v1::View& view, const LoadedDataset& data, const Layout& layout,
     const std::function<bool()>& cancelled, const ProgressFn& on_progress, const ChunkFn& on_chunk,
     const std::function<void()>& on_traced, bool work_profile,
-    const std::function<void(const FrameResult&)>& on_reported) {
+    const std::function<void(const FrameResult&)>& on_reported, v1::ImageEncoding image_encoding) {
   const uint64_t frame_id = next_frame_id_++;
   const auto t0 = Clock::now();
   const double started_unix =
@@ -208,6 +209,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(
     // here until it is complete, for a frame that fails is traced again
     // and its image must reach the job's watchers once.
     if (on_chunk) await.set_early_image_bytes(kEarlyImageBytes);
+    await.set_image_encoding(image_encoding);
     std::vector<v1::ImageChunk> early;
     auto reader = display->AwaitFrame(&ctx, await);
     // The watchdog: a member that stops renewing its registration (dead, or
@@ -282,8 +284,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(
         v1::ImageChunk* c = p.mutable_image();
         if (!on_chunk || c->width() != view.width() || c->row_begin() != rows ||
             c->row_end() > view.height() || c->row_end() <= c->row_begin() ||
-            c->rgb().size() !=
-                static_cast<size_t>(c->row_end() - c->row_begin()) * c->width() * 12) {
+            !ChunkBytesFit(*c, image_encoding)) {
           relay = absl::DataLossError(
               absl::StrCat("display: malformed image chunk of frame ", frame_id));
           ctx.TryCancel();

@@ -35,8 +35,8 @@ class FrameDriver {
   // Called with (pixels done, pixels total) while the frame runs.
   using ProgressFn = std::function<void(uint64_t, uint64_t)>;
   // Called with each chunk of the image as it arrives from the display, in
-  // order; the bytes are the display's, passed on without decoding. A
-  // non-OK return aborts the frame with that status.
+  // order, in Run's `image_encoding`; the bytes are the display's, passed
+  // on without decoding. A non-OK return aborts the frame with that status.
   using ChunkFn = std::function<absl::Status(v1::ImageChunk chunk)>;
 
   // REQUIRES: `registry` outlives this. A frame fails when the display
@@ -62,7 +62,8 @@ class FrameDriver {
       const std::function<bool()>& cancelled, const ProgressFn& on_progress,
       const ChunkFn& on_chunk, const std::function<void()>& on_traced = nullptr,
       bool work_profile = false,
-      const std::function<void(const FrameResult&)>& on_reported = nullptr);
+      const std::function<void(const FrameResult&)>& on_reported = nullptr,
+      v1::ImageEncoding image_encoding = v1::FLOAT32);
 
  private:
   Registry& registry_;

@@ -9,12 +9,15 @@
 namespace transtick {
 namespace {
 
-uint64_t ImageBytes(const v1::JobEvent& e) { return e.has_image() ? e.image().rgb().size() : 0; }
+// The bytes of an event's image rows, in either encoding (one is empty).
+uint64_t ImageBytes(const v1::JobEvent& e) {
+  return e.has_image() ? e.image().rgb().size() + e.image().rgb8().size() : 0;
+}
 
 // An event a late watcher can do without: progress since superseded, or
 // the shell left by an image chunk already handed over.
 bool IsDroppable(const v1::JobEvent& e) {
-  if (e.has_image()) return e.image().rgb().empty() && !e.has_stats();
+  if (e.has_image()) return ImageBytes(e) == 0 && !e.has_stats();
   return !e.has_stats() && e.error().empty() && e.pixels_total() > 0;
 }
 
@@ -261,9 +264,9 @@ bool Job::Stream(const std::function<bool(const v1::JobEvent&)>& write,
         v1::JobEvent& e = events_[next - first_seq_];
         ++next;
         if (e.has_image()) {
-          if (e.image().rgb().empty()) continue;  // another watcher took it
+          if (ImageBytes(e) == 0) continue;  // another watcher took it
           // Handed over: the log keeps no image once it is on its way.
-          pending_image_bytes_ -= e.image().rgb().size();
+          pending_image_bytes_ -= ImageBytes(e);
           const int frame = e.frame();
           if (frame >= 0 && frame < frames_total()) taken_[frame] = true;
           const bool skip = have.count(frame) != 0;

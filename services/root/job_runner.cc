@@ -318,7 +318,7 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
           turn.Release();
           if (task.on_traced) task.on_traced();
         },
-        task.balancer->LearnsFromProfiles(), learn);
+        task.balancer->LearnsFromProfiles(), learn, task.image_encoding);
     if (!result.ok()) {
       status = result.status();
       if (status.code() != absl::StatusCode::kUnavailable || task.cancelled()) return status;
@@ -370,6 +370,7 @@ absl::Status JobRunner::RunView(Job& job, LoadedDataset& data, FrameTask::Chosen
   task.rings = job.plan().rings.value_or(options_.rings);
   task.frames = job.spec().datasets(d).views_size();
   task.chosen = &chosen;
+  task.image_encoding = job.spec().image_encoding() == v1::RGB8 ? v1::RGB8 : v1::FLOAT32;
   task.cancelled = [&] { return job.cancelled() || queue_.stopping() || me.abandon.load(); };
   task.on_attempt = [&] { held.reset(); };
   task.on_traced = [&] {
@@ -433,8 +434,10 @@ absl::Status JobRunner::RunView(Job& job, LoadedDataset& data, FrameTask::Chosen
 std::optional<v1::ImageChunk> RowsOnce::Trim(v1::ImageChunk chunk) const {
   if (chunk.row_end() <= out_) return std::nullopt;
   if (chunk.row_begin() < out_) {
-    const size_t row_bytes = static_cast<size_t>(chunk.width()) * 3 * sizeof(float);
-    chunk.mutable_rgb()->erase(0, static_cast<size_t>(out_ - chunk.row_begin()) * row_bytes);
+    const v1::ImageEncoding encoding = chunk.rgb8().empty() ? v1::FLOAT32 : v1::RGB8;
+    const size_t row_bytes = static_cast<size_t>(chunk.width()) * PixelBytes(encoding);
+    MutableChunkBytes(&chunk, encoding)
+        ->erase(0, static_cast<size_t>(out_ - chunk.row_begin()) * row_bytes);
     chunk.set_row_begin(out_);
   }
   return chunk;

@@ -65,6 +65,7 @@ struct FrameTask {
   std::function<bool()> cancelled;
   FrameDriver::ProgressFn on_progress;
   FrameDriver::ChunkFn on_chunk;
+  v1::ImageEncoding image_encoding = v1::FLOAT32;  // of the chunks on_chunk takes
   std::function<void()> on_attempt;  // before each attempt (chunks of a failed one are void)
   // Once the frame has traced (FrameDriver::Run's on_traced), on the
   // rendering thread; again if a later attempt traces.
@@ -103,7 +104,8 @@ class RowsOnce {
  public:
   // The part of `chunk` whose rows have not gone out; none when all have.
   // REQUIRES: rows go out in order (chunks of an attempt come in order, and
-  // what goes out is a prefix of the image); rgb holds the rows' floats.
+  // what goes out is a prefix of the image); the chunk's rows fit rgb or
+  // rgb8 (ChunkBytesFit).
   std::optional<v1::ImageChunk> Trim(v1::ImageChunk chunk) const;
   // The rows of a chunk that ended at `row_end` went out.
   void Sent(int row_end) { out_ = std::max(out_, row_end); }

@@ -95,6 +95,8 @@ grpc::Status Sessions::Serve(grpc::ServerContext* ctx,
                         absl::StrCat("preview ", first.preview(), " is not in [0, 16]"));
   }
   const int preview = first.preview() > 1 ? first.preview() : 0;
+  auto encoding = ToImageEncoding(first.image_encoding(), "image_encoding");
+  if (!encoding.ok()) return ToGrpc(encoding.status());
   v1::Dataset spec = first.open();
   spec.clear_views();
 
@@ -167,9 +169,9 @@ grpc::Status Sessions::Serve(grpc::ServerContext* ctx,
     while (stream->Read(&r)) {
       absl::MutexLock lock(&inbox.mu);
       if (inbox.notices.size() >= kMaxNotices) inbox.notices.pop_front();
-      if (r.has_open() || r.preview() != 0) {
-        inbox.notices.push_back(
-            ErrorEvent(r.seq(), "open and preview belong to the session's first request"));
+      if (r.has_open() || r.preview() != 0 || r.image_encoding() != v1::IMAGE_ENCODING_DEFAULT) {
+        inbox.notices.push_back(ErrorEvent(
+            r.seq(), "open, preview and image_encoding belong to the session's first request"));
         continue;
       }
       if (r.has_materials() || r.has_transfer()) inbox.classification = r;
@@ -229,6 +231,7 @@ grpc::Status Sessions::Serve(grpc::ServerContext* ctx,
     task.interactive = true;
     task.frames = 1000;
     task.chosen = &chosen;
+    task.image_encoding = *encoding;
     task.cancelled = stopped;
     task.on_attempt = [&] { held.reset(); };
     task.on_chunk = [&](v1::ImageChunk chunk) -> absl::Status {

@@ -114,10 +114,20 @@ def _image(chunk, image: Optional[np.ndarray]) -> np.ndarray:
     if image is None:
         image = np.zeros((c.height, c.width, 3), dtype=np.float32)
     rows = c.row_end - c.row_begin
+    values = rows * c.width * 3
+    # Rows as float32 (rgb) or RGB8 (rgb8), exactly one of them
+    # (docs/formats.md, "Image chunks").
+    float32 = len(c.rgb) == values * 4 and not c.rgb8
+    rgb8 = len(c.rgb8) == values and not c.rgb
     if (image.shape != (c.height, c.width, 3) or c.row_begin < 0 or c.row_end > c.height
-            or rows < 0 or len(c.rgb) != rows * c.width * 3 * 4):
+            or rows < 0 or not (float32 or rgb8)):
         raise ValueError("the root sent a malformed image chunk")
-    image[c.row_begin:c.row_end] = np.frombuffer(c.rgb, dtype="<f4").reshape(rows, c.width, 3)
+    if float32:
+        block = np.frombuffer(c.rgb, dtype="<f4")
+    else:
+        # FromByte (image_io.h): b / 255 in float32, whose to_uint8 is b again.
+        block = np.frombuffer(c.rgb8, dtype=np.uint8).astype(np.float32) / np.float32(255)
+    image[c.row_begin:c.row_end] = block.reshape(rows, c.width, 3)
     return image
 
 
@@ -140,7 +150,7 @@ class Session:
     thread; next() from one thread at a time.
     """
 
-    def __init__(self, stub, metadata, dataset, preview: int):
+    def __init__(self, stub, metadata, dataset, preview: int, image_encoding: str = "float32"):
         self._requests: "queue.Queue" = queue.Queue()
         self._seq = itertools.count(1)
         self._lock = threading.Lock()
@@ -149,7 +159,9 @@ class Session:
         # As a job's dataset: materials_file and transfer_file are read here.
         job = cluster_pb2.Job()
         job.datasets.append(_message(dataset, cluster_pb2.Dataset))
-        self._send(cluster_pb2.SessionRequest(open=parse_job(job).datasets[0], preview=preview))
+        encoding = cluster_pb2.ImageEncoding.Value(image_encoding.upper())
+        self._send(cluster_pb2.SessionRequest(open=parse_job(job).datasets[0], preview=preview,
+                                              image_encoding=encoding))
         self._responses = stub.Session(iter(self._requests.get, None), metadata=metadata)
 
     def _send(self, request) -> int:
@@ -275,11 +287,13 @@ class Client:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def session(self, dataset, preview: int = 0) -> Session:
+    def session(self, dataset, preview: int = 0, image_encoding: str = "float32") -> Session:
         """Opens an interactive session on `dataset` (a Dataset or a dict in the
         job file's schema, with exactly one view: the first camera); with
-        `preview` (2 .. 16) each frame is preceded by one at 1/preview size."""
-        return Session(self._stub, self._metadata, dataset, preview)
+        `preview` (2 .. 16) each frame is preceded by one at 1/preview size.
+        `image_encoding` "rgb8" brings the frames in 8 bits, a quarter of the
+        bytes (their images are still float32: each byte / 255)."""
+        return Session(self._stub, self._metadata, dataset, preview, image_encoding)
 
     def submit(self, job: Union[dict, str, "cluster_pb2.Job"]) -> str:
         """Queues a job; returns its id. Errors are grpc.RpcError naming the field."""

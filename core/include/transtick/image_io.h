@@ -26,6 +26,10 @@ std::span<const std::string_view> SupportedImageExtensions();
 // case ("a/b.PNG" is supported, "png" and "a.png/" are not).
 bool IsSupportedImagePath(std::string_view path);
 
+// True when `path` is supported and its format stores 8-bit values (PNG,
+// JPEG): WriteImage keeps only ToByte of each float there.
+bool IsByteImagePath(std::string_view path);
+
 // The same list for messages: ".png, .jpg, .jpeg, .tif, .tiff, .exr, .hdr".
 std::string SupportedImageList();
 
@@ -41,6 +45,10 @@ inline uint8_t ToByte(float v) {
   v = v < 0 ? 0 : (v > 1 ? 1 : v);
   return static_cast<uint8_t>(v * 255.0f + 0.5f);
 }
+
+// The float an 8-bit value stands for, whose ToByte is that value again:
+// ToByte(FromByte(b)) == b for every b (image_io_test checks all 256).
+inline float FromByte(uint8_t b) { return static_cast<float>(b) / 255.0f; }
 
 }  // namespace transtick
 
