@@ -6,6 +6,10 @@
 //
 //   session_bench [--volume cthead.nrrd] [--materials FILE] [--workers 2]
 //                 [--size 400x400] [--steps 20] [--drag-ms 3000] [--every-ms 15]
+//                 [--image float32|rgb8]
+//
+// --image is the encoding the direct (gRPC) sessions ask for (docs/formats.md,
+// "Image chunks"); the gateway always asks for rgb8.
 //
 // Needs TRANSTICK_DATA_DIR (the volume's directory; default ../shared/data).
 #include <spdlog/spdlog.h>
@@ -35,6 +39,7 @@ int Main(int argc, char** argv) {
   std::string volume = "cthead.nrrd";
   std::string materials = std::string(TRANSTICK_SOURCE_DIR) + "/examples/cthead_materials.json";
   int workers = 2, width = 400, height = 400, steps = 20, drag_ms = 3000, every_ms = 15;
+  v1::ImageEncoding encoding = v1::FLOAT32;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string flag = argv[i], value = argv[i + 1];
     bool ok = true;
@@ -52,6 +57,10 @@ int Main(int argc, char** argv) {
       ok = bench::ParseInt(value, 0, 600000, &drag_ms);
     } else if (flag == "--every-ms") {
       ok = bench::ParseInt(value, 1, 10000, &every_ms);
+    } else if (flag == "--image") {
+      auto e = ParseEnum<v1::ImageEncoding>(value, "--image");
+      ok = e.ok();
+      if (ok) encoding = *e;
     } else {
       ok = false;
     }
@@ -90,11 +99,11 @@ int Main(int argc, char** argv) {
     return v;
   };
   *dataset.add_views() = view(45);
-  std::printf("session_bench: %s %dx%d, %d workers x 1 thread, shadows on\n", volume.c_str(), width,
-              height, workers);
+  std::printf("session_bench: %s %dx%d, %d workers x 1 thread, shadows on, images %s\n",
+              volume.c_str(), width, height, workers, EnumName(encoding).c_str());
 
   for (int preview : {0, 4}) {
-    auto session = SessionClient::Open((*cluster)->root_address(), dataset, preview);
+    auto session = SessionClient::Open((*cluster)->root_address(), dataset, preview, "", encoding);
     if (!session.ok()) return 1;
     auto next_full = [&](uint64_t seq, double* preview_ms,
                          std::chrono::steady_clock::time_point t0) -> absl::StatusOr<SessionClient::Event> {
@@ -214,7 +223,7 @@ int Main(int argc, char** argv) {
     }
   };
   if (!web_full(1)) return 1;
-  auto direct = SessionClient::Open((*cluster)->root_address(), dataset, 0);
+  auto direct = SessionClient::Open((*cluster)->root_address(), dataset, 0, "", encoding);
   if (!direct.ok()) return 1;
   for (uint64_t seq = 1;;) {  // its first frame
     auto e = (*direct)->Next();

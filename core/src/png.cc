@@ -11,9 +11,14 @@
 namespace transtick {
 namespace {
 
+// PNG's integers: 4 bytes, big-endian.
+void StoreU32(char* at, uint32_t v) {
+  for (int i = 0; i < 4; ++i) at[i] = static_cast<char>(v >> (24 - 8 * i));
+}
+
 void PutU32(std::string* out, uint32_t v) {
-  const char b[4] = {static_cast<char>(v >> 24), static_cast<char>(v >> 16),
-                     static_cast<char>(v >> 8), static_cast<char>(v)};
+  char b[4];
+  StoreU32(b, v);
   out->append(b, 4);
 }
 
@@ -38,11 +43,8 @@ absl::StatusOr<std::string> EncodePng(const Image& image, int level) {
   }
   std::string out("\x89PNG\r\n\x1a\n", 8);
   unsigned char header[13];
-  const uint32_t w = static_cast<uint32_t>(image.width), h = static_cast<uint32_t>(image.height);
-  for (int i = 0; i < 4; ++i) {
-    header[i] = static_cast<unsigned char>(w >> (24 - 8 * i));
-    header[4 + i] = static_cast<unsigned char>(h >> (24 - 8 * i));
-  }
+  StoreU32(reinterpret_cast<char*>(header), static_cast<uint32_t>(image.width));
+  StoreU32(reinterpret_cast<char*>(header + 4), static_cast<uint32_t>(image.height));
   header[8] = 8;   // bits per channel
   header[9] = 2;   // RGB
   header[10] = 0;  // deflate
@@ -101,9 +103,10 @@ absl::StatusOr<std::string> EncodePng(const Image& image, int level) {
     if (!pump(Z_NO_FLUSH)) return absl::InternalError("zlib could not deflate the image");
   }
   if (!pump(Z_FINISH)) return absl::InternalError("zlib could not deflate the image");
-  out.resize(out.size() - z.avail_out);
+  // The room zlib left unused (never more than `out` holds: it was appended).
+  out.erase(out.size() - z.avail_out);
   const size_t data = out.size() - idat - 8;
-  for (int i = 0; i < 4; ++i) out[idat + i] = static_cast<char>(data >> (24 - 8 * i));
+  StoreU32(out.data() + idat, static_cast<uint32_t>(data));
   const uLong crc = crc32(0L, reinterpret_cast<const Bytef*>(out.data() + idat + 4), data + 4);
   PutU32(&out, static_cast<uint32_t>(crc));
   PutChunk(&out, "IEND", nullptr, 0);
