@@ -507,6 +507,52 @@ TEST(CameraTest, RejectsAbsurdSizesAndViews) {
   EXPECT_FALSE(Camera::Create(spec, Vec3{1, 1, 1}).ok());
 }
 
+// An explicit view is refused for what is wrong with it, by name: an eye or
+// a target so far that rounding is all a ray would have (once, an eye at
+// 1e300 was refused as "up is parallel to the view direction": its distance
+// overflowed), or an up of zero length. An up of any other length is as
+// good as the unit one, however short or long, and a far eye within the
+// bound is taken.
+TEST(CameraTest, ExplicitViewsAreRefusedForWhatIsWrong) {
+  const Vec3 extent{30, 40, 10};
+  CameraSpec spec;
+  spec.width = spec.height = 8;
+  auto message = [&](const ExplicitView& v) {
+    spec.view = v;
+    return std::string(Camera::Create(spec, extent).status().message());
+  };
+  for (double far : {1.01e15, 1e300, -1e200}) {
+    const std::string eye = message({{far, 0, 0}, {0, 0, 0}, {0, 1, 0}});
+    EXPECT_NE(eye.find("the eye"), std::string::npos) << eye;
+    EXPECT_NE(eye.find("1e+15 world units"), std::string::npos) << eye;
+    const std::string target = message({{0, 0, 50}, {0, far, far}, {0, 1, 0}});
+    EXPECT_NE(target.find("the target"), std::string::npos) << target;
+  }
+  EXPECT_NE(message({{0, 0, 50}, {0, 0, 0}, {0, 0, 0}}).find("up is zero"), std::string::npos);
+  EXPECT_NE(message({{0, 0, 50}, {0, 0, 0}, {0, 0, 1e-300}}).find("parallel"), std::string::npos);
+
+  spec.view = ExplicitView{{10, 20, 50}, {1, -2, 3}, {0, 1, 0}};
+  auto unit = Camera::Create(spec, extent);
+  ASSERT_TRUE(unit.ok()) << unit.status();
+  // Powers of two, so that the unit up's rounding is every scale's: down to
+  // a subnormal, and up to where the squares overflow.
+  for (double s : {0x1p-1060, 0x1p-700, 0x1p-100, 0x1p100, 0x1p700, 0x1p1000}) {
+    spec.view->up = {0, s, 0};
+    auto scaled = Camera::Create(spec, extent);
+    ASSERT_TRUE(scaled.ok()) << s << ": " << scaled.status();
+    for (int p = 0; p < 64; p += 7) {
+      const WorldRay a = unit->Generate(p % 8, p / 8), b = scaled->Generate(p % 8, p / 8);
+      for (int k = 0; k < 3; ++k) {
+        EXPECT_EQ(a.origin[k], b.origin[k]) << s;
+        EXPECT_EQ(a.direction[k], b.direction[k]) << s;
+      }
+    }
+  }
+  // Within the bound, however far: taken.
+  spec.view = ExplicitView{{9e14, 1, -3}, {0, 0, 0}, {0, 1, 0}};
+  EXPECT_TRUE(Camera::Create(spec, extent).ok());
+}
+
 // Whether the ray meets the box [lo, hi] (slab method; touching counts).
 bool HitsBox(const WorldRay& r, const Vec3& lo, const Vec3& hi) {
   double t0 = 0, t1 = HUGE_VAL;

@@ -11,6 +11,13 @@ namespace transtick {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
+// How far from the volume's centre (world units) an explicit view's eye and
+// target may be. A double places a point at distance D to about D * 1e-16,
+// so beyond this a ray's entry into any volume of a millimetre or more is
+// rounding; and the lengths of longer vectors soon overflow. The same for
+// every volume, so that a view is refused when it is checked, before any
+// volume is read (ToCameraSpec).
+constexpr double kMaxViewDistance = 1e15;
 
 }  // namespace
 
@@ -49,6 +56,22 @@ absl::StatusOr<Camera> Camera::Create(const CameraSpec& spec, const Vec3& volume
         return absl::InvalidArgumentError("explicit view: eye, target and up must be finite");
       }
     }
+    for (const auto& [name, point] : {std::pair{"eye", c.eye_}, std::pair{"target", target}}) {
+      // Not finite when the length overflows: refused too.
+      if (!(Length(point) <= kMaxViewDistance)) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("explicit view: the ", name, " (", point.x, ", ", point.y, ", ", point.z,
+                         ") is more than ", kMaxViewDistance, " world units from the volume"));
+      }
+    }
+    const double up_scale =
+        std::max({std::fabs(up_hint.x), std::fabs(up_hint.y), std::fabs(up_hint.z)});
+    if (up_scale == 0) return absl::InvalidArgumentError("explicit view: up is zero");
+    // An up whose length overflows, or whose squares underflow, is scaled
+    // to components of at most 1; any other gives the bits it always gave.
+    if (const double length = Length(up_hint); !std::isfinite(length) || length < 1e-100) {
+      up_hint = {up_hint.x / up_scale, up_hint.y / up_scale, up_hint.z / up_scale};
+    }
   } else {
     const double az = spec.azimuth_deg * kDeg, el = spec.elevation_deg * kDeg;
     // Azimuth 0, elevation 0: the eye on +Z looking along -Z.
@@ -64,7 +87,8 @@ absl::StatusOr<Camera> Camera::Create(const CameraSpec& spec, const Vec3& volume
   }
   c.forward_ = Normalize(forward);
   Vec3 right = Cross(c.forward_, up_hint);
-  if (Length(right) < 1e-9) {
+  // Relative to the hint's length: a short up is as good as a long one.
+  if (Length(right) < 1e-9 * Length(up_hint)) {
     return absl::InvalidArgumentError("explicit view: up is parallel to the view direction");
   }
   c.right_ = Normalize(right);
