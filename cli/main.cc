@@ -76,7 +76,7 @@ const std::vector<FlagDoc> kVolumeFlags = {
      "VTK image data (.vti), a directory of one DICOM series, Levoy's .den; any\n"
      "other extension, or --raw-dims given, is headerless raw"},
     {"raw-dims", "XxYxZ", "a raw volume's size"},
-    {"raw-type", "T", "uint8|int8|uint16|int16|uint32|int32|float (default uint8)"},
+    {"raw-type", "T", "uint8|int8|uint16|int16|uint32|int32|float|double (default uint8)"},
     {"raw-endian", "little|big", "byte order of a raw volume (default little)"},
     {"raw-spacing", "X,Y,Z", "voxel size of a raw volume (default 1,1,1)"},
     {"raw-skip", "BYTES", "header bytes to skip in a raw volume (default 0)"},

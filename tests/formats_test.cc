@@ -2,9 +2,11 @@
 // (every reader's, and the camera's mapping into the volume's frame), and
 // the presets. Files are written by the tests: MetaImage and .vti by hand,
 // DICOM with GDCM.
+#include <fcntl.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
-#include <fcntl.h>
+#include <lz4.h>
+#include <lzma.h>
 #include <unistd.h>
 #include <zlib.h>
 
@@ -12,9 +14,11 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <string>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "dicom_writer.h"
 #include "transtick/camera.h"
 #include "transtick/classification.h"
@@ -135,8 +139,8 @@ TEST_F(FormatsTest, MetaImageErrorsNameTheFile) {
   ExpectError(ReadVolume(Write("long.mha", MhaHeader("") + Bytes(s) + "xx")), "long.mha",
               "holds 50");
   std::string bad_type = MhaHeader("");
-  bad_type.replace(bad_type.find("MET_SHORT"), 9, "MET_DOUBLE");
-  ExpectError(ReadVolume(Write("double.mha", bad_type + Bytes(s))), "double.mha", "MET_DOUBLE");
+  bad_type.replace(bad_type.find("MET_SHORT"), 9, "MET_LONG");
+  ExpectError(ReadVolume(Write("long.mha", bad_type + Bytes(s))), "long.mha", "MET_LONG");
   ExpectError(ReadVolume(Write("zcut.mha", MhaHeader("", true) + Zlib(Bytes(s)).substr(0, 10))),
               "zcut.mha", "truncated");
   std::string huge = MhaHeader("");
@@ -167,6 +171,44 @@ std::string Vti(const std::string& file_attrs, const std::string& image_attrs,
 }
 
 std::string U64(uint64_t v) { return std::string(reinterpret_cast<const char*>(&v), 8); }
+
+// One block as VTK's LZ4 compressor writes it: a raw LZ4 block.
+std::string Lz4(const std::string& raw) {
+  std::string out(LZ4_compressBound(static_cast<int>(raw.size())), '\0');
+  const int n = LZ4_compress_default(raw.data(), out.data(), static_cast<int>(raw.size()),
+                                     static_cast<int>(out.size()));
+  EXPECT_GT(n, 0);
+  out.resize(n);
+  return out;
+}
+
+// One block as VTK's LZMA compressor writes it: an .xz stream.
+std::string Lzma(const std::string& raw) {
+  std::string out(lzma_stream_buffer_bound(raw.size()), '\0');
+  size_t n = 0;
+  EXPECT_EQ(lzma_easy_buffer_encode(6, LZMA_CHECK_CRC64, nullptr,
+                                    reinterpret_cast<const uint8_t*>(raw.data()), raw.size(),
+                                    reinterpret_cast<uint8_t*>(out.data()), &n, out.size()),
+            LZMA_OK);
+  out.resize(n);
+  return out;
+}
+
+// base64 as VTK writes it: one run, padded with '='.
+std::string Base64(const std::string& bytes) {
+  static constexpr char kDigits[] =
+      "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  for (size_t i = 0; i < bytes.size(); i += 3) {
+    uint32_t bits = 0;
+    const size_t n = std::min<size_t>(3, bytes.size() - i);
+    for (size_t k = 0; k < 3; ++k) {
+      bits = bits << 8 | (k < n ? static_cast<unsigned char>(bytes[i + k]) : 0u);
+    }
+    for (size_t k = 0; k < 4; ++k) out += k <= n ? kDigits[(bits >> (18 - 6 * k)) & 63] : '=';
+  }
+  return out;
+}
 
 TEST_F(FormatsTest, VtiRawAndZlibAppended) {
   const auto s = Samples(24);
@@ -204,14 +246,50 @@ TEST_F(FormatsTest, VtiErrorsNameTheFile) {
               "byte count is 47");
   ExpectError(ReadVolume(Write("cut.vti", Vti("", "", array, U64(48) + data.substr(0, 5)))),
               "cut.vti", "");
-  ExpectError(ReadVolume(Write("f64.vti", Vti("", "", "<DataArray type=\"Float64\" Name=\"v\" "
-                                                      "format=\"appended\" offset=\"0\"/>",
-                                              U64(48) + data))),
-              "f64.vti", "Float64");
-  ExpectError(ReadVolume(Write("b64.vti", Vti("", "", "<DataArray type=\"Int16\" Name=\"v\" "
-                                                      "format=\"binary\">AAAA</DataArray>",
+  ExpectError(ReadVolume(Write("i64.vti", Vti("", "",
+                                              "<DataArray type=\"Int64\" Name=\"v\" "
+                                              "format=\"appended\" offset=\"0\"/>",
+                                              U64(192) + data))),
+              "i64.vti", "Int64");
+  // Three bytes of base64, where the header needs eight.
+  ExpectError(ReadVolume(Write("b64.vti", Vti("", "",
+                                              "<DataArray type=\"Int16\" Name=\"v\" "
+                                              "format=\"binary\">AAAA</DataArray>",
                                               ""))),
-              "b64.vti", "binary");
+              "b64.vti", "byte count (truncated?)");
+  const std::string inline_array = "<DataArray type=\"Int16\" Name=\"v\" format=\"binary\">";
+  ExpectError(ReadVolume(Write("char.vti", Vti("", "", inline_array + "AAAA*AAA</DataArray>", ""))),
+              "char.vti", "'*' is not base64");
+  ExpectError(ReadVolume(Write("pad.vti", Vti("", "", inline_array + "A===</DataArray>", ""))),
+              "pad.vti", "'=' after one character");
+  ExpectError(ReadVolume(Write("none.vti", Vti("", "",
+                                               "<DataArray type=\"Int16\" Name=\"v\" "
+                                               "format=\"binary\"/>",
+                                               ""))),
+              "none.vti", "has no content");
+  const std::string ascii = "<DataArray type=\"Int16\" Name=\"v\" format=\"ascii\">";
+  std::string numbers;
+  for (int16_t v : s) numbers += std::to_string(v) + " ";
+  ExpectError(ReadVolume(Write("few.vti", Vti("", "", ascii + "1 2 3</DataArray>", ""))), "few.vti",
+              "holds 3 samples, its extent says 24");
+  ExpectError(ReadVolume(Write("many.vti", Vti("", "", ascii + numbers + "7</DataArray>", ""))),
+              "many.vti", "more than the 24 samples");
+  ExpectError(ReadVolume(Write("word.vti", Vti("", "", ascii + "1 two 3</DataArray>", ""))),
+              "word.vti", "'two' is not a number");
+  ExpectError(ReadVolume(Write("zstd.vti", Vti("compressor=\"vtkZstdDataCompressor\"", "", array,
+                                               U64(48) + data))),
+              "zstd.vti", "vtkZstdDataCompressor");
+  // Blocks that do not decompress to what the header says, in each codec.
+  for (const char* c : {"vtkZLibDataCompressor", "vtkLZ4DataCompressor", "vtkLZMADataCompressor"}) {
+    const std::string half = data.substr(0, 24);
+    const std::string block = std::string(c) == "vtkZLibDataCompressor"  ? Zlib(half)
+                              : std::string(c) == "vtkLZ4DataCompressor" ? Lz4(half)
+                                                                         : Lzma(half);
+    ExpectError(
+        ReadVolume(Write("short.vti", Vti(absl::StrCat("compressor=\"", c, "\""), "", array,
+                                          U64(1) + U64(48) + U64(0) + U64(block.size()) + block))),
+        "short.vti", "does not inflate to 48 bytes");
+  }
   const std::string lie = U64(1000000) + U64(32) + U64(0) + U64(10);
   ExpectError(ReadVolume(Write("blocks.vti",
                                Vti("compressor=\"vtkZLibDataCompressor\"", "", array, lie))),
@@ -221,6 +299,100 @@ TEST_F(FormatsTest, VtiErrorsNameTheFile) {
                                Vti("compressor=\"vtkZLibDataCompressor\"", "", array, corrupt))),
               "corrupt.vti", "corrupt");
   ExpectError(ReadVolume(Write("notxml.vti", "hello")), "notxml.vti", "not a VTK XML file");
+}
+
+// Every way VTK's XML writers store a volume's array: appended raw or in
+// base64, inline in base64 (format "binary") or as numbers ("ascii"), each
+// uncompressed or compressed in blocks of a random size by zlib, LZ4 or
+// LZMA; base64 in several runs (VTK encodes the header and the data apart,
+// each padded), with white space between characters inline; Int16 and
+// Float64. 300 random volumes and ways, against their samples.
+TEST_F(FormatsTest, VtiEveryLayoutVtkWrites) {
+  std::mt19937 rng(20261206);
+  for (int trial = 0; trial < 300; ++trial) {
+    const bool f64 = trial % 2 == 1;
+    std::vector<int16_t> s(24);
+    for (int16_t& v : s)
+      v = static_cast<int16_t>(std::uniform_int_distribution<int>(-32768, 32767)(rng));
+    std::string data;
+    if (f64) {
+      for (int16_t v : s) {
+        const double d = v;
+        data.append(reinterpret_cast<const char*>(&d), 8);
+      }
+    } else {
+      data = Bytes(s);
+    }
+    const int layout = std::uniform_int_distribution<int>(0, 3)(rng);  // raw, base64, binary, ascii
+    // 0: none; 1, 2, 3: zlib, LZ4, LZMA.
+    const int codec = layout == 3 ? 0 : std::uniform_int_distribution<int>(0, 3)(rng);
+    const bool zlib = codec != 0;
+    SCOPED_TRACE(absl::StrCat("trial ", trial, " layout ", layout, " codec ", codec,
+                              f64 ? " Float64" : " Int16"));
+    // The header and the data, as separate runs.
+    std::vector<std::string> runs;
+    if (zlib) {
+      const size_t block = 2 * std::uniform_int_distribution<size_t>(1, data.size() / 2)(rng);
+      std::vector<std::string> blocks;
+      for (size_t i = 0; i < data.size(); i += block) {
+        const std::string b = data.substr(i, block);
+        blocks.push_back(codec == 1 ? Zlib(b) : codec == 2 ? Lz4(b) : Lzma(b));
+      }
+      std::string header = U64(blocks.size()) + U64(block) + U64(data.size() % block);
+      for (const std::string& b : blocks) header += U64(b.size());
+      runs.push_back(header);
+      std::string joined;
+      for (const std::string& b : blocks) joined += b;
+      runs.push_back(joined);
+    } else {
+      runs = {U64(data.size()), data};
+    }
+    const std::string type = f64 ? "Float64" : "Int16";
+    const char* const kCompressors[] = {"", "vtkZLibDataCompressor", "vtkLZ4DataCompressor",
+                                        "vtkLZMADataCompressor"};
+    const std::string compressor =
+        zlib ? absl::StrCat("compressor=\"", kCompressors[codec], "\"") : "";
+    std::string file;
+    if (layout <= 1) {
+      // The other array (Int8, 24 bytes) first, "v" after it.
+      const std::vector<std::string> other = {U64(24), std::string(24, '\1')};
+      std::string appended;
+      auto put = [&](const std::vector<std::string>& rs) {
+        for (const std::string& r : rs) appended += layout == 1 ? Base64(r) : r;
+      };
+      put(other);
+      const size_t offset = appended.size();
+      put(runs);
+      file = Vti(compressor, "",
+                 "<DataArray type=\"" + type + "\" Name=\"v\" format=\"appended\" offset=\"" +
+                     std::to_string(offset) + "\"/>",
+                 appended);
+      if (layout == 1) {
+        file.replace(file.find("encoding=\"raw\""), 14, "encoding=\"base64\"");
+      }
+    } else {
+      std::string content;
+      if (layout == 2) {
+        for (const std::string& r : runs) content += Base64(r);
+        // White space anywhere between characters, as line-wrapped text.
+        for (int k = std::uniform_int_distribution<int>(0, 6)(rng); k > 0; --k) {
+          const size_t at = std::uniform_int_distribution<size_t>(0, content.size())(rng);
+          content.insert(at, rng() % 2 ? "\n          " : " ");
+        }
+      } else {
+        for (int16_t v : s)
+          content += (rng() % 2 ? "\n" : " ") + std::to_string(v) + (f64 ? ".0" : "");
+      }
+      file = Vti(compressor, "",
+                 "<DataArray type=\"" + type + "\" Name=\"v\" format=\"" +
+                     (layout == 2 ? "binary" : "ascii") + "\">" + content + "</DataArray>",
+                 "");
+    }
+    auto v = ReadVolume(Write("v.vti", file));
+    ASSERT_TRUE(v.ok()) << v.status();
+    EXPECT_EQ(v->source_type, f64 ? ScalarType::kFloat64 : ScalarType::kInt16);
+    ExpectSamples(*v, s);
+  }
 }
 
 // ---------------------------------------------------------------------------

@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <fstream>
 #include <initializer_list>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -59,8 +60,8 @@ std::string Gzip(const std::string& data) {
 
 // Appends `value` as a sample of `type` in `order`.
 void AppendSample(double value, ScalarType type, ByteOrder order, std::string* out) {
-  unsigned char bytes[4];
-  uint32_t bits = 0;
+  unsigned char bytes[8];
+  uint64_t bits = 0;
   switch (type) {
     case ScalarType::kUint8:
     case ScalarType::kInt8:
@@ -76,9 +77,14 @@ void AppendSample(double value, ScalarType type, ByteOrder order, std::string* o
       break;
     case ScalarType::kFloat32: {
       float f = static_cast<float>(value);
-      std::memcpy(&bits, &f, 4);
+      uint32_t b32;
+      std::memcpy(&b32, &f, 4);
+      bits = b32;
       break;
     }
+    case ScalarType::kFloat64:
+      std::memcpy(&bits, &value, 8);
+      break;
   }
   const size_t size = ScalarTypeSize(type);
   for (size_t i = 0; i < size; ++i) {
@@ -111,18 +117,28 @@ std::vector<double> SampleValues(ScalarType type) {
       return {0, 1, -1, 16777216, -16777216, 70000, -70000, 3, 4, 5, 6, 7};
     case ScalarType::kFloat32:
       return {0, 1.5, -2.25, 1e10, -1e-3, 3.14159, 100, 3, 4, 5, 6, 7};
+    case ScalarType::kFloat64:
+      // Rounded to the nearest float; past the largest float, infinities.
+      return {0, 1.5, -2.25, 1e300, -1e-3, 3.141592653589793, -1e300, 1e-320, 4, 5, 6, 7};
   }
   return {};
 }
 
-constexpr ScalarType kAllTypes[] = {ScalarType::kUint8,  ScalarType::kInt8,   ScalarType::kUint16,
-                                    ScalarType::kInt16,  ScalarType::kUint32, ScalarType::kInt32,
-                                    ScalarType::kFloat32};
+constexpr ScalarType kAllTypes[] = {ScalarType::kUint8,   ScalarType::kInt8,   ScalarType::kUint16,
+                                    ScalarType::kInt16,   ScalarType::kUint32, ScalarType::kInt32,
+                                    ScalarType::kFloat32, ScalarType::kFloat64};
+
+// The float a sample of any type becomes: the nearest, or beyond the
+// largest float an infinity of its sign.
+float AsFloat(double v) {
+  constexpr double kMax = std::numeric_limits<float>::max();
+  return v > kMax ? INFINITY : v < -kMax ? -INFINITY : static_cast<float>(v);
+}
 
 void ExpectValues(const Volume& volume, const std::vector<double>& expected) {
   ASSERT_EQ(volume.values.size(), expected.size());
   for (size_t i = 0; i < expected.size(); ++i) {
-    EXPECT_FLOAT_EQ(volume.values[i], static_cast<float>(expected[i])) << "sample " << i;
+    EXPECT_FLOAT_EQ(volume.values[i], AsFloat(expected[i])) << "sample " << i;
   }
 }
 
@@ -217,13 +233,15 @@ TEST(ScalarTypeTest, ParsesEveryNrrdSpelling) {
       {"uint32", ScalarType::kUint32},
       {"uint32_t", ScalarType::kUint32},
       {"float", ScalarType::kFloat32},
+      {"double", ScalarType::kFloat64},
+      {"float64", ScalarType::kFloat64},
   };
   for (const auto& [name, type] : cases) {
     absl::StatusOr<ScalarType> parsed = ParseScalarType(name);
     ASSERT_TRUE(parsed.ok()) << name << ": " << parsed.status();
     EXPECT_EQ(*parsed, type) << name;
   }
-  for (const char* bad : {"double", "int64", "char", "block", ""}) {
+  for (const char* bad : {"long double", "int64", "char", "block", ""}) {
     EXPECT_EQ(ParseScalarType(bad).status().code(), absl::StatusCode::kInvalidArgument) << bad;
   }
 }
@@ -539,8 +557,8 @@ TEST_F(VolumeIoTest, NrrdBadFields) {
   };
   const std::string base_tail = "encoding: raw\nendian: little\n";
   const Case cases[] = {
-      {"type.nrrd", "NRRD0004\ntype: double\ndimension: 3\nsizes: 3 2 2\n" + base_tail,
-       "unsupported sample type 'double'"},
+      {"type.nrrd", "NRRD0004\ntype: int64\ndimension: 3\nsizes: 3 2 2\n" + base_tail,
+       "unsupported sample type 'int64'"},
       {"encoding.nrrd",
        "NRRD0004\ntype: int16\ndimension: 3\nsizes: 3 2 2\nencoding: ascii\nendian: little\n",
        "unsupported encoding 'ascii'"},
@@ -796,9 +814,9 @@ std::string NiftiHeader(const NiftiSpec& spec) {
 }
 
 constexpr std::pair<int, ScalarType> kNiftiTypes[] = {
-    {2, ScalarType::kUint8},    {4, ScalarType::kInt16},  {8, ScalarType::kInt32},
-    {16, ScalarType::kFloat32}, {256, ScalarType::kInt8}, {512, ScalarType::kUint16},
-    {768, ScalarType::kUint32},
+    {2, ScalarType::kUint8},    {4, ScalarType::kInt16},    {8, ScalarType::kInt32},
+    {16, ScalarType::kFloat32}, {256, ScalarType::kInt8},   {512, ScalarType::kUint16},
+    {768, ScalarType::kUint32}, {64, ScalarType::kFloat64},
 };
 
 TEST_F(VolumeIoTest, NiftiAllTypesBothOrdersRawAndGzip) {
@@ -872,7 +890,7 @@ TEST_F(VolumeIoTest, NiftiErrors) {
     cases.push_back({name, spec, hint});
   };
   add(
-      "float64.nii", [](NiftiSpec& s) { s.datatype = 64; }, "datatype 64 (float64)");
+      "int64.nii", [](NiftiSpec& s) { s.datatype = 1024; }, "datatype 1024 (int64)");
   add(
       "weird.nii", [](NiftiSpec& s) { s.datatype = 3; }, "datatype 3");
   add(

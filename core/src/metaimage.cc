@@ -60,15 +60,16 @@ absl::StatusOr<bool> Boolean(const std::string& path, const std::string& key,
 
 absl::StatusOr<ScalarType> ElementType(const std::string& path, const std::string& value) {
   static const std::map<std::string, ScalarType> kTypes = {
-      {"MET_UCHAR", ScalarType::kUint8},  {"MET_CHAR", ScalarType::kInt8},
+      {"MET_UCHAR", ScalarType::kUint8},   {"MET_CHAR", ScalarType::kInt8},
       {"MET_USHORT", ScalarType::kUint16}, {"MET_SHORT", ScalarType::kInt16},
-      {"MET_UINT", ScalarType::kUint32},  {"MET_INT", ScalarType::kInt32},
-      {"MET_FLOAT", ScalarType::kFloat32}};
+      {"MET_UINT", ScalarType::kUint32},   {"MET_INT", ScalarType::kInt32},
+      {"MET_FLOAT", ScalarType::kFloat32}, {"MET_DOUBLE", ScalarType::kFloat64}};
   auto it = kTypes.find(value);
   if (it == kTypes.end()) {
-    return Error(path, absl::StrCat("ElementType '", value,
-                                    "' is not supported (supported: MET_UCHAR, MET_CHAR, "
-                                    "MET_USHORT, MET_SHORT, MET_UINT, MET_INT, MET_FLOAT)"));
+    return Error(path,
+                 absl::StrCat("ElementType '", value,
+                              "' is not supported (supported: MET_UCHAR, MET_CHAR, "
+                              "MET_USHORT, MET_SHORT, MET_UINT, MET_INT, MET_FLOAT, MET_DOUBLE)"));
   }
   return it->second;
 }

@@ -91,8 +91,6 @@ const char* UnsupportedDatatypeName(int datatype) {
       return "binary";
     case 32:
       return "complex64";
-    case 64:
-      return "float64";
     case 128:
       return "rgb24";
     case 1024:
@@ -196,6 +194,9 @@ absl::StatusOr<Header> ParseHeader(const std::string& path, const unsigned char*
     case 16:
       header.type = ScalarType::kFloat32;
       break;
+    case 64:
+      header.type = ScalarType::kFloat64;
+      break;
     case 256:
       header.type = ScalarType::kInt8;
       break;
@@ -209,7 +210,7 @@ absl::StatusOr<Header> ParseHeader(const std::string& path, const unsigned char*
       return Error(path, absl::StrCat("unsupported datatype ", datatype, " (",
                                       UnsupportedDatatypeName(datatype),
                                       "); supported: uint8, int8, uint16, int16, uint32, "
-                                      "int32, float32"));
+                                      "int32, float32, float64"));
   }
 
   for (int i = 0; i < 3; ++i) {

@@ -20,6 +20,8 @@ std::string_view ScalarTypeName(ScalarType type) {
       return "int32";
     case ScalarType::kFloat32:
       return "float";
+    case ScalarType::kFloat64:
+      return "double";
   }
   return "unknown";
 }
@@ -36,6 +38,8 @@ size_t ScalarTypeSize(ScalarType type) {
     case ScalarType::kInt32:
     case ScalarType::kFloat32:
       return 4;
+    case ScalarType::kFloat64:
+      return 8;
   }
   return 0;
 }

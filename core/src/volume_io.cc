@@ -13,13 +13,14 @@
 #include <climits>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <utility>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
-#include "absl/strings/str_split.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
 #include "volume_io_internal.h"
 
 namespace transtick {
@@ -36,7 +37,7 @@ absl::Status ErrnoError(const std::string& path, const char* what, int error) {
 
 template <typename T>
 T LoadSample(const unsigned char* p, bool swap) {
-  static_assert(sizeof(T) <= 4);
+  static_assert(sizeof(T) <= 8);
   unsigned char bytes[sizeof(T)];
   if (swap) {
     for (size_t i = 0; i < sizeof(T); ++i) bytes[i] = p[sizeof(T) - 1 - i];
@@ -52,6 +53,20 @@ template <typename T>
 void ConvertTyped(const unsigned char* src, size_t count, bool swap, float* dst) {
   for (size_t i = 0; i < count; ++i) {
     dst[i] = static_cast<float>(LoadSample<T>(src + i * sizeof(T), swap));
+  }
+}
+
+// Doubles are rounded to the nearest float; beyond the largest float they
+// become infinities of their sign (what the renderers do with infinities:
+// docs/security.md), and NaN stays NaN.
+template <>
+void ConvertTyped<double>(const unsigned char* src, size_t count, bool swap, float* dst) {
+  constexpr double kMax = std::numeric_limits<float>::max();
+  for (size_t i = 0; i < count; ++i) {
+    const double v = LoadSample<double>(src + i * sizeof(double), swap);
+    dst[i] = v > kMax    ? std::numeric_limits<float>::infinity()
+             : v < -kMax ? -std::numeric_limits<float>::infinity()
+                         : static_cast<float>(v);
   }
 }
 
@@ -227,8 +242,14 @@ absl::StatusOr<uint64_t> CheckedDataBytes(const std::string& path,
         float_bytes / (1 << 20), " MiB as float, more than the limit of ",
         options.max_bytes / (1 << 20), " MiB"));
   }
-  // Cannot overflow: the sample size is at most sizeof(float).
-  return voxels * ScalarTypeSize(type);
+  // A double is twice a float: checked too, for limits near 2^64.
+  uint64_t bytes = 0;
+  if (!CheckedMul(voxels, ScalarTypeSize(type), &bytes)) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ": ", voxels, " samples of ",
+                                                   std::string(ScalarTypeName(type)),
+                                                   " overflow 64 bits"));
+  }
+  return bytes;
 }
 
 void ConvertSamples(const unsigned char* src, size_t count, ScalarType type, ByteOrder order,
@@ -256,6 +277,9 @@ void ConvertSamples(const unsigned char* src, size_t count, ScalarType type, Byt
       break;
     case ScalarType::kFloat32:
       ConvertTyped<float>(src, count, swap, dst);
+      break;
+    case ScalarType::kFloat64:
+      ConvertTyped<double>(src, count, swap, dst);
       break;
   }
 }
@@ -451,6 +475,8 @@ absl::StatusOr<ScalarType> ParseScalarType(const std::string& name) {
       {"uint32_t", ScalarType::kUint32},
       {"float", ScalarType::kFloat32},
       {"float32", ScalarType::kFloat32},
+      {"double", ScalarType::kFloat64},
+      {"float64", ScalarType::kFloat64},
   };
   std::string key = absl::AsciiStrToLower(absl::StripAsciiWhitespace(name));
   for (const auto& [spelling, type] : kNames) {
@@ -458,7 +484,7 @@ absl::StatusOr<ScalarType> ParseScalarType(const std::string& name) {
   }
   return absl::InvalidArgumentError(
       absl::StrCat("unsupported sample type '", name,
-                   "' (supported: uint8, int8, uint16, int16, uint32, int32, float)"));
+                   "' (supported: uint8, int8, uint16, int16, uint32, int32, float, double)"));
 }
 
 absl::StatusOr<Volume> ReadRaw(const std::string& path, const RawSpec& spec,

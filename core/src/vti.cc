@@ -5,37 +5,52 @@
 //
 // Accepted:
 //   <VTKFile type="ImageData" byte_order="LittleEndian|BigEndian"
-//            header_type="UInt32|UInt64" compressor="vtkZLibDataCompressor"?>
+//            header_type="UInt32|UInt64"
+//            compressor="vtkZLibDataCompressor|vtkLZ4DataCompressor|vtkLZMADataCompressor"?>
 //     <ImageData WholeExtent="x0 x1 y0 y1 z0 z1" Origin="x y z"
 //                Spacing="sx sy sz" Direction="9 numbers, row-major"?>
 //       <Piece Extent="the whole extent">          exactly one piece
 //         <PointData Scalars="name"?>
-//           <DataArray type="Int8|UInt8|Int16|UInt16|Int32|UInt32|Float32"
-//                      Name="..." NumberOfComponents="1"? format="appended"
-//                      offset="n"/>
-//     <AppendedData encoding="raw"> _ then the arrays' bytes
+//           <DataArray type="Int8|UInt8|Int16|UInt16|Int32|UInt32|Float32|Float64"
+//                      Name="..." NumberOfComponents="1"?
+//                      format="appended" offset="n"/>       or
+//                      format="binary"> base64 </DataArray>  or
+//                      format="ascii"> numbers </DataArray>
+//     <AppendedData encoding="raw|base64"> _ then the arrays' bytes
 // The array used is the one PointData's Scalars names, else the first.
 // Point data: the volume has x1-x0+1 samples along x (likewise y, z).
 // Direction's columns are the index axes in world space; world is LPS, as
 // VTK does not say otherwise.
 //
-// An appended array without compression is a header_type byte count, then
-// the bytes. With vtkZLibDataCompressor it is a header of header_type
-// integers: the number of blocks n, the uncompressed block size, the size
-// of the last block (0: a full block), and n compressed sizes; then the n
-// zlib streams. Inline data (format="binary" or "ascii"), base64 appended
-// data, other compressors and Float64 are refused, each with a clear error.
+// An array without compression is a header_type byte count, then the
+// bytes. Compressed (vtkZLibDataCompressor, vtkLZ4DataCompressor or
+// vtkLZMADataCompressor), it is a header of header_type integers: the
+// number of blocks n, the uncompressed block size, the size of the last
+// block (0: a full block), and n compressed sizes; then the n compressed
+// blocks (a zlib stream, a raw LZ4 block, an .xz stream). In base64
+// (appended with encoding="base64", where offsets count characters after
+// the '_', or inline with format="binary") the same bytes are encoded; VTK
+// encodes the header and the data as separate base64 runs, each with its
+// own padding, so the decoder starts afresh after a padded group. ASCII
+// arrays are the samples' numbers, separated by white space. Other
+// compressors, several pieces and Int64 are refused, each with a clear
+// error, and an inline array's tag must lie in the file's first MiB (where
+// the tags are read).
+#include <lz4.h>
+#include <lzma.h>
 #include <zlib.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/escaping.h"
 #include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -61,6 +76,8 @@ absl::Status Error(const std::string& path, absl::string_view message) {
 struct Tag {
   std::string name;
   std::map<std::string, std::string> attributes;
+  size_t end = 0;      // just past its '>' in the text it was read from
+  bool empty = false;  // <tag ... />: no content
 };
 
 // The tags of the XML before the appended data, in order; closing tags and
@@ -80,8 +97,12 @@ absl::StatusOr<std::vector<Tag>> ParseTags(const std::string& path, absl::string
     absl::string_view body = xml.substr(i + 1, end - i - 1);
     i = end + 1;
     if (body.empty() || body[0] == '/' || body[0] == '?' || body[0] == '!') continue;
-    if (body.back() == '/') body.remove_suffix(1);
     Tag tag;
+    tag.end = i;
+    if (body.back() == '/') {
+      body.remove_suffix(1);
+      tag.empty = true;
+    }
     size_t p = 0;
     while (p < body.size() && !absl::ascii_isspace(static_cast<unsigned char>(body[p]))) ++p;
     tag.name = std::string(body.substr(0, p));
@@ -109,26 +130,195 @@ absl::StatusOr<std::vector<Tag>> ParseTags(const std::string& path, absl::string
 
 absl::StatusOr<ScalarType> ArrayType(const std::string& path, const std::string& name) {
   static const std::map<std::string, ScalarType> kTypes = {
-      {"Int8", ScalarType::kInt8},     {"UInt8", ScalarType::kUint8},
-      {"Int16", ScalarType::kInt16},   {"UInt16", ScalarType::kUint16},
-      {"Int32", ScalarType::kInt32},   {"UInt32", ScalarType::kUint32},
-      {"Float32", ScalarType::kFloat32}};
+      {"Int8", ScalarType::kInt8},       {"UInt8", ScalarType::kUint8},
+      {"Int16", ScalarType::kInt16},     {"UInt16", ScalarType::kUint16},
+      {"Int32", ScalarType::kInt32},     {"UInt32", ScalarType::kUint32},
+      {"Float32", ScalarType::kFloat32}, {"Float64", ScalarType::kFloat64}};
   auto it = kTypes.find(name);
   if (it == kTypes.end()) {
     return Error(path, absl::StrCat("DataArray type '", name,
                                     "' is not supported (supported: Int8, UInt8, Int16, UInt16, "
-                                    "Int32, UInt32, Float32)"));
+                                    "Int32, UInt32, Float32, Float64)"));
   }
   return it->second;
 }
 
-// Reads exactly n bytes at the file's current position.
-absl::Status ReadExactly(const std::string& path, std::FILE* f, unsigned char* dst, size_t n,
-                         const char* what) {
-  if (std::fread(dst, 1, n, f) != n) {
-    return Error(path, absl::StrCat("file ends inside the ", what, " (truncated?)"));
+// The bytes of an array, from where they begin in the file: raw, or
+// decoded from base64 as they are read.
+class ByteSource {
+ public:
+  ByteSource(const std::string& path, std::FILE* f, bool base64)
+      : path_(path), f_(f), base64_(base64) {}
+
+  // Exactly n bytes, or an error naming `what` was cut short.
+  absl::Status Read(unsigned char* dst, size_t n, const char* what) {
+    if (!base64_) {
+      if (std::fread(dst, 1, n, f_) != n) return Short(what);
+      return absl::OkStatus();
+    }
+    while (n > 0) {
+      if (out_pos_ == out_len_) {
+        if (absl::Status s = DecodeGroup(what); !s.ok()) return s;
+        continue;
+      }
+      const size_t take = std::min(n, out_len_ - out_pos_);
+      std::copy_n(out_ + out_pos_, take, dst);
+      dst += take;
+      out_pos_ += take;
+      n -= take;
+    }
+    return absl::OkStatus();
+  }
+
+ private:
+  absl::Status Short(const char* what) const {
+    return Error(path_, absl::StrCat(base64_ ? "base64 data" : "file", " ends inside the ", what,
+                                     " (truncated?)"));
+  }
+
+  // The next group of four base64 characters, white space skipped, into
+  // one to three bytes; '=' pads a group short, and the next run begins
+  // after it. The data ends at '<' (the element's end) or the file's.
+  absl::Status DecodeGroup(const char* what) {
+    uint32_t bits = 0;
+    int chars = 0, pad = 0;
+    while (chars + pad < 4) {
+      const int c = getc_unlocked(f_);
+      if (c == EOF || c == '<') return Short(what);
+      if (absl::ascii_isspace(static_cast<unsigned char>(c))) continue;
+      if (c == '=') {
+        // Padding: at least two characters in the group before it, and
+        // nothing but padding after it.
+        if (chars < 2) {
+          if (chars == 0) continue;  // a stray '=' between runs
+          return Error(path_,
+                       absl::StrCat("base64 data of the ", what, ": '=' after one character"));
+        }
+        ++pad;
+        continue;
+      }
+      const int v = Value(c);
+      if (v < 0 || pad > 0) {
+        return Error(path_, absl::StrCat("base64 data of the ", what, ": character '",
+                                         absl::CEscape(std::string(1, static_cast<char>(c))),
+                                         "' is not base64"));
+      }
+      bits = bits << 6 | static_cast<uint32_t>(v);
+      ++chars;
+    }
+    bits <<= 6 * pad;
+    out_[0] = static_cast<unsigned char>(bits >> 16);
+    out_[1] = static_cast<unsigned char>(bits >> 8);
+    out_[2] = static_cast<unsigned char>(bits);
+    out_pos_ = 0;
+    out_len_ = static_cast<size_t>(chars - 1);  // 4 characters: 3 bytes, 3: 2, 2: 1
+    return absl::OkStatus();
+  }
+
+  static int Value(int c) {
+    if (c >= 'A' && c <= 'Z') return c - 'A';
+    if (c >= 'a' && c <= 'z') return c - 'a' + 26;
+    if (c >= '0' && c <= '9') return c - '0' + 52;
+    if (c == '+') return 62;
+    if (c == '/') return 63;
+    return -1;
+  }
+
+  const std::string& path_;
+  std::FILE* const f_;
+  const bool base64_;
+  unsigned char out_[3] = {0, 0, 0};
+  size_t out_pos_ = 0, out_len_ = 0;
+};
+
+// An ASCII array's `count` numbers, from the file's current position to
+// the element's end ('<'), as floats (what ConvertSamples makes of each
+// type's value).
+absl::Status ReadAsciiSamples(const std::string& path, std::FILE* f, uint64_t count,
+                              std::vector<float>* out) {
+  std::string token;
+  uint64_t read = 0;
+  auto flush = [&]() -> absl::Status {
+    if (token.empty()) return absl::OkStatus();
+    double v = 0;
+    if (token.size() > 64 || !absl::SimpleAtod(token, &v)) {
+      return Error(path, absl::StrCat("ASCII array: '", absl::CEscape(token.substr(0, 64)),
+                                      "' is not a number"));
+    }
+    if (++read > count) {
+      return Error(path, absl::StrCat("ASCII array holds more than the ", count,
+                                      " samples its extent says"));
+    }
+    constexpr double kMax = std::numeric_limits<float>::max();
+    out->push_back(v > kMax    ? std::numeric_limits<float>::infinity()
+                   : v < -kMax ? -std::numeric_limits<float>::infinity()
+                               : static_cast<float>(v));
+    token.clear();
+    return absl::OkStatus();
+  };
+  while (true) {
+    const int c = getc_unlocked(f);
+    if (c == EOF || c == '<' || absl::ascii_isspace(static_cast<unsigned char>(c))) {
+      if (absl::Status s = flush(); !s.ok()) return s;
+      if (c == EOF || c == '<') break;
+      continue;
+    }
+    if (token.size() > 64) continue;  // refused at its end, without growing
+    token.push_back(static_cast<char>(c));
+  }
+  if (read < count) {
+    return Error(path, absl::StrCat("ASCII array holds ", read, " samples, its extent says ", count,
+                                    " (truncated?)"));
   }
   return absl::OkStatus();
+}
+
+enum class Compressor { kNone, kZlib, kLz4, kLzma };
+
+// One compressed block into exactly `want` bytes at `out`: false when it is
+// corrupt or holds another number of bytes. zlib: a zlib stream; LZ4: a raw
+// LZ4 block (LZ4_compress_fast); LZMA: an .xz stream
+// (lzma_easy_buffer_encode), as VTK's compressors write them.
+bool Inflate(Compressor compressor, const std::vector<unsigned char>& in, uint64_t want,
+             unsigned char* out) {
+  switch (compressor) {
+    case Compressor::kZlib: {
+      uLongf got = static_cast<uLongf>(want);
+      return uncompress(out, &got, in.data(), static_cast<uLong>(in.size())) == Z_OK && got == want;
+    }
+    case Compressor::kLz4: {
+      if (in.size() > static_cast<size_t>(INT32_MAX)) return false;  // want <= kMaxBlockBytes
+      const int got = LZ4_decompress_safe(reinterpret_cast<const char*>(in.data()),
+                                          reinterpret_cast<char*>(out), static_cast<int>(in.size()),
+                                          static_cast<int>(want));
+      return got >= 0 && static_cast<uint64_t>(got) == want;
+    }
+    case Compressor::kLzma: {
+      // The decoder may use at most this much memory: a stream that asks
+      // for more (a dictionary no block of kMaxBlockBytes needs) fails.
+      uint64_t memlimit = uint64_t{256} << 20;
+      size_t in_pos = 0, out_pos = 0;
+      const lzma_ret r = lzma_stream_buffer_decode(&memlimit, 0, nullptr, in.data(), &in_pos,
+                                                   in.size(), out, &out_pos, want);
+      // All of the block read, and exactly `want` bytes made of it.
+      return r == LZMA_OK && in_pos == in.size() && out_pos == want;
+    }
+    case Compressor::kNone:
+      break;
+  }
+  return false;
+}
+
+// The volume placed as the file says.
+absl::StatusOr<Volume> Finish(const std::string& path, bool oriented,
+                              const std::array<std::array<double, 3>, 3>& axes,
+                              const std::array<double, 3>& origin, Volume volume) {
+  if (oriented) {
+    if (absl::Status s = SetOrientation(path, axes, origin, &volume); !s.ok()) return s;
+  } else {
+    volume.origin = origin;
+  }
+  return volume;
 }
 
 }  // namespace
@@ -143,8 +333,17 @@ absl::StatusOr<Volume> ReadVti(const std::string& path, const ReadOptions& optio
     return Error(path, "not a VTK XML file (no <VTKFile> in its first 4096 bytes)");
   }
   const size_t appended = text.find("<AppendedData");
-  const absl::string_view xml =
-      absl::string_view(text).substr(0, appended == std::string::npos ? text.size() : appended);
+  // The tags are read from the first MiB: a longer file's text may end
+  // inside one, which is left out.
+  const bool cut = appended == std::string::npos && *file_size > text.size();
+  size_t xml_end = appended == std::string::npos ? text.size() : appended;
+  if (cut) {
+    const size_t last_open = text.rfind('<');
+    if (last_open != std::string::npos && text.find('>', last_open) == std::string::npos) {
+      xml_end = last_open;
+    }
+  }
+  const absl::string_view xml = absl::string_view(text).substr(0, xml_end);
   absl::StatusOr<std::vector<Tag>> tags = ParseTags(path, xml);
   if (!tags.ok()) return tags.status();
   const Tag* file = nullptr;
@@ -194,14 +393,22 @@ absl::StatusOr<Volume> ReadVti(const std::string& path, const ReadOptions& optio
       return Error(path, absl::StrCat("header_type '", *ht, "' is neither UInt32 nor UInt64"));
     }
   }
-  bool compressed = false;
+  Compressor compressor = Compressor::kNone;
   if (const std::string* c = attr(file, "compressor"); c && !c->empty()) {
-    if (*c != "vtkZLibDataCompressor") {
+    // The classes VTK's writers name (vtkXMLWriter::SetCompressorType).
+    if (*c == "vtkZLibDataCompressor") {
+      compressor = Compressor::kZlib;
+    } else if (*c == "vtkLZ4DataCompressor") {
+      compressor = Compressor::kLz4;
+    } else if (*c == "vtkLZMADataCompressor") {
+      compressor = Compressor::kLzma;
+    } else {
       return Error(path, absl::StrCat("compressor '", *c,
-                                      "' is not supported (supported: vtkZLibDataCompressor)"));
+                                      "' is not supported (supported: vtkZLibDataCompressor, "
+                                      "vtkLZ4DataCompressor, vtkLZMADataCompressor)"));
     }
-    compressed = true;
   }
+  const bool compressed = compressor != Compressor::kNone;
 
   const std::string* extent_text = attr(image, "WholeExtent");
   if (extent_text == nullptr) return Error(path, "<ImageData> has no WholeExtent");
@@ -250,8 +457,17 @@ absl::StatusOr<Volume> ReadVti(const std::string& path, const ReadOptions& optio
   if (arrays.empty()) return Error(path, "no point data array (<PointData><DataArray>)");
   const Tag* array = arrays.front();
   if (const std::string* scalars = point_data ? attr(point_data, "Scalars") : nullptr) {
+    bool found = false;
     for (const Tag* a : arrays) {
-      if (const std::string* name = attr(a, "Name"); name && *name == *scalars) array = a;
+      if (const std::string* name = attr(a, "Name"); name && *name == *scalars) {
+        array = a;
+        found = true;
+      }
+    }
+    if (!found && cut) {
+      return Error(path, absl::StrCat("the array Scalars names ('", *scalars,
+                                      "') is not among the tags of the file's first ",
+                                      kMaxHeaderBytes, " bytes: write it first, or appended"));
     }
   }
   const std::string* type_text = attr(array, "type");
@@ -263,32 +479,45 @@ absl::StatusOr<Volume> ReadVti(const std::string& path, const ReadOptions& optio
                                     " components: only scalar arrays (1 component) are supported"));
   }
   const std::string* format = attr(array, "format");
-  if (format == nullptr || *format != "appended") {
-    return Error(path, absl::StrCat("DataArray format '", format ? *format : "",
-                                    "' is not supported (supported: appended, raw encoding)"));
+  const std::string format_name = format ? *format : "";
+  if (format_name != "appended" && format_name != "binary" && format_name != "ascii") {
+    return Error(path, absl::StrCat("DataArray format '", format_name,
+                                    "' is not supported (supported: appended, binary, ascii)"));
   }
-  uint64_t array_offset = 0;
-  if (const std::string* o = attr(array, "offset"); o == nullptr || !absl::SimpleAtoi(*o, &array_offset)) {
-    return Error(path, "DataArray has no valid offset");
-  }
-  if (appended == std::string::npos) return Error(path, "no <AppendedData> (truncated?)");
-  {
+  uint64_t start = 0;
+  bool base64 = format_name == "binary";
+  if (format_name != "appended") {
+    // Inline: the array's content follows its tag.
+    if (array->empty) {
+      return Error(path, absl::StrCat("DataArray format '", format_name, "' has no content"));
+    }
+    start = array->end;
+  } else {
+    uint64_t array_offset = 0;
+    if (const std::string* o = attr(array, "offset");
+        o == nullptr || !absl::SimpleAtoi(*o, &array_offset)) {
+      return Error(path, "DataArray has no valid offset");
+    }
+    if (appended == std::string::npos) return Error(path, "no <AppendedData> (truncated?)");
     const size_t tag_end = text.find('>', appended);
     if (tag_end == std::string::npos) return Error(path, "<AppendedData> tag without '>'");
     absl::StatusOr<std::vector<Tag>> t =
         ParseTags(path, absl::string_view(text).substr(appended, tag_end - appended + 1));
     if (!t.ok()) return t.status();
     const std::string* enc = t->empty() ? nullptr : attr(&t->front(), "encoding");
-    if (enc == nullptr || *enc != "raw") {
+    if (enc == nullptr || (*enc != "raw" && *enc != "base64")) {
       return Error(path, absl::StrCat("AppendedData encoding '", enc ? *enc : "",
-                                      "' is not supported (supported: raw)"));
+                                      "' is not supported (supported: raw, base64)"));
     }
-  }
-  const size_t underscore = text.find('_', appended);
-  if (underscore == std::string::npos) return Error(path, "<AppendedData> has no '_' before its data");
-  uint64_t start = 0;
-  if (!vi::CheckedAdd(underscore + 1, array_offset, &start) || start > *file_size) {
-    return Error(path, absl::StrCat("DataArray offset ", array_offset, " lies past the end of the file"));
+    base64 = *enc == "base64";
+    const size_t underscore = text.find('_', tag_end);
+    if (underscore == std::string::npos) {
+      return Error(path, "<AppendedData> has no '_' before its data");
+    }
+    if (!vi::CheckedAdd(underscore + 1, array_offset, &start) || start > *file_size) {
+      return Error(
+          path, absl::StrCat("DataArray offset ", array_offset, " lies past the end of the file"));
+    }
   }
 
   absl::StatusOr<uint64_t> data_bytes = vi::CheckedDataBytes(path, dims, *type, options);
@@ -305,10 +534,15 @@ absl::StatusOr<Volume> ReadVti(const std::string& path, const ReadOptions& optio
   if (!opened.ok()) return opened.status();
   std::FILE* f = opened->get();
   if (::fseeko(f, static_cast<off_t>(start), SEEK_SET) != 0) return Error(path, "seek failed");
+  if (format_name == "ascii") {
+    if (absl::Status s = ReadAsciiSamples(path, f, count, &volume.values); !s.ok()) return s;
+    return Finish(path, oriented, axes, origin, std::move(volume));
+  }
+  ByteSource source(path, f, base64);
   // Header integers are in the file's byte order.
   auto read_uint = [&](uint64_t* v, const char* what) -> absl::Status {
     unsigned char b[8];
-    if (absl::Status s = ReadExactly(path, f, b, header_bytes, what); !s.ok()) return s;
+    if (absl::Status s = source.Read(b, header_bytes, what); !s.ok()) return s;
     *v = 0;
     for (size_t i = 0; i < header_bytes; ++i) {
       const size_t k = order == ByteOrder::kBig ? i : header_bytes - 1 - i;
@@ -323,14 +557,14 @@ absl::StatusOr<Volume> ReadVti(const std::string& path, const ReadOptions& optio
     if (bytes != *data_bytes) {
       return Error(path, absl::StrCat("extent says ", layout, ", the array's byte count is ", bytes));
     }
-    if (*file_size - start - header_bytes < bytes) {
+    if (!base64 && *file_size - start - header_bytes < bytes) {
       return Error(path, absl::StrCat("extent says ", layout, ", file holds ",
                                       *file_size - start - header_bytes, " bytes of it"));
     }
-    volume.values.reserve(count);
-    absl::Status s = vi::ReadSamples(
-        [&](unsigned char* dst, size_t n) { return ReadExactly(path, f, dst, n, "array"); }, count,
-        *type, order, &volume.values);
+    if (!base64) volume.values.reserve(count);
+    absl::Status s =
+        vi::ReadSamples([&](unsigned char* dst, size_t n) { return source.Read(dst, n, "array"); },
+                        count, *type, order, &volume.values);
     if (!s.ok()) return s;
   } else {
     uint64_t blocks = 0, block_size = 0, last_size = 0;
@@ -363,7 +597,7 @@ absl::StatusOr<Volume> ReadVti(const std::string& path, const ReadOptions& optio
       }
     }
     const uint64_t data_start = start + header_bytes * (3 + blocks);
-    if (compressed_total > *file_size - std::min(*file_size, data_start)) {
+    if (!base64 && compressed_total > *file_size - std::min(*file_size, data_start)) {
       return Error(path, absl::StrCat("compressed array: blocks of ", compressed_total,
                                       " bytes in all, file holds ",
                                       *file_size - std::min(*file_size, data_start), " (truncated?)"));
@@ -378,14 +612,11 @@ absl::StatusOr<Volume> ReadVti(const std::string& path, const ReadOptions& optio
             if (out_pos == out_len) {
               if (block == blocks) return Error(path, "compressed array: blocks end early");
               in.resize(sizes[block]);
-              if (absl::Status r = ReadExactly(path, f, in.data(), in.size(), "compressed block");
-                  !r.ok()) {
+              if (absl::Status r = source.Read(in.data(), in.size(), "compressed block"); !r.ok()) {
                 return r;
               }
               const uint64_t want = (block + 1 == blocks && last_size != 0) ? last_size : block_size;
-              uLongf got = static_cast<uLongf>(want);
-              const int z = uncompress(out.data(), &got, in.data(), static_cast<uLong>(in.size()));
-              if (z != Z_OK || got != want) {
+              if (!Inflate(compressor, in, want, out.data())) {
                 return Error(path, absl::StrCat("compressed array: block ", block,
                                                 " is corrupt or does not inflate to ", want,
                                                 " bytes"));
@@ -405,12 +636,7 @@ absl::StatusOr<Volume> ReadVti(const std::string& path, const ReadOptions& optio
         count, *type, order, &volume.values);
     if (!s.ok()) return s;
   }
-  if (oriented) {
-    if (absl::Status s = SetOrientation(path, axes, origin, &volume); !s.ok()) return s;
-  } else {
-    volume.origin = origin;
-  }
-  return volume;
+  return Finish(path, oriented, axes, origin, std::move(volume));
 }
 
 }  // namespace transtick

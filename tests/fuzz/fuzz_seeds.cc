@@ -35,6 +35,38 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// A .vti of raw appended data with its arrays in base64 instead (one run),
+// as VTK's writers make by default.
+std::string VtiAsBase64(std::string vti) {
+  static constexpr char kDigits[] =
+      "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  const std::string open = "<AppendedData encoding=\"raw\">\n_";
+  const size_t begin = vti.find(open) + open.size();
+  const size_t end = vti.rfind("\n</AppendedData>");
+  const std::string bytes = vti.substr(begin, end - begin);
+  std::string text;
+  for (size_t i = 0; i < bytes.size(); i += 3) {
+    uint32_t bits = 0;
+    const size_t n = std::min<size_t>(3, bytes.size() - i);
+    for (size_t k = 0; k < 3; ++k) {
+      bits = bits << 8 | (k < n ? static_cast<unsigned char>(bytes[i + k]) : 0u);
+    }
+    for (size_t k = 0; k < 4; ++k) text += k <= n ? kDigits[(bits >> (18 - 6 * k)) & 63] : '=';
+  }
+  vti.replace(begin, end - begin, text);
+  vti.replace(vti.find("encoding=\"raw\""), 14, "encoding=\"base64\"");
+  return vti;
+}
+
+// The same volume's samples inline as ASCII numbers.
+std::string VtiAsAscii(std::string vti, const Volume& v) {
+  std::string numbers;
+  for (float x : v.values) absl::StrAppend(&numbers, x, " ");
+  const std::string tag = "format=\"appended\" offset=\"0\"/>";
+  vti.replace(vti.find(tag), tag.size(), "format=\"ascii\">" + numbers + "</DataArray>");
+  return vti;
+}
+
 bool Write(const fs::path& path, const std::string& bytes) {
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
   out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
@@ -87,9 +119,15 @@ bool WriteVolumes(const fs::path& dir) {
       ok &= Write(dir / absl::StrCat("metaimage-", tag, ".mha"),
                   MetaImageFile(v, ScalarType::kInt16, order, compressed)) &&
             ReadVolume((dir / absl::StrCat("metaimage-", tag, ".mha")).string()).ok();
-      ok &= Write(dir / absl::StrCat("vti-", tag, ".vti"),
-                  VtiFile(v, ScalarType::kUint16, order, compressed)) &&
+      const std::string vti = VtiFile(v, ScalarType::kUint16, order, compressed);
+      ok &= Write(dir / absl::StrCat("vti-", tag, ".vti"), vti) &&
             ReadVolume((dir / absl::StrCat("vti-", tag, ".vti")).string()).ok();
+      ok &= Write(dir / absl::StrCat("vti-base64-", tag, ".vti"), VtiAsBase64(vti)) &&
+            ReadVolume((dir / absl::StrCat("vti-base64-", tag, ".vti")).string()).ok();
+      if (!compressed) {
+        ok &= Write(dir / absl::StrCat("vti-ascii-", tag, ".vti"), VtiAsAscii(vti, v)) &&
+              ReadVolume((dir / absl::StrCat("vti-ascii-", tag, ".vti")).string()).ok();
+      }
     }
   }
   // The volume fuzzer makes a directory of this input's slices.

@@ -12,7 +12,7 @@
 namespace transtick {
 
 // The sample types the readers accept. Values are converted to float on load.
-enum class ScalarType { kUint8, kInt8, kUint16, kInt16, kUint32, kInt32, kFloat32 };
+enum class ScalarType { kUint8, kInt8, kUint16, kInt16, kUint32, kInt32, kFloat32, kFloat64 };
 
 std::string_view ScalarTypeName(ScalarType type);
 size_t ScalarTypeSize(ScalarType type);
