@@ -8,7 +8,7 @@ cd "$(dirname "$0")/.."
 packages=(build-essential cmake ninja-build ccache pkg-config git
   libabsl-dev libprotobuf-dev protobuf-compiler libgrpc++-dev protobuf-compiler-grpc
   libspdlog-dev libopenimageio-dev libgtest-dev libgmock-dev zlib1g-dev libsqlite3-dev
-  liblz4-dev liblzma-dev libcpp-httplib-dev libgdcm-dev openssl curl
+  libbz2-dev liblz4-dev liblzma-dev libcpp-httplib-dev libgdcm-dev openssl curl
   iproute2  # ip and tc: the emulated hosts' namespaces and links (tests/emulated_hosts_test.sh)
   python3-grpcio python3-protobuf python3-numpy python3-pil
   chromium)  # the web viewer's browser test (tests/web_viewer_test.sh)

@@ -271,7 +271,7 @@ TEST_F(FormatsTest, VtiErrorsNameTheFile) {
   std::string numbers;
   for (int16_t v : s) numbers += std::to_string(v) + " ";
   ExpectError(ReadVolume(Write("few.vti", Vti("", "", ascii + "1 2 3</DataArray>", ""))), "few.vti",
-              "holds 3 samples, its extent says 24");
+              "holds 3 samples, its header says 24");
   ExpectError(ReadVolume(Write("many.vti", Vti("", "", ascii + numbers + "7</DataArray>", ""))),
               "many.vti", "more than the 24 samples");
   ExpectError(ReadVolume(Write("word.vti", Vti("", "", ascii + "1 two 3</DataArray>", ""))),
@@ -380,8 +380,7 @@ TEST_F(FormatsTest, VtiEveryLayoutVtkWrites) {
           content.insert(at, rng() % 2 ? "\n          " : " ");
         }
       } else {
-        for (int16_t v : s)
-          content += (rng() % 2 ? "\n" : " ") + std::to_string(v) + (f64 ? ".0" : "");
+        for (int16_t v : s) absl::StrAppend(&content, rng() % 2 ? "\n" : " ", v, f64 ? ".0" : "");
       }
       file = Vti(compressor, "",
                  "<DataArray type=\"" + type + "\" Name=\"v\" format=\"" +

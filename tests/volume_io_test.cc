@@ -18,6 +18,8 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "bzlib.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "transtick/synthetic.h"
@@ -39,6 +41,16 @@ std::string DataDir() {
     return dir;
   }
   return TRANSTICK_SOURCE_DIR "/../shared/data";
+}
+
+std::string Bzip2(const std::string& data) {
+  std::string out(data.size() + data.size() / 100 + 600, '\0');
+  unsigned int n = static_cast<unsigned int>(out.size());
+  EXPECT_EQ(BZ2_bzBuffToBuffCompress(out.data(), &n, const_cast<char*>(data.data()),
+                                     static_cast<unsigned int>(data.size()), 9, 0, 0),
+            BZ_OK);
+  out.resize(n);
+  return out;
 }
 
 std::string Gzip(const std::string& data) {
@@ -262,18 +274,25 @@ TEST(VolumeTest, Range) {
 // ---------------------------------------------------------------------------
 // NRRD: decoding
 
-TEST_F(VolumeIoTest, NrrdAllTypesBothOrdersRawAndGzip) {
+TEST_F(VolumeIoTest, NrrdAllTypesBothOrdersRawGzipBzip2AndAscii) {
   for (ScalarType type : kAllTypes) {
     for (ByteOrder order : {ByteOrder::kLittle, ByteOrder::kBig}) {
-      for (bool gzip : {false, true}) {
+      for (const char* encoding : {"raw", "gzip", "bzip2", "ascii"}) {
         SCOPED_TRACE(absl::StrCat(std::string(ScalarTypeName(type)),
-                                  order == ByteOrder::kBig ? " big" : " little",
-                                  gzip ? " gzip" : " raw"));
+                                  order == ByteOrder::kBig ? " big " : " little ", encoding));
         const std::vector<double> values = SampleValues(type);
         std::string data = Encode(values, type, order);
-        if (gzip) data = Gzip(data);
+        if (encoding == std::string("gzip")) data = Gzip(data);
+        if (encoding == std::string("bzip2")) data = Bzip2(data);
+        if (encoding == std::string("ascii")) {
+          // As writers print them: several to a line, full precision.
+          data.clear();
+          for (size_t i = 0; i < values.size(); ++i) {
+            data += absl::StrFormat("%.17g%s", values[i], i % 5 == 4 ? "\n" : " ");
+          }
+        }
         const std::string path =
-            Write("v.nrrd", NrrdHeader(std::string(ScalarTypeName(type)), gzip ? "gzip" : "raw",
+            Write("v.nrrd", NrrdHeader(std::string(ScalarTypeName(type)), encoding,
                                        order == ByteOrder::kBig ? "big" : "little") +
                                 "\n" + data);
         absl::StatusOr<Volume> volume = ReadNrrd(path);
@@ -560,8 +579,8 @@ TEST_F(VolumeIoTest, NrrdBadFields) {
       {"type.nrrd", "NRRD0004\ntype: int64\ndimension: 3\nsizes: 3 2 2\n" + base_tail,
        "unsupported sample type 'int64'"},
       {"encoding.nrrd",
-       "NRRD0004\ntype: int16\ndimension: 3\nsizes: 3 2 2\nencoding: ascii\nendian: little\n",
-       "unsupported encoding 'ascii'"},
+       "NRRD0004\ntype: int16\ndimension: 3\nsizes: 3 2 2\nencoding: hex\nendian: little\n",
+       "unsupported encoding 'hex'"},
       {"notype.nrrd", "NRRD0004\ndimension: 3\nsizes: 3 2 2\n" + base_tail, "'type'"},
       {"nodim.nrrd", "NRRD0004\ntype: int16\nsizes: 3 2 2\n" + base_tail, "'dimension'"},
       {"nosizes.nrrd", "NRRD0004\ntype: int16\ndimension: 3\n" + base_tail, "'sizes'"},
@@ -612,6 +631,34 @@ TEST_F(VolumeIoTest, NrrdBadFields) {
     const std::string path = Write(c.name, c.header + "\n" + data);
     ExpectError(ReadNrrd(path).status(), absl::StatusCode::kInvalidArgument, path, c.hint);
   }
+}
+
+// ASCII and bzip2 data that is cut short, too long, corrupt or not numbers
+// is refused by name; ASCII data takes no byte skip (its lines are skipped).
+TEST_F(VolumeIoTest, NrrdAsciiAndBzip2Errors) {
+  const std::string header = "NRRD0004\ntype: int16\ndimension: 3\nsizes: 3 2 2\n";
+  const std::string twelve = "1 2 3 4 5 6\n7 8 9 10 11 12\n";
+  const std::pair<std::string, const char*> cases[] = {
+      {header + "encoding: ascii\n\n1 2 3\n", "holds 3 samples, its header says 12"},
+      {header + "encoding: ascii\n\n" + twelve + "13\n", "more than the 12 samples"},
+      {header + "encoding: text\n\n1 2 x3 4\n", "'x3' is not a number"},
+      {header + "encoding: ascii\nbyte skip: 4\n\n" + twelve, "byte skip is not allowed"},
+      {header + "encoding: bzip2\nendian: little\n\n" + Bzip2(std::string(24, '\1')).substr(0, 20),
+       "truncated"},
+      {header + "encoding: bz2\nendian: little\n\n" + Bzip2(std::string(26, '\1')),
+       "bzip2 data in file holds more"},
+      {header + "encoding: bzip2\nendian: little\n\nBZh9 not bzip2 at all", "corrupt bzip2"},
+  };
+  for (const auto& [file, hint] : cases) {
+    SCOPED_TRACE(hint);
+    const std::string path = Write("bad.nrrd", file);
+    ExpectError(ReadNrrd(path).status(), absl::StatusCode::kInvalidArgument, path, hint);
+  }
+  // A line skip before ASCII data, in a detached data file.
+  Write("a.txt", "a comment line\n" + twelve);
+  auto v = ReadNrrd(Write("a.nhdr", header + "encoding: ascii\ndata file: a.txt\nline skip: 1\n"));
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ(v->values[11], 12.0f);
 }
 
 TEST_F(VolumeIoTest, NrrdDetachedErrors) {

@@ -263,10 +263,10 @@ absl::StatusOr<Volume> ReadMetaImage(const std::string& path, const ReadOptions&
     if (!vi::CheckedAdd(offset, static_cast<uint64_t>(header_size), &start)) {
       return Error(path, "HeaderSize is too large");
     }
-    absl::StatusOr<std::unique_ptr<vi::GzipFileReader>> reader =
-        vi::GzipFileReader::Open(data_path, start, options);
+    absl::StatusOr<std::unique_ptr<vi::CompressedFileReader>> reader =
+        vi::CompressedFileReader::Open(data_path, start, options);
     if (!reader.ok()) return reader.status();
-    vi::GzipFileReader& gz = **reader;
+    vi::CompressedFileReader& gz = **reader;
     absl::Status s = vi::ReadSamples([&gz](unsigned char* dst, size_t n) { return gz.Read(dst, n); },
                                      count, *type, order, &volume.values);
     absl::StatusOr<bool> at_end = s.ok() ? gz.AtEnd() : absl::StatusOr<bool>(s);

@@ -266,9 +266,10 @@ absl::StatusOr<Volume> ReadNifti(const std::string& path, const ReadOptions& opt
   if (!gzipped.ok()) return gzipped.status();
 
   unsigned char bytes[kHeaderBytes];
-  std::unique_ptr<vi::GzipFileReader> gz;
+  std::unique_ptr<vi::CompressedFileReader> gz;
   if (*gzipped) {
-    absl::StatusOr<std::unique_ptr<vi::GzipFileReader>> reader = vi::GzipFileReader::Open(path, 0, options);
+    absl::StatusOr<std::unique_ptr<vi::CompressedFileReader>> reader =
+        vi::CompressedFileReader::Open(path, 0, options);
     if (!reader.ok()) return reader.status();
     gz = *std::move(reader);
     absl::Status status = gz->Read(bytes, kHeaderBytes);

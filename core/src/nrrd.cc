@@ -10,8 +10,9 @@
 //                             follows immediately. A detached header (.nhdr)
 //                             names its data with "data file:" and may simply
 //                             end at end of file.
-// Fields read: type, dimension (must be 3), sizes, encoding (raw, gzip/gz),
-// endian (needed for samples wider than a byte), spacings or space directions
+// Fields read: type, dimension (must be 3), sizes, encoding (raw, gzip/gz,
+// bzip2/bz2, ascii/text/txt: numbers separated by white space), endian
+// (needed for binary samples wider than a byte), spacings or space directions
 // (the length of each direction vector is the spacing), byte skip (>= 0, or
 // -1 for raw data: "the data are the last bytes of the file"), line skip, data
 // file (a single file, relative to the header's directory), and for the
@@ -54,7 +55,7 @@ namespace vi = volume_io_internal;
 // how much a file without a blank line costs to reject.
 constexpr uint64_t kMaxHeaderBytes = uint64_t{1} << 20;
 
-enum class Encoding { kRaw, kGzip };
+enum class Encoding { kRaw, kGzip, kBzip2, kAscii };
 
 struct Field {
   std::string value;
@@ -302,12 +303,16 @@ absl::StatusOr<Volume> ReadNrrd(const std::string& path, const ReadOptions& opti
     encoding = Encoding::kRaw;
   } else if (encoding_name == "gzip" || encoding_name == "gz") {
     encoding = Encoding::kGzip;
+  } else if (encoding_name == "bzip2" || encoding_name == "bz2") {
+    encoding = Encoding::kBzip2;
+  } else if (encoding_name == "ascii" || encoding_name == "text" || encoding_name == "txt") {
+    encoding = Encoding::kAscii;
   } else {
-    return Error(
-        path, absl::StrCat("unsupported encoding '", *encoding_text, "' (supported: raw, gzip)"));
+    return Error(path, absl::StrCat("unsupported encoding '", *encoding_text,
+                                    "' (supported: raw, gzip, bzip2, ascii)"));
   }
   ByteOrder order = ByteOrder::kLittle;
-  if (ScalarTypeSize(*type) > 1) {
+  if (ScalarTypeSize(*type) > 1 && encoding != Encoding::kAscii) {
     const std::string* endian_text = find("endian");
     if (endian_text == nullptr) return missing("endian");
     std::string endian = absl::AsciiStrToLower(*endian_text);
@@ -374,6 +379,9 @@ absl::StatusOr<Volume> ReadNrrd(const std::string& path, const ReadOptions& opti
     }
     if (byte_skip == -1 && encoding != Encoding::kRaw) {
       return Error(path, "byte skip -1 is only allowed with raw encoding");
+    }
+    if (byte_skip != 0 && encoding == Encoding::kAscii) {
+      return Error(path, "byte skip is not allowed with ascii encoding (line skip is)");
     }
   }
   int64_t line_skip = 0;
@@ -442,10 +450,28 @@ absl::StatusOr<Volume> ReadNrrd(const std::string& path, const ReadOptions& opti
     return volume;
   }
 
-  absl::StatusOr<std::unique_ptr<vi::GzipFileReader>> reader =
-      vi::GzipFileReader::Open(data_path, offset, options);
+  if (encoding == Encoding::kAscii) {
+    absl::StatusOr<vi::FilePtr> file = vi::OpenFile(data_path, options);
+    if (!file.ok()) return file.status();
+    if (::fseeko(file->get(), static_cast<off_t>(offset), SEEK_SET) != 0) {
+      return Error(path, absl::StrCat("seek in ", where, " failed"));
+    }
+    if (absl::Status s = vi::ReadAsciiSamples(data_path, file->get(), count, false, &volume.values);
+        !s.ok()) {
+      return s;
+    }
+    if (axes) {
+      if (absl::Status s = SetOrientation(path, *axes, origin, &volume); !s.ok()) return s;
+    }
+    return volume;
+  }
+
+  const bool bzip2 = encoding == Encoding::kBzip2;
+  absl::StatusOr<std::unique_ptr<vi::CompressedFileReader>> reader = vi::CompressedFileReader::Open(
+      data_path, offset, options,
+      bzip2 ? vi::CompressedFileReader::Codec::kBzip2 : vi::CompressedFileReader::Codec::kGzip);
   if (!reader.ok()) return reader.status();
-  vi::GzipFileReader& gz = **reader;
+  vi::CompressedFileReader& gz = **reader;
   const std::string context = absl::StrCat(
       "header says ", layout,
       byte_skip > 0 ? absl::StrCat(" after a byte skip of ", byte_skip) : std::string());
@@ -458,7 +484,8 @@ absl::StatusOr<Volume> ReadNrrd(const std::string& path, const ReadOptions& opti
   absl::StatusOr<bool> at_end = gz.AtEnd();
   if (!at_end.ok()) return Annotate(at_end.status(), context);
   if (!*at_end) {
-    return Error(path, absl::StrCat(context, ", gzip data in ", where, " holds more"));
+    return Error(path, absl::StrCat(context, bzip2 ? ", bzip2" : ", gzip", " data in ", where,
+                                    " holds more"));
   }
   if (axes) {
     if (absl::Status s = SetOrientation(path, *axes, origin, &volume); !s.ok()) return s;

@@ -17,6 +17,7 @@
 #include <utility>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/escaping.h"
 #include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -323,82 +324,169 @@ absl::Status ReadRawSamples(const std::string& path, uint64_t offset, uint64_t c
       count, type, order, out);
 }
 
-GzipFileReader::GzipFileReader(std::string path, FilePtr file)
-    : path_(std::move(path)), file_(std::move(file)), in_(64 * 1024) {}
-
-GzipFileReader::~GzipFileReader() {
-  if (initialized_) inflateEnd(&stream_);
+absl::Status ReadAsciiSamples(const std::string& path, std::FILE* f, uint64_t count,
+                              bool stop_at_tag, std::vector<float>* out) {
+  std::string token;
+  uint64_t read = 0;
+  auto flush = [&]() -> absl::Status {
+    if (token.empty()) return absl::OkStatus();
+    double v = 0;
+    if (token.size() > 64 || !absl::SimpleAtod(token, &v)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          path, ": ASCII data: '", absl::CEscape(token.substr(0, 64)), "' is not a number"));
+    }
+    if (++read > count) {
+      return absl::InvalidArgumentError(absl::StrCat(path, ": ASCII data holds more than the ",
+                                                     count, " samples its header says"));
+    }
+    constexpr double kMax = std::numeric_limits<float>::max();
+    out->push_back(v > kMax    ? std::numeric_limits<float>::infinity()
+                   : v < -kMax ? -std::numeric_limits<float>::infinity()
+                               : static_cast<float>(v));
+    token.clear();
+    return absl::OkStatus();
+  };
+  while (true) {
+    const int c = getc_unlocked(f);
+    const bool end = c == EOF || (stop_at_tag && c == '<');
+    if (end || absl::ascii_isspace(static_cast<unsigned char>(c))) {
+      if (absl::Status s = flush(); !s.ok()) return s;
+      if (end) break;
+      continue;
+    }
+    if (token.size() > 64) continue;  // refused at its end, without growing
+    token.push_back(static_cast<char>(c));
+  }
+  if (read < count) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        path, ": ASCII data holds ", read, " samples, its header says ", count, " (truncated?)"));
+  }
+  return absl::OkStatus();
 }
 
-absl::StatusOr<std::unique_ptr<GzipFileReader>> GzipFileReader::Open(const std::string& path,
-                                                                     uint64_t offset, const ReadOptions& options) {
+CompressedFileReader::CompressedFileReader(std::string path, FilePtr file, Codec codec)
+    : path_(std::move(path)), file_(std::move(file)), codec_(codec), in_(64 * 1024) {}
+
+CompressedFileReader::~CompressedFileReader() {
+  if (!initialized_) return;
+  if (codec_ == Codec::kGzip) {
+    inflateEnd(&stream_);
+  } else {
+    BZ2_bzDecompressEnd(&bz_);
+  }
+}
+
+absl::StatusOr<std::unique_ptr<CompressedFileReader>> CompressedFileReader::Open(
+    const std::string& path, uint64_t offset, const ReadOptions& options, Codec codec) {
   absl::StatusOr<FilePtr> file = OpenFile(path, options);
   if (!file.ok()) return file.status();
   if (::fseeko(file->get(), static_cast<off_t>(offset), SEEK_SET) != 0) {
     return ErrnoError(path, "seek failed", errno);
   }
-  std::unique_ptr<GzipFileReader> reader(new GzipFileReader(path, *std::move(file)));
-  // 15 + 32: maximum window, and detect a gzip or zlib header automatically.
-  if (inflateInit2(&reader->stream_, 15 + 32) != Z_OK) {
-    return absl::ResourceExhaustedError(absl::StrCat(path, ": cannot initialise zlib"));
+  std::unique_ptr<CompressedFileReader> reader(
+      new CompressedFileReader(path, *std::move(file), codec));
+  if (codec == Codec::kGzip) {
+    // 15 + 32: maximum window, and detect a gzip or zlib header automatically.
+    if (inflateInit2(&reader->stream_, 15 + 32) != Z_OK) {
+      return absl::ResourceExhaustedError(absl::StrCat(path, ": cannot initialise zlib"));
+    }
+  } else if (BZ2_bzDecompressInit(&reader->bz_, 0, 0) != BZ_OK) {
+    return absl::ResourceExhaustedError(absl::StrCat(path, ": cannot initialise bzip2"));
   }
   reader->initialized_ = true;
   return reader;
 }
 
-absl::Status GzipFileReader::Inflate(unsigned char* dst, size_t n, size_t* produced) {
+absl::Status CompressedFileReader::Step(unsigned char* dst, size_t n, size_t* made,
+                                        uint64_t before) {
+  const size_t want = std::min<size_t>(n, size_t{1} << 30);
+  if (codec_ == Codec::kGzip) {
+    stream_.next_in = next_in_;
+    stream_.avail_in = static_cast<uInt>(avail_in_);
+    stream_.next_out = dst;
+    stream_.avail_out = static_cast<uInt>(want);
+    const int result = inflate(&stream_, Z_NO_FLUSH);
+    *made = want - stream_.avail_out;
+    next_in_ = stream_.next_in;
+    avail_in_ = stream_.avail_in;
+    switch (result) {
+      case Z_OK:
+      case Z_BUF_ERROR:  // no progress possible: more input needed, the loop reads it
+        return absl::OkStatus();
+      case Z_STREAM_END:
+        stream_end_ = true;
+        return absl::OkStatus();
+      case Z_MEM_ERROR:
+        return absl::ResourceExhaustedError(absl::StrCat(path_, ": zlib out of memory"));
+      default:  // Z_DATA_ERROR, Z_NEED_DICT, Z_STREAM_ERROR
+        return absl::InvalidArgumentError(
+            absl::StrCat(path_, ": corrupt gzip data after ", before + *made,
+                         " decompressed bytes: ", stream_.msg ? stream_.msg : "unknown error"));
+    }
+  }
+  bz_.next_in = reinterpret_cast<char*>(next_in_);
+  bz_.avail_in = static_cast<unsigned int>(avail_in_);
+  bz_.next_out = reinterpret_cast<char*>(dst);
+  bz_.avail_out = static_cast<unsigned int>(want);
+  const int result = BZ2_bzDecompress(&bz_);
+  *made = want - bz_.avail_out;
+  next_in_ = reinterpret_cast<unsigned char*>(bz_.next_in);
+  avail_in_ = bz_.avail_in;
+  switch (result) {
+    case BZ_OK:
+      return absl::OkStatus();
+    case BZ_STREAM_END:
+      stream_end_ = true;
+      return absl::OkStatus();
+    case BZ_MEM_ERROR:
+      return absl::ResourceExhaustedError(absl::StrCat(path_, ": bzip2 out of memory"));
+    default:  // BZ_DATA_ERROR, BZ_DATA_ERROR_MAGIC, BZ_PARAM_ERROR
+      return absl::InvalidArgumentError(absl::StrCat(path_, ": corrupt bzip2 data after ",
+                                                     before + *made, " decompressed bytes"));
+  }
+}
+
+absl::Status CompressedFileReader::Inflate(unsigned char* dst, size_t n, size_t* produced) {
   *produced = 0;
   while (*produced < n && !stream_end_) {
-    if (stream_.avail_in == 0 && !file_eof_) {
+    if (avail_in_ == 0 && !file_eof_) {
       size_t got = std::fread(in_.data(), 1, in_.size(), file_.get());
       if (got < in_.size()) {
         if (std::ferror(file_.get())) return ErrnoError(path_, "read failed", errno);
         file_eof_ = true;
       }
-      stream_.next_in = in_.data();
-      stream_.avail_in = static_cast<uInt>(got);
+      next_in_ = in_.data();
+      avail_in_ = got;
     }
-    if (stream_.avail_in == 0 && file_eof_) {
+    const size_t before = *produced;
+    size_t made = 0;
+    if (absl::Status s = Step(dst + *produced, n - *produced, &made, position_ + before); !s.ok()) {
+      return s;
+    }
+    *produced += made;
+    // Out of input, and the codec made nothing of what it had: cut short.
+    if (avail_in_ == 0 && file_eof_ && !stream_end_ && made == 0) {
       return absl::InvalidArgumentError(
-          absl::StrCat(path_, ": gzip data is truncated (stream cut off after ",
+          absl::StrCat(path_, ": ", codec_name(), " data is truncated (stream cut off after ",
                        position_ + *produced, " decompressed bytes)"));
-    }
-    const size_t want = std::min<size_t>(n - *produced, size_t{1} << 30);
-    stream_.next_out = dst + *produced;
-    stream_.avail_out = static_cast<uInt>(want);
-    int result = inflate(&stream_, Z_NO_FLUSH);
-    *produced += want - stream_.avail_out;
-    switch (result) {
-      case Z_OK:
-      case Z_BUF_ERROR:  // no progress possible: more input needed, loop reads it
-        break;
-      case Z_STREAM_END:
-        stream_end_ = true;
-        break;
-      case Z_MEM_ERROR:
-        return absl::ResourceExhaustedError(absl::StrCat(path_, ": zlib out of memory"));
-      default:  // Z_DATA_ERROR, Z_NEED_DICT, Z_STREAM_ERROR
-        return absl::InvalidArgumentError(
-            absl::StrCat(path_, ": corrupt gzip data after ", position_ + *produced,
-                         " decompressed bytes: ", stream_.msg ? stream_.msg : "unknown error"));
     }
   }
   position_ += *produced;
   return absl::OkStatus();
 }
 
-absl::Status GzipFileReader::Read(unsigned char* dst, size_t n) {
+absl::Status CompressedFileReader::Read(unsigned char* dst, size_t n) {
   size_t produced = 0;
   absl::Status status = Inflate(dst, n, &produced);
   if (!status.ok()) return status;
   if (produced < n) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(path_, ": gzip data ends after ", position_, " decompressed bytes"));
+    return absl::InvalidArgumentError(absl::StrCat(path_, ": ", codec_name(), " data ends after ",
+                                                   position_, " decompressed bytes"));
   }
   return absl::OkStatus();
 }
 
-absl::Status GzipFileReader::Skip(uint64_t n) {
+absl::Status CompressedFileReader::Skip(uint64_t n) {
   unsigned char scratch[4096];
   while (n > 0) {
     size_t step = static_cast<size_t>(std::min<uint64_t>(n, sizeof(scratch)));
@@ -409,7 +497,7 @@ absl::Status GzipFileReader::Skip(uint64_t n) {
   return absl::OkStatus();
 }
 
-absl::StatusOr<bool> GzipFileReader::AtEnd() {
+absl::StatusOr<bool> CompressedFileReader::AtEnd() {
   if (stream_end_) return true;
   unsigned char probe;
   size_t produced = 0;
@@ -418,7 +506,7 @@ absl::StatusOr<bool> GzipFileReader::AtEnd() {
   return produced == 0;
 }
 
-absl::StatusOr<uint64_t> GzipFileReader::SkipToEnd(uint64_t limit) {
+absl::StatusOr<uint64_t> CompressedFileReader::SkipToEnd(uint64_t limit) {
   const uint64_t start = position_;
   unsigned char scratch[4096];
   while (!stream_end_) {
@@ -426,8 +514,9 @@ absl::StatusOr<uint64_t> GzipFileReader::SkipToEnd(uint64_t limit) {
     absl::Status status = Inflate(scratch, sizeof(scratch), &produced);
     if (!status.ok()) return status;
     if (position_ - start > limit) {
-      return absl::InvalidArgumentError(absl::StrCat(path_, ": gzip data goes on for more than ",
-                                                     limit, " bytes after the samples"));
+      return absl::InvalidArgumentError(absl::StrCat(path_, ": ", codec_name(),
+                                                     " data goes on for more than ", limit,
+                                                     " bytes after the samples"));
     }
   }
   return position_ - start;

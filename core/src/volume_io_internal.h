@@ -16,6 +16,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "bzlib.h"
 #include "transtick/volume.h"
 #include "transtick/volume_io.h"
 #include "zlib.h"
@@ -88,19 +89,31 @@ absl::Status ReadSamples(const ReadFn& read, uint64_t count, ScalarType type, By
 absl::Status ReadRawSamples(const std::string& path, uint64_t offset, uint64_t count,
                             ScalarType type, ByteOrder order, std::vector<float>* out, const ReadOptions& options);
 
+// `count` samples written as numbers separated by white space, from the
+// file's current position to its end, or with `stop_at_tag` to the first
+// '<' (an XML element's content); each becomes the nearest float (an
+// infinity beyond the largest). Too few, too many, or a token that is no
+// number is an InvalidArgument error naming the file.
+absl::Status ReadAsciiSamples(const std::string& path, std::FILE* f, uint64_t count,
+                              bool stop_at_tag, std::vector<float>* out);
+
 // Streams the decompressed content of a gzip or zlib stream (detected from
-// its first bytes) that starts at `offset` in a file. Reading past the end of
-// the stream, or a corrupt stream, is an InvalidArgument error naming the
-// file; memory use is bounded by one input buffer whatever the stream holds.
+// its first bytes), or of a bzip2 stream, that starts at `offset` in a file.
+// Reading past the end of the stream, or a corrupt stream, is an
+// InvalidArgument error naming the file; memory use is bounded by one input
+// buffer (and bzip2's 3.7 MB of tables) whatever the stream holds.
 //
 // Not thread-safe; owns its file handle.
-class GzipFileReader {
+class CompressedFileReader {
  public:
-  static absl::StatusOr<std::unique_ptr<GzipFileReader>> Open(const std::string& path,
-                                                              uint64_t offset, const ReadOptions& options);
-  ~GzipFileReader();
-  GzipFileReader(const GzipFileReader&) = delete;
-  GzipFileReader& operator=(const GzipFileReader&) = delete;
+  enum class Codec { kGzip, kBzip2 };
+  static absl::StatusOr<std::unique_ptr<CompressedFileReader>> Open(const std::string& path,
+                                                                    uint64_t offset,
+                                                                    const ReadOptions& options,
+                                                                    Codec codec = Codec::kGzip);
+  ~CompressedFileReader();
+  CompressedFileReader(const CompressedFileReader&) = delete;
+  CompressedFileReader& operator=(const CompressedFileReader&) = delete;
 
   // Reads exactly `n` decompressed bytes.
   absl::Status Read(unsigned char* dst, size_t n);
@@ -117,14 +130,22 @@ class GzipFileReader {
   uint64_t position() const { return position_; }
 
  private:
-  GzipFileReader(std::string path, FilePtr file);
+  CompressedFileReader(std::string path, FilePtr file, Codec codec);
   // Inflates into [dst, dst + n); sets *produced. Stops early only at the end
   // of the stream.
   absl::Status Inflate(unsigned char* dst, size_t n, size_t* produced);
+  // One step of the codec from the input buffer into [dst, dst + n): how
+  // many bytes it made; sets stream_end_.
+  absl::Status Step(unsigned char* dst, size_t n, size_t* made, uint64_t before);
+  const char* codec_name() const { return codec_ == Codec::kGzip ? "gzip" : "bzip2"; }
 
   std::string path_;
   FilePtr file_;
+  Codec codec_;
   z_stream stream_{};
+  bz_stream bz_{};
+  size_t avail_in_ = 0;  // input bytes at next_in_ not yet given to the codec
+  unsigned char* next_in_ = nullptr;
   bool initialized_ = false;
   bool stream_end_ = false;
   bool file_eof_ = false;

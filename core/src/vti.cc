@@ -231,48 +231,6 @@ class ByteSource {
   size_t out_pos_ = 0, out_len_ = 0;
 };
 
-// An ASCII array's `count` numbers, from the file's current position to
-// the element's end ('<'), as floats (what ConvertSamples makes of each
-// type's value).
-absl::Status ReadAsciiSamples(const std::string& path, std::FILE* f, uint64_t count,
-                              std::vector<float>* out) {
-  std::string token;
-  uint64_t read = 0;
-  auto flush = [&]() -> absl::Status {
-    if (token.empty()) return absl::OkStatus();
-    double v = 0;
-    if (token.size() > 64 || !absl::SimpleAtod(token, &v)) {
-      return Error(path, absl::StrCat("ASCII array: '", absl::CEscape(token.substr(0, 64)),
-                                      "' is not a number"));
-    }
-    if (++read > count) {
-      return Error(path, absl::StrCat("ASCII array holds more than the ", count,
-                                      " samples its extent says"));
-    }
-    constexpr double kMax = std::numeric_limits<float>::max();
-    out->push_back(v > kMax    ? std::numeric_limits<float>::infinity()
-                   : v < -kMax ? -std::numeric_limits<float>::infinity()
-                               : static_cast<float>(v));
-    token.clear();
-    return absl::OkStatus();
-  };
-  while (true) {
-    const int c = getc_unlocked(f);
-    if (c == EOF || c == '<' || absl::ascii_isspace(static_cast<unsigned char>(c))) {
-      if (absl::Status s = flush(); !s.ok()) return s;
-      if (c == EOF || c == '<') break;
-      continue;
-    }
-    if (token.size() > 64) continue;  // refused at its end, without growing
-    token.push_back(static_cast<char>(c));
-  }
-  if (read < count) {
-    return Error(path, absl::StrCat("ASCII array holds ", read, " samples, its extent says ", count,
-                                    " (truncated?)"));
-  }
-  return absl::OkStatus();
-}
-
 enum class Compressor { kNone, kZlib, kLz4, kLzma };
 
 // One compressed block into exactly `want` bytes at `out`: false when it is
@@ -535,7 +493,9 @@ absl::StatusOr<Volume> ReadVti(const std::string& path, const ReadOptions& optio
   std::FILE* f = opened->get();
   if (::fseeko(f, static_cast<off_t>(start), SEEK_SET) != 0) return Error(path, "seek failed");
   if (format_name == "ascii") {
-    if (absl::Status s = ReadAsciiSamples(path, f, count, &volume.values); !s.ok()) return s;
+    if (absl::Status s = vi::ReadAsciiSamples(path, f, count, true, &volume.values); !s.ok()) {
+      return s;
+    }
     return Finish(path, oriented, axes, origin, std::move(volume));
   }
   ByteSource source(path, f, base64);

@@ -1,8 +1,9 @@
 // Writes the generated seed corpora of the fuzzers (scripts/fuzz.sh runs it;
 // the job seeds are text files in tests/fuzz/corpus/job and examples/):
-//   DIR/volume/  small valid NRRD (raw and gzip), NIfTI-1 (.nii and .nii.gz),
-//                .den, MetaImage (raw and zlib) and .vti (raw and zlib
-//                blocks) files, several sample types and both byte orders,
+//   DIR/volume/  small valid NRRD (raw, gzip, bzip2, ascii), NIfTI-1 (.nii
+//                and .nii.gz), .den, MetaImage (raw and zlib) and .vti (raw
+//                and zlib blocks, appended raw or base64, inline ascii)
+//                files, several sample types and both byte orders,
 //                and a DICOM series in the volume fuzzer's form;
 //   DIR/batch/   ray batches as neighbours send them (fresh primaries, rays
 //                handed on mid-flight, shadow rays) and deposit batches as
@@ -14,6 +15,8 @@
 //                such a volume (the sticks fuzzer reads its whole input as
 //                a brick map and as a field summary too).
 // Usage: fuzz_seeds DIR
+#include <bzlib.h>
+
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -129,6 +132,25 @@ bool WriteVolumes(const fs::path& dir) {
               ReadVolume((dir / absl::StrCat("vti-ascii-", tag, ".vti")).string()).ok();
       }
     }
+  }
+  // NRRD in its other two encodings: ASCII numbers and bzip2.
+  {
+    const std::string raw = NrrdFile(v, ScalarType::kFloat32, ByteOrder::kLittle, false);
+    const size_t data = raw.find("\n\n") + 2;
+    std::string numbers;
+    for (float x : v.values) absl::StrAppend(&numbers, x, x == v.values.back() ? "\n" : " ");
+    std::string ascii = raw.substr(0, data) + numbers;
+    ascii.replace(ascii.find("encoding: raw"), 13, "encoding: ascii");
+    ok &= WriteVolume(dir / "ascii.nrrd", ascii, v);
+    std::string bz(raw.size() + raw.size() / 100 + 600, '\0');
+    unsigned int n = static_cast<unsigned int>(bz.size());
+    std::string samples = raw.substr(data);
+    ok &= BZ2_bzBuffToBuffCompress(bz.data(), &n, samples.data(),
+                                   static_cast<unsigned int>(samples.size()), 9, 0, 0) == BZ_OK;
+    bz.resize(n);
+    std::string bzip2 = raw.substr(0, data) + bz;
+    bzip2.replace(bzip2.find("encoding: raw"), 13, "encoding: bzip2");
+    ok &= WriteVolume(dir / "bzip2.nrrd", bzip2, v);
   }
   // The volume fuzzer makes a directory of this input's slices.
   ok &= Write(dir / "series.dicom", DicomSeriesInput(v));
