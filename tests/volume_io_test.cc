@@ -866,6 +866,73 @@ constexpr std::pair<int, ScalarType> kNiftiTypes[] = {
     {768, ScalarType::kUint32}, {64, ScalarType::kFloat64},
 };
 
+// A .hdr/.img pair, NIfTI-1 ("ni1", samples from vox_offset of the .img)
+// or Analyze 7.5 (no magic; its bytes where NIfTI keeps the qform and sform
+// hold other things, here garbage, and are not read): every type, both byte
+// orders, either file gzipped or not, named by either file, in either case.
+TEST_F(VolumeIoTest, NiftiPairsAndAnalyze) {
+  int n = 0;
+  for (const auto& [datatype, type] : kNiftiTypes) {
+    for (int variant = 0; variant < 16; ++variant) {
+      const bool big = variant & 1, hdr_gz = variant & 2, img_gz = variant & 4,
+                 analyze = variant & 8;
+      const bool by_img = (n % 3) == 1, upper = (n % 5) == 2;
+      ++n;
+      SCOPED_TRACE(absl::StrCat(datatype, " variant ", variant, by_img ? " by .img" : "",
+                                upper ? " upper case" : ""));
+      NiftiSpec spec;
+      spec.big = big;
+      spec.datatype = datatype;
+      spec.pixdim[0] = 0.5f;
+      spec.vox_offset = analyze ? 0.0f : 8.0f;
+      spec.magic = analyze ? "\0\0\0" : "ni1";
+      std::string header = NiftiHeader(spec).substr(0, 348);
+      if (analyze) {
+        for (size_t i = 252; i < 344; ++i) header[i] = static_cast<char>(i * 37);
+      }
+      const std::vector<double> values = SampleValues(type);
+      std::string img = std::string(analyze ? 0 : 8, '\7') +
+                        Encode(values, type, big ? ByteOrder::kBig : ByteOrder::kLittle);
+      const std::string stem = absl::StrCat("pair", n);
+      const std::string h = upper ? ".HDR" : ".hdr", i = upper ? ".IMG" : ".img";
+      const std::string hdr_path =
+          Write(stem + h + (hdr_gz ? ".gz" : ""), hdr_gz ? Gzip(header) : header);
+      const std::string img_path =
+          Write(stem + i + (img_gz ? ".gz" : ""), img_gz ? Gzip(img) : img);
+      absl::StatusOr<Volume> volume = ReadVolume(by_img ? img_path : hdr_path);
+      ASSERT_TRUE(volume.ok()) << volume.status();
+      EXPECT_EQ(volume->dims, (std::array<int, 3>{3, 2, 2}));
+      EXPECT_EQ(volume->source_type, type);
+      EXPECT_EQ(volume->spacing, (std::array<double, 3>{0.5, 1.0, 1.0}));
+      EXPECT_EQ(volume->direction, kIdentityDirection);
+      ExpectValues(*volume, values);
+    }
+  }
+  // The other half missing; a single-file header in a pair; an offset
+  // before the .img's start.
+  NiftiSpec spec;
+  spec.magic = "ni1";
+  spec.vox_offset = 0.0f;
+  const std::string lone = Write("lone.hdr", NiftiHeader(spec).substr(0, 348));
+  ExpectError(ReadVolume(lone).status(), absl::StatusCode::kNotFound, lone, "its pair");
+  spec.magic = "n+1";
+  const std::string single = Write("single.hdr", NiftiHeader(spec).substr(0, 348));
+  Write("single.img", std::string(12, '\1'));
+  ExpectError(ReadVolume(single).status(), absl::StatusCode::kInvalidArgument, single,
+              "name the file .nii");
+  spec.magic = "ni1";
+  spec.vox_offset = -4.0f;
+  const std::string before = Write("before.hdr", NiftiHeader(spec).substr(0, 348));
+  Write("before.img", std::string(12, '\1'));
+  ExpectError(ReadVolume(before).status(), absl::StatusCode::kInvalidArgument, before,
+              "into the .img");
+  spec.vox_offset = 4.0f;
+  const std::string shortimg = Write("short.hdr", NiftiHeader(spec).substr(0, 348));
+  const std::string shortdata = Write("short.img", std::string(12, '\1'));
+  ExpectError(ReadVolume(shortimg).status(), absl::StatusCode::kInvalidArgument, shortdata,
+              "file holds 8");
+}
+
 TEST_F(VolumeIoTest, NiftiAllTypesBothOrdersRawAndGzip) {
   for (const auto& [datatype, type] : kNiftiTypes) {
     for (bool big : {false, true}) {
@@ -963,7 +1030,7 @@ TEST_F(VolumeIoTest, NiftiErrors) {
   add(
       "nifti2.nii", [](NiftiSpec& s) { s.sizeof_hdr = 540; }, "NIfTI-2");
   add(
-      "pair.nii", [](NiftiSpec& s) { s.magic = "ni1"; }, ".hdr/.img pair");
+      "pair.nii", [](NiftiSpec& s) { s.magic = "ni1"; }, "open it as the .hdr file");
   add(
       "magic.nii", [](NiftiSpec& s) { s.magic = "xyz"; }, "magic");
   add(

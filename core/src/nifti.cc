@@ -1,4 +1,6 @@
-// NIfTI-1 single-file reader (.nii, and .nii.gz: the same bytes gzipped).
+// NIfTI-1 reader: single files (.nii, and .nii.gz: the same bytes gzipped)
+// and pairs of a header and its samples (.hdr + .img, either gzipped), NIfTI-1
+// ("ni1") or Analyze 7.5 (no magic; no orientation: the identity).
 //
 // The 348-byte header, fields used here (offsets in bytes; byte order is the
 // file's, told by sizeof_hdr which must read 348):
@@ -16,8 +18,9 @@
 //      256  float32[3]   quatern_b, quatern_c, quatern_d
 //      268  float32[3]   qoffset_x, qoffset_y, qoffset_z
 //      280  float32[12]  srow_x, srow_y, srow_z (4 each: i, j, k, offset)
-//      344  char[4]      magic        "n+1\0" (single file)
-// Samples follow at vox_offset, x fastest. Between byte 348 and vox_offset
+//      344  char[4]      magic        "n+1\0" (single file), "ni1\0" (pair)
+// Samples follow at vox_offset, x fastest (in a pair, at vox_offset of the
+// .img, usually 0). Between byte 348 and vox_offset
 // may sit extensions, which are skipped; bytes after the samples are ignored
 // (in a .nii.gz, up to kMaxTrailingBytes of them).
 //
@@ -37,8 +40,12 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <tuple>
+#include <utility>
 #include <vector>
 
+#include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "transtick/orientation.h"
 #include "transtick/volume_io.h"
@@ -146,7 +153,8 @@ std::array<std::array<double, 3>, 3> QformAxes(const HeaderView& h) {
   return axes;
 }
 
-absl::StatusOr<Header> ParseHeader(const std::string& path, const unsigned char* bytes) {
+// `pair`: the header of a .hdr/.img pair, NIfTI-1 or Analyze 7.5.
+absl::StatusOr<Header> ParseHeader(const std::string& path, const unsigned char* bytes, bool pair) {
   Header header;
   bool big;
   if (HeaderView(bytes, false).U32(0) == kHeaderBytes) {
@@ -161,11 +169,20 @@ absl::StatusOr<Header> ParseHeader(const std::string& path, const unsigned char*
   header.order = big ? ByteOrder::kBig : ByteOrder::kLittle;
   HeaderView h(bytes, big);
 
-  if (std::memcmp(bytes + 344, "ni1\0", 4) == 0) {
-    return Error(path, "is the header of a .hdr/.img pair; only single-file .nii is supported");
-  }
-  if (std::memcmp(bytes + 344, "n+1\0", 4) != 0) {
-    return Error(path, "bad NIfTI-1 magic (expected \"n+1\")");
+  // Analyze 7.5 has no magic there; its bytes 252-347 mean other things
+  // (orient, originator, ...), so no orientation is read from them.
+  bool analyze = false;
+  if (!pair) {
+    if (std::memcmp(bytes + 344, "ni1\0", 4) == 0) {
+      return Error(path, "is the header of a .hdr/.img pair: open it as the .hdr file");
+    }
+    if (std::memcmp(bytes + 344, "n+1\0", 4) != 0) {
+      return Error(path, "bad NIfTI-1 magic (expected \"n+1\")");
+    }
+  } else if (std::memcmp(bytes + 344, "n+1\0", 4) == 0) {
+    return Error(path, "magic \"n+1\": a single-file NIfTI-1 header; name the file .nii");
+  } else {
+    analyze = std::memcmp(bytes + 344, "ni1\0", 4) != 0;
   }
 
   const int rank = h.I16(40);
@@ -219,7 +236,15 @@ absl::StatusOr<Header> ParseHeader(const std::string& path, const unsigned char*
   }
 
   const float vox_offset = h.F32(108);
-  if (vox_offset == 0.0f) {
+  if (pair) {
+    // Into the .img: from 0.
+    if (!(vox_offset >= 0) || !(vox_offset <= kMaxVoxOffset) ||
+        vox_offset != std::floor(vox_offset)) {
+      return Error(path, absl::StrCat("vox_offset ", vox_offset,
+                                      " is not a whole number of bytes into the .img"));
+    }
+    header.vox_offset = static_cast<uint64_t>(vox_offset);
+  } else if (vox_offset == 0.0f) {
     header.vox_offset = kDefaultVoxOffset;
   } else if (!(vox_offset >= kHeaderBytes) || !(vox_offset <= kMaxVoxOffset) ||
              vox_offset != std::floor(vox_offset)) {
@@ -231,6 +256,7 @@ absl::StatusOr<Header> ParseHeader(const std::string& path, const unsigned char*
 
   header.slope = h.F32(112);
   header.inter = h.F32(116);
+  if (analyze) return header;
   const int qform_code = h.I16(252), sform_code = h.I16(254);
   if (qform_code > 0) {
     header.qform_axes = QformAxes(h);
@@ -259,9 +285,58 @@ void ApplyScaling(float slope, float inter, std::vector<float>* values) {
   for (float& v : *values) v = v * slope + inter;
 }
 
+// The name with its 3-letter extension swapped between hdr and img, letter
+// case kept ("a.HDR" and "a.IMG").
+std::string Swapped(std::string name, size_t ext_at) {
+  static constexpr char kFrom[] = "hdrimgHDRIMG", kTo[] = "imghdrIMGHDR";
+  for (size_t i = ext_at; i < ext_at + 3; ++i) {
+    for (size_t k = 0; k < 12; ++k) {
+      if (name[i] == kFrom[k] && (k % 3) == i - ext_at) {
+        name[i] = kTo[k];
+        break;
+      }
+    }
+  }
+  return name;
+}
+
+// For a .hdr or .img (either possibly .gz): the header's file and the
+// samples' file, the other of which may or may not be gzipped, whichever
+// exists.
+absl::StatusOr<std::pair<std::string, std::string>> PairFiles(const std::string& path,
+                                                              const ReadOptions& options) {
+  const bool gz = absl::EndsWith(absl::AsciiStrToLower(path), ".gz");
+  const std::string plain = gz ? path.substr(0, path.size() - 3) : path;
+  const size_t ext_at = plain.size() - 3;
+  const std::string other = Swapped(plain, ext_at);
+  std::string found;
+  for (const std::string& candidate : {other + (gz ? ".gz" : ""), other + (gz ? "" : ".gz")}) {
+    if (vi::FileSize(candidate, options).ok()) {
+      found = candidate;
+      break;
+    }
+  }
+  if (found.empty()) {
+    return absl::NotFoundError(
+        absl::StrCat(path, ": its pair ", other, " (or ", other, ".gz) is not there"));
+  }
+  const bool is_header = absl::AsciiStrToLower(plain.substr(ext_at)) == "hdr";
+  return is_header ? std::pair{path, found} : std::pair{found, path};
+}
+
 }  // namespace
 
-absl::StatusOr<Volume> ReadNifti(const std::string& path, const ReadOptions& options) {
+absl::StatusOr<Volume> ReadNifti(const std::string& given, const ReadOptions& options) {
+  const std::string lower = absl::AsciiStrToLower(given);
+  const bool pair = absl::EndsWith(lower, ".hdr") || absl::EndsWith(lower, ".hdr.gz") ||
+                    absl::EndsWith(lower, ".img") || absl::EndsWith(lower, ".img.gz");
+  // The header's file, and the samples' (the same file unless a pair).
+  std::string path = given, data_path = given;
+  if (pair) {
+    auto files = PairFiles(given, options);
+    if (!files.ok()) return files.status();
+    std::tie(path, data_path) = *files;
+  }
   absl::StatusOr<bool> gzipped = vi::IsGzipFile(path, options);
   if (!gzipped.ok()) return gzipped.status();
 
@@ -287,7 +362,7 @@ absl::StatusOr<Volume> ReadNifti(const std::string& path, const ReadOptions& opt
     std::memcpy(bytes, prefix->data(), kHeaderBytes);
   }
 
-  absl::StatusOr<Header> header = ParseHeader(path, bytes);
+  absl::StatusOr<Header> header = ParseHeader(path, bytes, pair);
   if (!header.ok()) return header.status();
   absl::StatusOr<uint64_t> data_bytes =
       vi::CheckedDataBytes(path, header->dims, header->type, options);
@@ -301,8 +376,20 @@ absl::StatusOr<Volume> ReadNifti(const std::string& path, const ReadOptions& opt
   volume.source_type = header->type;
   const uint64_t count = volume.VoxelCount();
 
+  // A pair's samples are in a file of their own, from vox_offset.
+  const uint64_t skip = pair ? header->vox_offset : header->vox_offset - kHeaderBytes;
+  if (pair) {
+    gz.reset();
+    absl::StatusOr<bool> data_gzipped = vi::IsGzipFile(data_path, options);
+    if (!data_gzipped.ok()) return data_gzipped.status();
+    if (*data_gzipped) {
+      auto reader = vi::CompressedFileReader::Open(data_path, 0, options);
+      if (!reader.ok()) return reader.status();
+      gz = *std::move(reader);
+    }
+  }
   if (gz != nullptr) {
-    absl::Status status = gz->Skip(header->vox_offset - kHeaderBytes);
+    absl::Status status = gz->Skip(skip);
     if (status.ok()) {
       status = vi::ReadSamples([&](unsigned char* dst, size_t n) { return gz->Read(dst, n); },
                                count, header->type, header->order, &volume.values);
@@ -313,15 +400,15 @@ absl::StatusOr<Volume> ReadNifti(const std::string& path, const ReadOptions& opt
                                                       " at offset ", header->vox_offset));
     }
   } else {
-    absl::StatusOr<uint64_t> file_size = vi::FileSize(path, options);
+    absl::StatusOr<uint64_t> file_size = vi::FileSize(data_path, options);
     if (!file_size.ok()) return file_size.status();
     const uint64_t available =
         *file_size > header->vox_offset ? *file_size - header->vox_offset : 0;
     if (available < *data_bytes) {
-      return Error(path, absl::StrCat("header says ", layout, " at offset ", header->vox_offset,
-                                      ", file holds ", available));
+      return Error(data_path, absl::StrCat("header says ", layout, " at offset ",
+                                           header->vox_offset, ", file holds ", available));
     }
-    absl::Status status = vi::ReadRawSamples(path, header->vox_offset, count, header->type,
+    absl::Status status = vi::ReadRawSamples(data_path, header->vox_offset, count, header->type,
                                              header->order, &volume.values, options);
     if (!status.ok()) return status;
   }

@@ -606,8 +606,9 @@ absl::StatusOr<Volume> ReadRaw(const std::string& path, const RawSpec& spec,
 }
 
 std::span<const std::string_view> VolumeFileExtensions() {
-  static constexpr std::string_view kExtensions[] = {".nrrd", ".nhdr", ".den", ".nii",
-                                                     ".nii.gz", ".mha", ".mhd", ".vti"};
+  // A .hdr/.img pair is named by its .hdr (the .img is read with it).
+  static constexpr std::string_view kExtensions[] = {".nrrd", ".nhdr",   ".den", ".nii", ".nii.gz",
+                                                     ".hdr",  ".hdr.gz", ".mha", ".mhd", ".vti"};
   return kExtensions;
 }
 
@@ -627,8 +628,8 @@ absl::StatusOr<Volume> ReadVolume(const std::string& path, const ReadOptions& op
     return ReadNrrd(path, options);
   }
   if (absl::EndsWith(lower, ".den")) return ReadDen(path, options);
-  if (absl::EndsWith(lower, ".nii") || absl::EndsWith(lower, ".nii.gz")) {
-    return ReadNifti(path, options);
+  for (const char* e : {".nii", ".nii.gz", ".hdr", ".hdr.gz", ".img", ".img.gz"}) {
+    if (absl::EndsWith(lower, e)) return ReadNifti(path, options);
   }
   if (absl::EndsWith(lower, ".mha") || absl::EndsWith(lower, ".mhd")) {
     return ReadMetaImage(path, options);

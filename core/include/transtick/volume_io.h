@@ -64,7 +64,9 @@ absl::StatusOr<Volume> ReadDen(const std::string& path, const ReadOptions& optio
 
 // NIfTI-1 single file (.nii, .nii.gz): 348-byte header, vox_offset, datatypes
 // matching ScalarType, pixdim for spacing, scl_slope/scl_inter applied,
-// sform or qform for the orientation.
+// sform or qform for the orientation. Given a .hdr or .img (either maybe
+// .gz), the pair: NIfTI-1 ("ni1") or Analyze 7.5 (no orientation), samples
+// from vox_offset of the .img.
 absl::StatusOr<Volume> ReadNifti(const std::string& path, const ReadOptions& options = {});
 
 // MetaImage (.mha attached, .mhd with a data file): 3-D scalar images, raw or
