@@ -57,17 +57,20 @@ void ConvertTyped(const unsigned char* src, size_t count, bool swap, float* dst)
   }
 }
 
-// Doubles are rounded to the nearest float; beyond the largest float they
-// become infinities of their sign (what the renderers do with infinities:
+// A double as a sample: the nearest float; beyond the largest float an
+// infinity of its sign (what the renderers do with infinities:
 // docs/security.md), and NaN stays NaN.
+float NearestFloat(double v) {
+  constexpr double kMax = std::numeric_limits<float>::max();
+  return v > kMax    ? std::numeric_limits<float>::infinity()
+         : v < -kMax ? -std::numeric_limits<float>::infinity()
+                     : static_cast<float>(v);
+}
+
 template <>
 void ConvertTyped<double>(const unsigned char* src, size_t count, bool swap, float* dst) {
-  constexpr double kMax = std::numeric_limits<float>::max();
   for (size_t i = 0; i < count; ++i) {
-    const double v = LoadSample<double>(src + i * sizeof(double), swap);
-    dst[i] = v > kMax    ? std::numeric_limits<float>::infinity()
-             : v < -kMax ? -std::numeric_limits<float>::infinity()
-                         : static_cast<float>(v);
+    dst[i] = NearestFloat(LoadSample<double>(src + i * sizeof(double), swap));
   }
 }
 
@@ -339,10 +342,7 @@ absl::Status ReadAsciiSamples(const std::string& path, std::FILE* f, uint64_t co
       return absl::InvalidArgumentError(absl::StrCat(path, ": ASCII data holds more than the ",
                                                      count, " samples its header says"));
     }
-    constexpr double kMax = std::numeric_limits<float>::max();
-    out->push_back(v > kMax    ? std::numeric_limits<float>::infinity()
-                   : v < -kMax ? -std::numeric_limits<float>::infinity()
-                               : static_cast<float>(v));
+    out->push_back(NearestFloat(v));
     token.clear();
     return absl::OkStatus();
   };
