@@ -73,8 +73,9 @@ std::vector<FlagDoc> With(std::vector<FlagDoc> a, const std::vector<FlagDoc>& b)
 const std::vector<FlagDoc> kVolumeFlags = {
     {"volume", "FILE",
      "NRRD (.nrrd, .nhdr), NIfTI-1 (.nii, .nii.gz), MetaImage (.mha, .mhd),\n"
-     "VTK image data (.vti), a directory of one DICOM series, Levoy's .den; any\n"
-     "other extension, or --raw-dims given, is headerless raw"},
+     "VTK image data (.vti), a directory of DICOM files (DIR#UID: one series of\n"
+     "several in it), Levoy's .den; any other extension, or --raw-dims given, is\n"
+     "headerless raw"},
     {"raw-dims", "XxYxZ", "a raw volume's size"},
     {"raw-type", "T", "uint8|int8|uint16|int16|uint32|int32|float|double (default uint8)"},
     {"raw-endian", "little|big", "byte order of a raw volume (default little)"},
@@ -329,6 +330,7 @@ int Info(int argc, char** argv) {
             << volume->spacing[0] << " " << volume->spacing[1] << " " << volume->spacing[2]
             << ", values " << range[0] << " .. " << range[1] << "\n"
             << "  " << DescribeOrientation(*volume) << "\n";
+  for (const std::string& note : volume->notes) std::cout << "  note: " << note << "\n";
   // A coarse histogram helps choose material intervals.
   constexpr int kBins = 16;
   // In double: a float volume's range may span nearly all of float, and
@@ -487,8 +489,13 @@ int RenderInProcess(const Flags& flags, const v1::View& view, bool dvr,
   auto camera = Camera::Create(*ToCameraSpec(*local_view), extent);
   if (!camera.ok()) return fail(camera.status());
   Progress progress(Progress::ForStderr(flags.Has("quiet")));
-  const std::vector<std::string> warnings =
-      dvr ? UnseenTransfer(transfer, *volume) : UnseenMaterials(classification, *volume);
+  // As the root's: what the reader passed over or chose, then what of the
+  // classification shows nothing.
+  std::vector<std::string> warnings = volume->notes;
+  for (std::string& w :
+       dvr ? UnseenTransfer(transfer, *volume) : UnseenMaterials(classification, *volume)) {
+    warnings.push_back(std::move(w));
+  }
   for (const std::string& w : warnings) progress.Warn("warning: " + w);
   RenderStats stats;
   auto image = RenderLocal(*scene, *camera, ToRenderSettings(view), *threads, &stats,
@@ -748,7 +755,10 @@ int Render(int argc, char** argv) {
     std::error_code ec;
     std::filesystem::path abs = std::filesystem::absolute(volume, ec).lexically_normal();
     if (!abs.has_filename()) abs = abs.parent_path();  // "series/": a DICOM directory
-    if (!std::filesystem::is_regular_file(abs, ec) && !std::filesystem::is_directory(abs, ec)) {
+    // "DIR#UID": one series of a DICOM directory.
+    const std::optional<SeriesPath> series = ParseSeriesPath(abs.string());
+    if (!std::filesystem::is_regular_file(abs, ec) && !std::filesystem::is_directory(abs, ec) &&
+        !(series && std::filesystem::is_directory(series->dir, ec))) {
       return fail(absl::NotFoundError(absl::StrCat(volume, ": cannot open")));
     }
     LocalCluster::Options co;

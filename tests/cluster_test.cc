@@ -2,6 +2,7 @@
 // streams between workers. Its images must equal the in-process render bit
 // for bit, and bad jobs must get clear errors without hurting the cluster.
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -12,6 +13,7 @@
 #include "cluster.grpc.pb.h"
 #include "convert.h"
 #include "daemon.h"
+#include "dicom_writer.h"
 #include "display_service.h"
 #include "gtest/gtest.h"
 #include "local_cluster.h"
@@ -263,6 +265,85 @@ TEST_F(ClusterTest, OrientedVolumesAndPresetsEqualTheInProcessRender) {
       EXPECT_EQ(got->rgb, want[i].rgb) << workers << " workers, " << rings << " rings, view " << i;
     }
   }
+}
+
+// One series of a DICOM study directory, named "DIR#UID", read by the root
+// from its data directory through its confinement: the cluster's image
+// equals the in-process one, and the job says which series it read and
+// what it passed over. The study alone is refused with its series listed.
+TEST_F(ClusterTest, OneSeriesOfADicomStudyRendersAsInProcess) {
+  const std::array<int, 3> dims = {24, 20, 14};
+  const Volume phantom = MakeNoisyPhantom(dims, 33);
+  fs::create_directories(dir_ + "/study");
+  auto write = [&](const std::string& name, const testing::DicomSlice& s) {
+    const std::string bytes = testing::DicomSliceFile(s);
+    ASSERT_FALSE(bytes.empty()) << name;
+    std::ofstream(dir_ + "/study/" + name, std::ios::binary) << bytes;
+  };
+  for (int z = 0; z < dims[2]; ++z) {
+    testing::DicomSlice s;
+    s.series = "1.2.3.4";
+    s.columns = dims[0];
+    s.rows = dims[1];
+    s.spacing = {1.0, 0.9};
+    s.slope = 1;
+    s.intercept = 0;
+    s.position = {-5, 7, 1.5 * z};
+    for (int y = 0; y < dims[1]; ++y)
+      for (int x = 0; x < dims[0]; ++x)
+        s.pixels.push_back(static_cast<int16_t>(std::lround(phantom.At(x, y, z))));
+    write("IM" + std::to_string(z), s);
+  }
+  testing::DicomSlice scout;
+  scout.series = "1.2.3.5";
+  write("SCOUT", scout);
+  std::ofstream(dir_ + "/study/readme.txt") << "exported";
+
+  const v1::View view = View(40, 15, true, "dicom.exr");
+  const Image want = Reference(dir_ + "/study#1.2.3.4", Materials(), view);
+  // The series shows: a good part of the image is lit.
+  const auto lit =
+      std::count_if(want.rgb.begin(), want.rgb.end(), [](float c) { return c > 0.05f; });
+  EXPECT_GT(lit, static_cast<long>(want.rgb.size() / 10));
+  auto cluster = StartCluster(3);
+  ASSERT_TRUE(cluster.ok()) << cluster.status();
+  v1::Job job = MakeJob({view});
+  job.mutable_datasets(0)->set_volume("study#1.2.3.4");
+  auto stats = SubmitAndWatch((*cluster)->root_address(), job, WatchOptions{});
+  ASSERT_TRUE(stats.ok()) << stats.status();
+  ASSERT_EQ(stats->size(), 1u);
+  const auto& warnings = (*stats)[0].warnings();
+  auto said = [&](const std::string& text) {
+    return std::any_of(warnings.begin(), warnings.end(),
+                       [&](const std::string& w) { return w.find(text) != std::string::npos; });
+  };
+  EXPECT_TRUE(said("read series 1.2.3.4 (CT, 14 files) of 2 in the directory"));
+  EXPECT_TRUE(said("passed over 1 file that is not DICOM (readme.txt)"));
+  auto got = ReadImage(view.output());
+  ASSERT_TRUE(got.ok()) << got.status();
+  EXPECT_EQ(got->rgb, want.rgb);
+
+  v1::Job whole = MakeJob({View(0, 0, true, "whole.png")});
+  whole.mutable_datasets(0)->set_volume("study");
+  auto refused = SubmitAndWatch((*cluster)->root_address(), whole, WatchOptions{});
+  ASSERT_FALSE(refused.ok());
+  const std::string message(refused.status().message());
+  EXPECT_NE(message.find("2 series in one directory; name one as study#UID"), std::string::npos)
+      << message;
+  EXPECT_NE(message.find("1.2.3.5 (CT, 1 file)"), std::string::npos) << message;
+  // A series that is not there, and one whose directory is not.
+  v1::Job absent = MakeJob({View(0, 0, true, "absent.png")});
+  absent.mutable_datasets(0)->set_volume("study#9.9");
+  refused = SubmitAndWatch((*cluster)->root_address(), absent, WatchOptions{});
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(std::string(refused.status().message()).find("no series 9.9 in study"),
+            std::string::npos)
+      << refused.status();
+  absent.mutable_datasets(0)->set_volume("nostudy#1.2");
+  refused = SubmitAndWatch((*cluster)->root_address(), absent, WatchOptions{});
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(std::string(refused.status().message()).find("nostudy#1.2"), std::string::npos)
+      << refused.status();
 }
 
 // The surface model travels with the materials to every worker: the

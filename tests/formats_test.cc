@@ -475,18 +475,23 @@ TEST_F(FormatsTest, DicomSeriesRefusesGapsMixedSeriesAndJunk) {
   ExpectError(ReadVolume(series("dup", {at(0), at(1), at(1)})), "dup", "same position");
   SliceSpec other = at(2);
   other.series = "9.9.9";
-  ExpectError(ReadVolume(series("mixed", {at(0), at(1), other})), "mixed", "mixed series");
+  ExpectError(ReadVolume(series("mixed", {at(0), at(1), other})), "mixed",
+              "2 series in one directory; name one as");
   SliceSpec big = at(2);
   big.columns = 5;
   ExpectError(ReadVolume(series("sizes", {at(0), at(1), big})), "sizes", "differ");
   SliceSpec tilted = at(2);
   tilted.position = {0, 1, 2};
   ExpectError(ReadVolume(series("tilt", {at(0), at(1), tilted})), "tilt", "tilted gantry");
-  const std::string junk = series("junk", {at(0), at(1)});
-  Write("junk/readme.txt", "not a DICOM file");
-  ExpectError(ReadVolume(junk), "readme.txt", "not a DICOM file");
+  // A slice that starts as DICOM does and is damaged is an error, never
+  // passed over: the volume would silently lose it.
+  const std::string junk = series("junk", {at(0), at(1), at(2)});
+  std::filesystem::resize_file(junk + "/f2", 140);
+  ExpectError(ReadVolume(junk), "f2", "not a DICOM file, or a damaged one");
   std::filesystem::create_directories(dir_ + "/empty");
-  ExpectError(ReadVolume(dir_ + "/empty"), "empty", "no DICOM files");
+  Write("empty/readme.txt", "no DICOM here");
+  ExpectError(ReadVolume(dir_ + "/empty"), "empty",
+              "no DICOM images; it passed over 1 file that is not DICOM (readme.txt)");
   // A slice cut short: its header reads, its pixels do not.
   const std::string cut = series("cut", {at(0), at(1)});
   std::filesystem::resize_file(cut + "/f1", std::filesystem::file_size(cut + "/f1") - 10);
@@ -496,6 +501,101 @@ TEST_F(FormatsTest, DicomSeriesRefusesGapsMixedSeriesAndJunk) {
 // Found by volume_fuzzer: GDCM allocates an element's declared length before
 // reading it, so a 150-byte file declaring a 1.3 GB element cost 1.3 GB. The
 // reader walks the element lengths first and refuses the file.
+// A study as exports and archives leave it: several series in one
+// directory, beside subdirectories, notes and reports. The path names the
+// series to read ("DIR#UID"); without one the error lists them all.
+TEST_F(FormatsTest, DicomStudyDirectoryNamesItsSeries) {
+  const std::string dir = dir_ + "/study";
+  std::filesystem::create_directories(dir + "/more/deeper");
+  // Series 1.2.3.4 of 4 slices and 1.2.3.40 of 2 (one UID a prefix of the
+  // other), their files interleaved by name.
+  for (int n = 0; n < 6; ++n) {
+    SliceSpec s;
+    const bool axial = n % 3 != 2;
+    s.series = axial ? "1.2.3.4" : "1.2.3.40";
+    const int z = axial ? n - n / 3 : n / 3;
+    s.position = {0, 0, (axial ? 1.0 : 5.0) * z};
+    s.frame_value = (axial ? 10 : 20) + z;
+    WriteSlice(dir + "/IM" + std::to_string(n), s);
+  }
+  Write("study/readme.txt", "exported by a viewer");
+  Write("study/annotations.xml", "<?xml version=\"1.0\"?><reads/>");
+  Write("study/empty", "");
+  // A DICOM object without pixel data, as a structured report is.
+  std::string report(128, '\0');
+  report += "DICM";
+  report += std::string("\x02\x00\x10\x00UI\x14\x00", 8) + std::string("1.2.840.10008.1.2.1\0", 20);
+  report += std::string(
+      "\x08\x00\x60\x00"
+      "CS"
+      "\x02\x00"
+      "SR",
+      10);
+  Write("study/report.dcm", report);
+  Write("study/more/deeper/IM0", "not read");
+
+  auto all = ReadVolume(dir);
+  ASSERT_FALSE(all.ok());
+  const std::string listing(all.status().message());
+  EXPECT_THAT(listing, HasSubstr("2 series in one directory; name one as " + dir + "#UID"));
+  EXPECT_THAT(listing, HasSubstr("1.2.3.4 (CT, 4 files)"));
+  EXPECT_THAT(listing, HasSubstr("1.2.3.40 (CT, 2 files)"));
+
+  auto axial = ReadVolume(dir + "#1.2.3.4");
+  ASSERT_TRUE(axial.ok()) << axial.status();
+  EXPECT_EQ(axial->dims, (std::array<int, 3>{4, 3, 4}));
+  EXPECT_NEAR(axial->spacing[2], 1.0, 1e-9);
+  for (int z = 0; z < 4; ++z) EXPECT_EQ(axial->At(1, 0, z), (10 + z) * 100 + 1 - 1024) << z;
+  EXPECT_THAT(axial->notes,
+              ::testing::ElementsAre(
+                  "passed over 1 subdirectory (more/)",
+                  "passed over 3 files that are not DICOM (annotations.xml, empty, readme.txt)",
+                  "passed over 1 DICOM file without an image (report.dcm)",
+                  "read series 1.2.3.4 (CT, 4 files) of 2 in the directory"));
+  auto other = ReadVolume(dir + "/#1.2.3.40");  // a trailing slash on the directory is fine
+  ASSERT_TRUE(other.ok()) << other.status();
+  EXPECT_EQ(other->dims[2], 2);
+  EXPECT_NEAR(other->spacing[2], 5.0, 1e-9);
+  EXPECT_EQ(other->At(0, 0, 1), 2100 - 1024);
+
+  auto missing = ReadVolume(dir + "#1.2.3");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
+  EXPECT_THAT(std::string(missing.status().message()), HasSubstr("no series 1.2.3 in"));
+  EXPECT_THAT(std::string(missing.status().message()), HasSubstr("1.2.3.40 (CT, 2 files)"));
+  // A name with a '#' that exists is read as itself, not as a series.
+  std::filesystem::create_directories(dir_ + "/one#2");
+  for (int n = 0; n < 2; ++n) {
+    SliceSpec s;
+    s.position = {0, 0, 2.0 * n};
+    WriteSlice(dir_ + "/one#2/f" + std::to_string(n), s);
+  }
+  auto hashed = ReadVolume(dir_ + "/one#2");
+  ASSERT_TRUE(hashed.ok()) << hashed.status();
+  EXPECT_TRUE(hashed->notes.empty());
+  // A series is read whatever the other series in its directory hold, and
+  // a series that cannot be read says why when it is named.
+  SliceSpec odd;
+  odd.series = "7.7";
+  odd.spacing = {-0.5, 0.8};
+  WriteSlice(dir + "/IM9", odd);
+  EXPECT_TRUE(ReadVolume(dir + "#1.2.3.4").ok());
+  ExpectError(ReadVolume(dir + "#7.7"), "IM9", "is not positive");
+}
+
+TEST(SeriesPathTest, OnlyADigitsAndDotsUidAfterTheLastHash) {
+  auto parsed = ParseSeriesPath("data/study#1.2.840.113619.2.55");
+  ASSERT_TRUE(parsed.has_value());
+  EXPECT_EQ(parsed->dir, "data/study");
+  EXPECT_EQ(parsed->series, "1.2.840.113619.2.55");
+  EXPECT_EQ(ParseSeriesPath("a#b#12")->dir, "a#b");
+  for (const char* not_a_series :
+       {"study", "study#", "#1.2", "scan#1.nrrd", "study#1.2/IM1", "study#1 2", "a#-1",
+        "s#12345678901234567890123456789012345678901234567890123456789012345"}) {
+    EXPECT_FALSE(ParseSeriesPath(not_a_series).has_value()) << not_a_series;
+  }
+}
+
 TEST_F(FormatsTest, DicomElementThatLiesAboutItsLength) {
   std::string file(128, '\0');
   file += "DICM";

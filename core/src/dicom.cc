@@ -3,8 +3,14 @@
 // which lives in the module libtranstick_dicom.so (dicom_gdcm.cc, loaded on
 // first use: dicom_module.h says why).
 //
-// Each file in the directory is one slice; DICOMDIR and names starting with
-// '.' are passed over. Every file is read through ReadOptions::open (so the
+// Each DICOM image file in the directory is one slice. DICOMDIR, names
+// starting with '.', subdirectories, files that are not DICOM (no "DICM" at
+// byte 128, and not starting as a data set without one does, with group
+// 0002 or 0008) and DICOM files without pixel data (reports, presentation
+// states) are passed over, and Volume::notes names them. The slices are
+// grouped by SeriesInstanceUID: a directory of several series is read only
+// when the path names one ("DIR#UID"), else the error lists them. Every
+// file is read through ReadOptions::open (so the
 // root's confinement holds), its element lengths walked (ElementWalk, below:
 // GDCM would allocate whatever a length declares), and given to GDCM from
 // memory. Each is read twice: first its header only (up to the pixel data),
@@ -27,7 +33,7 @@
 // between consecutive positions give the z spacing: they must all be equal
 // (to 1% or 0.01 mm). A gap that is a multiple of the others (a missing
 // slice), two slices at one position, positions off the normal (a tilted
-// gantry) and files of other series are refused, naming the files.
+// gantry) are refused, naming the files.
 #include <dirent.h>
 #include <dlfcn.h>
 #include <fcntl.h>
@@ -46,6 +52,7 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
 #include "dicom_module.h"
@@ -69,6 +76,11 @@ absl::Status Error(const std::string& path, absl::string_view message) {
 struct Slice {
   std::string path;
   std::string series;
+  std::string modality, description, number;  // for the listing of a directory's series
+  // Why this image cannot be a slice of a volume (colour, several frames,
+  // a size or attribute out of range), or OK: an error only when its
+  // series is the one read.
+  absl::Status problem;
   int rows = 0, columns = 0;
   int bits = 0;
   bool is_signed = false;
@@ -97,11 +109,14 @@ enum Element : size_t {
   kPosition,        // (0020,0032) ImagePositionPatient
   kSlope,           // (0028,1053) RescaleSlope
   kIntercept,       // (0028,1052) RescaleIntercept
+  kModality,        // (0008,0060)
+  kDescription,     // (0008,103E) SeriesDescription
+  kSeriesNumber,    // (0020,0011)
   kElements
 };
-constexpr uint32_t kTags[kElements] = {0x0020000e, 0x00280010, 0x00280011, 0x00280002,
-                                       0x00280008, 0x00280100, 0x00280103, 0x00280030,
-                                       0x00200037, 0x00200032, 0x00281053, 0x00281052};
+constexpr uint32_t kTags[kElements] = {0x0020000e, 0x00280010, 0x00280011, 0x00280002, 0x00280008,
+                                       0x00280100, 0x00280103, 0x00280030, 0x00200037, 0x00200032,
+                                       0x00281053, 0x00281052, 0x00080060, 0x0008103e, 0x00200011};
 
 // libtranstick_dicom.so's functions, or why it could not be loaded.
 struct Gdcm {
@@ -426,31 +441,27 @@ absl::StatusOr<std::string> ReadChecked(const std::string& path, const ReadOptio
   return bytes;
 }
 
-absl::StatusOr<Slice> ReadHeader(const Gdcm& gdcm, const std::string& path,
-                                 const ReadOptions& options) {
-  absl::StatusOr<std::string> contents = ReadChecked(path, options);
-  if (!contents.ok()) return contents.status();
-  const uint64_t file_size = contents->size();
-  DicomHeader h;
-  // Up to the pixel data: nothing of it is read, and its length is checked
-  // below before GDCM reads it. The module takes the bytes.
-  gdcm.read_header(&*contents, kTags, kElements, &h);
-  if (!h.read) return Error(path, "is not a DICOM file GDCM can read");
-  Slice s;
-  s.path = path;
-  s.native = !h.encapsulated;
+// Printable text of a header's string for a message: at most 64
+// characters, anything but printable ASCII shown as '?'.
+std::string Shown(std::string text) {
+  if (text.size() > 64) text = text.substr(0, 61) + "...";
+  for (char& c : text) {
+    if (!absl::ascii_isprint(static_cast<unsigned char>(c))) c = '?';
+  }
+  return text;
+}
+
+// Checks the image attributes of a slice whose header is `h`, and fills
+// `s` from them. The error says why the image cannot be a slice.
+absl::Status CheckImage(const DicomHeader& h, uint64_t file_size, Slice& s) {
+  const std::string& path = s.path;
   if (h.big_endian) {
     // Retired since 2004; the attributes below are read little-endian.
     return Error(path, "uses the retired explicit VR big endian transfer syntax, not supported");
   }
-  const int64_t value_at = h.pixel_value_at;
-  if (value_at < 4 || static_cast<uint64_t>(value_at) > file_size) {
-    return Error(path, "has no pixel data (7FE0,0010)");
-  }
   // As stored, little endian: big-endian files are refused above.
   s.pixel_length = h.pixel_length;
-  s.pixel_available = file_size - static_cast<uint64_t>(value_at);
-  s.series = Text(h, kSeries);
+  s.pixel_available = file_size - static_cast<uint64_t>(h.pixel_value_at);
   s.rows = Unsigned16(h, kRows);
   s.columns = Unsigned16(h, kColumns);
   if (s.rows <= 0 || s.columns <= 0) {
@@ -463,7 +474,7 @@ absl::StatusOr<Slice> ReadHeader(const Gdcm& gdcm, const std::string& path,
   }
   const std::string frames = Text(h, kFrames);
   if (!frames.empty() && frames != "1") {
-    return Error(path, absl::StrCat("has ", frames,
+    return Error(path, absl::StrCat("has ", Shown(frames),
                                     " frames: only single-frame slices are supported"));
   }
   s.bits = Unsigned16(h, kBits);
@@ -505,7 +516,61 @@ absl::StatusOr<Slice> ReadHeader(const Gdcm& gdcm, const std::string& path,
     return Error(path, absl::StrCat("pixel data of ", s.pixel_length, " bytes, the file holds ",
                                     s.pixel_available, " (truncated?)"));
   }
-  return s;
+  return absl::OkStatus();
+}
+
+// What a file in a series directory is.
+enum class FileKind {
+  kImage,     // a DICOM image: a slice (its problem aside)
+  kNotDicom,  // no DICOM file at all (a text, an image of another format)
+  kNoImage,   // DICOM without pixel data (a report, a presentation state)
+};
+
+// Reads a file's header. A file that starts as DICOM does ("DICM" at byte
+// 128) and cannot be read is an error (a damaged slice must not go
+// unnoticed); one that does not, and is not read as a data set without a
+// preamble either, is kNotDicom.
+absl::StatusOr<FileKind> ReadHeader(const Gdcm& gdcm, const std::string& path,
+                                    const ReadOptions& options, Slice* out) {
+  absl::StatusOr<std::string> prefix = vi::ReadPrefix(path, 132, options);
+  if (!prefix.ok()) return prefix.status();
+  const bool magic = prefix->size() == 132 && prefix->compare(128, 4, "DICM") == 0;
+  if (!magic) {
+    // A data set without the preamble begins with an element of the meta
+    // group or of group 0008 (identification), little endian.
+    const unsigned group = prefix->size() >= 8 ? static_cast<unsigned char>((*prefix)[0]) |
+                                                     static_cast<unsigned char>((*prefix)[1]) << 8
+                                               : 0;
+    if (group != 0x0002 && group != 0x0008) return FileKind::kNotDicom;
+  }
+  absl::StatusOr<std::string> contents = ReadChecked(path, options);
+  if (!contents.ok()) {
+    if (!magic && contents.status().code() == absl::StatusCode::kInvalidArgument) {
+      return FileKind::kNotDicom;
+    }
+    return contents.status();
+  }
+  const uint64_t file_size = contents->size();
+  DicomHeader h;
+  // Up to the pixel data: nothing of it is read, and its length is checked
+  // below before GDCM reads it. The module takes the bytes.
+  gdcm.read_header(&*contents, kTags, kElements, &h);
+  if (!h.read) {
+    if (!magic) return FileKind::kNotDicom;
+    return Error(path, "is not a DICOM file GDCM can read");
+  }
+  const int64_t value_at = h.pixel_value_at;
+  if (value_at < 4 || static_cast<uint64_t>(value_at) > file_size) return FileKind::kNoImage;
+  Slice& s = *out;
+  s = Slice();
+  s.path = path;
+  s.native = !h.encapsulated;
+  s.series = Text(h, kSeries);
+  s.modality = Text(h, kModality);
+  s.description = Text(h, kDescription);
+  s.number = Text(h, kSeriesNumber);
+  s.problem = CheckImage(h, file_size, s);
+  return FileKind::kImage;
 }
 
 ScalarType TypeOf(const Slice& s) {
@@ -563,7 +628,47 @@ double Dot(const std::array<double, 3>& a, const std::array<double, 3>& b) {
   return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
 }
 
+// Up to `limit` of `names`, comma-separated, and how many more.
+std::string NameSome(const std::vector<std::string>& names, size_t limit = 3) {
+  std::string out;
+  for (size_t i = 0; i < names.size() && i < limit; ++i) {
+    absl::StrAppend(&out, i ? ", " : "", Shown(names[i]));
+  }
+  if (names.size() > limit) absl::StrAppend(&out, " and ", names.size() - limit, " more");
+  return out;
+}
+
+// One series of a directory: its slices in file name order.
+struct Series {
+  std::string uid;
+  std::vector<Slice> slices;
+  // "1.2.3 (CT, series 2 'AX 5mm', 120 files)"
+  std::string Describe() const {
+    const Slice& f = slices.front();
+    std::string what = f.modality.empty() ? "" : Shown(f.modality);
+    if (!f.number.empty())
+      absl::StrAppend(&what, what.empty() ? "" : ", ", "series ", Shown(f.number));
+    if (!f.description.empty())
+      absl::StrAppend(&what, what.empty() ? "" : " ", "'", Shown(f.description), "'");
+    absl::StrAppend(&what, what.empty() ? "" : ", ", slices.size(),
+                    slices.size() == 1 ? " file" : " files");
+    return absl::StrCat(uid.empty() ? "(no SeriesInstanceUID)" : Shown(uid), " (", what, ")");
+  }
+};
+
 }  // namespace
+
+std::optional<SeriesPath> ParseSeriesPath(std::string_view path) {
+  const size_t hash = path.rfind('#');
+  if (hash == std::string_view::npos || hash == 0) return std::nullopt;
+  const std::string_view uid = path.substr(hash + 1);
+  // A UID: digits and dots, at most 64 characters (PS3.5 9.1).
+  if (uid.empty() || uid.size() > 64) return std::nullopt;
+  for (char c : uid) {
+    if (!(absl::ascii_isdigit(static_cast<unsigned char>(c)) || c == '.')) return std::nullopt;
+  }
+  return SeriesPath{std::string(path.substr(0, hash)), std::string(uid)};
+}
 
 absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOptions& options) {
   const Gdcm& gdcm = LoadGdcm();
@@ -571,28 +676,104 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
     return absl::UnavailableError(
         absl::StrCat(path, ": cannot read DICOM: ", gdcm.status.message()));
   }
-  absl::StatusOr<std::vector<std::string>> names = ListDirectory(path, options);
+  // The directory, and the series the path names in it (if any).
+  std::string directory = path;
+  std::string wanted;
+  bool select = false;
+  if (!vi::IsDirectory(path, options)) {
+    if (std::optional<SeriesPath> sp = ParseSeriesPath(path);
+        sp && vi::IsDirectory(sp->dir, options)) {
+      directory = sp->dir;
+      wanted = sp->series;
+      select = true;
+    }
+  }
+  absl::StatusOr<std::vector<std::string>> names = ListDirectory(directory, options);
   if (!names.ok()) return names.status();
   std::sort(names->begin(), names->end());
-  const std::string dir = absl::StrCat(absl::StripSuffix(path, "/"), "/");
-  std::vector<Slice> slices;
+  const std::string dir = absl::StrCat(absl::StripSuffix(directory, "/"), "/");
+  std::vector<Series> all;
+  std::vector<std::string> subdirectories, not_dicom, no_image;
+  size_t files = 0;
   for (const std::string& name : *names) {
     if (name.empty() || name[0] == '.' || absl::AsciiStrToUpper(name) == "DICOMDIR") continue;
-    if (slices.size() >= kMaxSlices) {
+    if (++files > kMaxSlices) {
       return Error(path, absl::StrCat("more than ", kMaxSlices, " files"));
     }
-    absl::StatusOr<Slice> s = ReadHeader(gdcm, dir + name, options);
-    if (!s.ok()) return s.status();
-    slices.push_back(*std::move(s));
+    const std::string file = dir + name;
+    if (vi::IsDirectory(file, options)) {
+      subdirectories.push_back(name + "/");
+      continue;
+    }
+    Slice slice;
+    absl::StatusOr<FileKind> kind = ReadHeader(gdcm, file, options, &slice);
+    if (!kind.ok()) return kind.status();
+    if (*kind == FileKind::kNotDicom) {
+      not_dicom.push_back(name);
+      continue;
+    }
+    if (*kind == FileKind::kNoImage) {
+      no_image.push_back(name);
+      continue;
+    }
+    auto it = std::find_if(all.begin(), all.end(),
+                           [&](const Series& x) { return x.uid == slice.series; });
+    if (it == all.end()) {
+      all.push_back({slice.series, {}});
+      it = all.end() - 1;
+    }
+    it->slices.push_back(std::move(slice));
   }
-  if (slices.empty()) return Error(path, "the directory holds no DICOM files");
+  std::vector<std::string> notes;
+  if (!subdirectories.empty()) {
+    notes.push_back(absl::StrCat("passed over ", subdirectories.size(), " subdirector",
+                                 subdirectories.size() == 1 ? "y" : "ies", " (",
+                                 NameSome(subdirectories), ")"));
+  }
+  if (!not_dicom.empty()) {
+    notes.push_back(absl::StrCat("passed over ", not_dicom.size(),
+                                 not_dicom.size() == 1 ? " file that is" : " files that are",
+                                 " not DICOM (", NameSome(not_dicom), ")"));
+  }
+  if (!no_image.empty()) {
+    notes.push_back(absl::StrCat("passed over ", no_image.size(), " DICOM file",
+                                 no_image.size() == 1 ? "" : "s", " without an image (",
+                                 NameSome(no_image), ")"));
+  }
+  if (all.empty()) {
+    return Error(path, absl::StrCat("the directory holds no DICOM images",
+                                    notes.empty() ? "" : "; it ", absl::StrJoin(notes, "; ")));
+  }
+  auto list = [&] {
+    std::vector<std::string> lines;
+    for (const Series& x : all) lines.push_back(x.Describe());
+    return absl::StrJoin(lines, "; ");
+  };
+  const Series* chosen = nullptr;
+  if (select) {
+    for (const Series& x : all) {
+      if (x.uid == wanted) chosen = &x;
+    }
+    if (chosen == nullptr) {
+      return absl::NotFoundError(
+          absl::StrCat(path, ": no series ", wanted, " in ", directory, ", which holds ", list()));
+    }
+  } else if (all.size() == 1) {
+    chosen = &all.front();
+  } else {
+    return Error(path, absl::StrCat(all.size(), " series in one directory; name one as ",
+                                    absl::StripSuffix(directory, "/"), "#UID: ", list()));
+  }
+  if (all.size() > 1) {
+    notes.push_back(
+        absl::StrCat("read series ", chosen->Describe(), " of ", all.size(), " in the directory"));
+  }
+  std::vector<Slice> slices = chosen->slices;
   const Slice& first = slices.front();
   for (const Slice& s : slices) {
-    if (s.series != first.series) {
-      return Error(path, absl::StrCat("mixed series: ", first.path, " is of series '", first.series,
-                                      "', ", s.path, " of '", s.series,
-                                      "'; put each series in a directory of its own"));
-    }
+    if (!s.problem.ok()) return s.problem;
+  }
+  for (const Slice& s : slices) {
     if (s.rows != first.rows || s.columns != first.columns || s.bits != first.bits ||
         s.is_signed != first.is_signed) {
       return Error(path, absl::StrCat(s.path, " is ", s.columns, "x", s.rows, " ", s.bits,
@@ -683,6 +864,7 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
       !s.ok()) {
     return s;
   }
+  volume.notes = std::move(notes);
   return volume;
 }
 

@@ -40,13 +40,26 @@ void ReadHeader(std::string* bytes, const uint32_t* tags, size_t count,
   out->big_endian = syntax.GetSwapCode() == gdcm::SwapCode::BigEndian;
   stream.clear();
   const std::streamoff at = stream.tellg();
-  if (at >= 4 && static_cast<uint64_t>(at) <= file_size) {
-    // The value length precedes the value, in either VR form.
-    unsigned char vl[4];
-    stream.seekg(at - 4);
-    if (stream.read(reinterpret_cast<char*>(vl), 4)) {
-      out->pixel_value_at = at;
-      out->pixel_length = uint32_t{vl[3]} << 24 | vl[2] << 16 | vl[1] << 8 | vl[0];
+  if (at >= 8 && static_cast<uint64_t>(at) <= file_size) {
+    // The value length precedes the value, in either VR form, and the tag
+    // (7FE0,0010) precedes that: 8 bytes before the value in implicit VR,
+    // 12 in explicit VR. Without the tag the reader stopped at the end of a
+    // file that has no pixel data (a report, a presentation state).
+    unsigned char head[12] = {};
+    const std::streamoff from = at >= 12 ? at - 12 : at - 8;
+    stream.seekg(from);
+    if (stream.read(reinterpret_cast<char*>(head), at - from)) {
+      const unsigned char* vl = head + (at - from) - 4;
+      auto tag_at = [&](std::streamoff back) {
+        if (at - back < from) return false;
+        const unsigned char* t = head + (at - back - from);
+        return (t[0] == 0xe0 && t[1] == 0x7f && t[2] == 0x10 && t[3] == 0x00) ||
+               (t[0] == 0x7f && t[1] == 0xe0 && t[2] == 0x00 && t[3] == 0x10);  // big endian
+      };
+      if (tag_at(8) || tag_at(12)) {
+        out->pixel_value_at = at;
+        out->pixel_length = uint32_t{vl[3]} << 24 | vl[2] << 16 | vl[1] << 8 | vl[0];
+      }
     }
   }
   const gdcm::DataSet& ds = reader.GetFile().GetDataSet();

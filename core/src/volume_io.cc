@@ -638,6 +638,11 @@ absl::StatusOr<Volume> ReadVolume(const std::string& path, const ReadOptions& op
   if (absl::EndsWith(path, "/") || vi::IsDirectory(path, options)) {
     return ReadDicomSeries(path, options);
   }
+  // "DIR#UID": one series of a DICOM directory.
+  if (std::optional<SeriesPath> sp = ParseSeriesPath(path);
+      sp && vi::IsDirectory(sp->dir, options)) {
+    return ReadDicomSeries(path, options);
+  }
   // Name the extension we saw so a typo ("cthead.nrd") is easy to spot.
   size_t slash = path.find_last_of('/');
   size_t dot = path.find_last_of('.');
@@ -646,9 +651,9 @@ absl::StatusOr<Volume> ReadVolume(const std::string& path, const ReadOptions& op
                               : absl::StrCat("extension '", path.substr(dot), "'");
   std::string expected;
   for (std::string_view e : VolumeFileExtensions()) absl::StrAppend(&expected, std::string(e), ", ");
-  return absl::InvalidArgumentError(absl::StrCat(path, ": unknown volume format (", extension,
-                                                 "; expected ", expected,
-                                                 "or a directory of DICOM files)"));
+  return absl::InvalidArgumentError(
+      absl::StrCat(path, ": unknown volume format (", extension, "; expected ", expected,
+                   "a directory of DICOM files, or DIR#UID for one series of it)"));
 }
 
 }  // namespace transtick

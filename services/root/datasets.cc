@@ -27,9 +27,25 @@ namespace {
 // character of it can forge a line.
 std::string Shown(const std::string& path) { return Printable(path); }
 
-// OK when `relative` opens (confined) as a regular file.
-absl::Status CheckVolume(const ConfinedDir& dir, const std::string& relative) {
+// Opens (confined) what `relative` names: the file or directory, or for a
+// path that names none, "DIR#UID" (one series of a DICOM directory,
+// ParseSeriesPath), the directory; its descriptor, which the caller closes.
+absl::StatusOr<int> OpenVolume(const ConfinedDir& dir, const std::string& relative) {
   auto fd = dir.OpenFile(relative);
+  if (fd.ok() || fd.status().code() != absl::StatusCode::kNotFound) return fd;
+  std::optional<SeriesPath> sp = ParseSeriesPath(relative);
+  if (!sp) return fd;
+  auto series_dir = dir.OpenFile(sp->dir);
+  if (!series_dir.ok()) return fd;
+  struct stat st {};
+  if (::fstat(*series_dir, &st) == 0 && S_ISDIR(st.st_mode)) return series_dir;
+  ::close(*series_dir);
+  return fd;
+}
+
+// OK when `relative` opens (confined) as a regular file or a directory.
+absl::Status CheckVolume(const ConfinedDir& dir, const std::string& relative) {
+  auto fd = OpenVolume(dir, relative);
   if (!fd.ok()) return absl::Status(fd.status().code(), Shown(std::string(fd.status().message())));
   struct stat st {};
   // A directory is a DICOM series.
@@ -153,7 +169,7 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
   if (!dir.ok()) return absl::UnavailableError("the root's data directory cannot be opened");
   struct stat st {};
   {
-    auto fd = (*dir)->OpenFile(ds.volume());
+    auto fd = OpenVolume(**dir, ds.volume());
     if (!fd.ok()) return fd.status();
     const int r = ::fstat(*fd, &st);
     ::close(*fd);
@@ -210,6 +226,9 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
     scene = Scene::ForDvr(*volume, transfer);
     data->warnings = UnseenTransfer(transfer, *volume);
   }
+  // What the reader passed over or chose (a DICOM directory's other files
+  // and series) comes first: the user sees which data was rendered.
+  data->warnings.insert(data->warnings.begin(), volume->notes.begin(), volume->notes.end());
   for (const std::string& w : data->warnings) spdlog::info("{}: {}", Shown(ds.volume()), w);
   if (!scene.ok())
     return absl::Status(scene.status().code(),

@@ -45,6 +45,10 @@ struct Volume {
   std::array<double, 3> origin = {0.0, 0.0, 0.0};
   Direction direction = kIdentityDirection;
   bool x_reversed = false;  // the reader reversed x to turn a reflection into a rotation
+  // What the reader passed over or chose that a user should know of (a
+  // DICOM directory's other files and series), one sentence each; shown by
+  // `transtick info` and logged by the root.
+  std::vector<std::string> notes;
 
   size_t VoxelCount() const {
     return static_cast<size_t>(dims[0]) * static_cast<size_t>(dims[1]) *

@@ -12,6 +12,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <span>
 #include <string>
 #include <string_view>
@@ -78,13 +79,28 @@ absl::StatusOr<Volume> ReadMetaImage(const std::string& path, const ReadOptions&
 // Spacing and Direction for the orientation.
 absl::StatusOr<Volume> ReadVti(const std::string& path, const ReadOptions& options = {});
 
-// A directory holding one DICOM series of single-frame CT or MR slices, read
-// with GDCM: sorted by position along the slice normal, rescaled by slope
-// and intercept, spacing from PixelSpacing and the positions. Mixed series,
-// missing slices (gaps), duplicate positions, tilted gantries and slices of
-// different sizes are refused. Every file goes through `options.open`, the
-// directory through `options.list`.
+// A DICOM series of single-frame CT or MR slices in a directory, read with
+// GDCM: sorted by position along the slice normal, rescaled by slope and
+// intercept, spacing from PixelSpacing and the positions. Missing slices
+// (gaps), duplicate positions, tilted gantries and slices of different
+// sizes are refused. Subdirectories, files that are not DICOM and DICOM
+// files without an image (reports, presentation states) are passed over
+// and named in Volume::notes. A directory holding several series is read
+// only when `path` names one, "DIR#UID" (SeriesPath); otherwise the error
+// lists them. Every file goes through `options.open`, the directory
+// through `options.list`.
 absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOptions& options = {});
+
+// A path that names one series of a DICOM directory: "DIR#UID", the UID of
+// digits and dots (as every DICOM UID is), DIR the part before the last
+// '#'. Whether `path` has that form; a path that names a file or a
+// directory as it is (a name with a '#' in it) is read as that, and only
+// one that does not is taken for a series (ReadVolume, the root).
+struct SeriesPath {
+  std::string dir;
+  std::string series;
+};
+std::optional<SeriesPath> ParseSeriesPath(std::string_view path);
 
 absl::StatusOr<Volume> ReadRaw(const std::string& path, const RawSpec& spec,
                                const ReadOptions& options = {});
@@ -97,8 +113,8 @@ std::span<const std::string_view> VolumeFileExtensions();
 // Whether `path` ends in one of them, in any case.
 bool IsVolumeFileName(std::string_view path);
 
-// Chooses the reader by extension (VolumeFileExtensions); a directory is
-// read as a DICOM series.
+// Chooses the reader by extension (VolumeFileExtensions); a directory, or
+// a series of one (ParseSeriesPath), is read as a DICOM series.
 absl::StatusOr<Volume> ReadVolume(const std::string& path, const ReadOptions& options = {});
 
 // Parses "uint8", "int16", "float", ... (NRRD's names and their synonyms).
