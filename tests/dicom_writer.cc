@@ -3,10 +3,14 @@
 #include <gdcmAttribute.h>
 #include <gdcmImage.h>
 #include <gdcmImageWriter.h>
+#include <gdcmItem.h>
 #include <gdcmReader.h>
+#include <gdcmSequenceOfItems.h>
 #include <gdcmTrace.h>
+#include <gdcmUIDGenerator.h>
 #include <gdcmWriter.h>
 
+#include <algorithm>
 #include <sstream>
 
 namespace transtick::testing {
@@ -59,6 +63,131 @@ std::string DicomSliceFile(const DicomSlice& slice) {
   rewrite.SetFile(reader.GetFile());
   rewrite.SetStream(out);
   if (!rewrite.Write()) return "";
+  return out.str();
+}
+
+namespace {
+
+// A sequence of undefined length holding `items`.
+gdcm::DataElement Sequence(uint16_t group, uint16_t element,
+                           const std::vector<gdcm::DataSet>& items) {
+  gdcm::SmartPointer<gdcm::SequenceOfItems> sq = new gdcm::SequenceOfItems();
+  sq->SetLengthToUndefined();
+  for (const gdcm::DataSet& ds : items) {
+    gdcm::Item item;
+    item.SetVLToUndefined();
+    item.SetNestedDataSet(ds);
+    sq->AddItem(item);
+  }
+  gdcm::DataElement de(gdcm::Tag(group, element));
+  de.SetVR(gdcm::VR::SQ);
+  de.SetValue(*sq);
+  de.SetVLToUndefined();
+  return de;
+}
+
+}  // namespace
+
+std::string DicomMultiFrameFile(const DicomMultiFrame& image) {
+  gdcm::Trace::WarningOff();
+  const size_t frames = image.positions.size();
+  gdcm::Writer writer;
+  gdcm::File& file = writer.GetFile();
+  file.GetHeader().SetDataSetTransferSyntax(gdcm::TransferSyntax::ExplicitVRLittleEndian);
+  gdcm::DataSet& ds = file.GetDataSet();
+  gdcm::UIDGenerator uid;
+  ds.Replace(gdcm::Attribute<0x0008, 0x0016>{image.sop_class.c_str()}.GetAsDataElement());
+  ds.Replace(gdcm::Attribute<0x0008, 0x0018>{uid.Generate()}.GetAsDataElement());
+  ds.Replace(
+      gdcm::Attribute<0x0008, 0x0060>{image.grid_offsets ? "RTDOSE" : "MR"}.GetAsDataElement());
+  gdcm::Attribute<0x0020, 0x000e> series;
+  series.SetValue(image.series);
+  ds.Replace(series.GetAsDataElement());
+  ds.Replace(gdcm::Attribute<0x0028, 0x0002>{1}.GetAsDataElement());
+  ds.Replace(gdcm::Attribute<0x0028, 0x0004>{"MONOCHROME2"}.GetAsDataElement());
+  const size_t declared = image.declared_frames > 0 ? image.declared_frames : frames;
+  ds.Replace(gdcm::Attribute<0x0028, 0x0008>{static_cast<int32_t>(declared)}.GetAsDataElement());
+  ds.Replace(gdcm::Attribute<0x0028, 0x0010>{static_cast<uint16_t>(image.rows)}.GetAsDataElement());
+  ds.Replace(
+      gdcm::Attribute<0x0028, 0x0011>{static_cast<uint16_t>(image.columns)}.GetAsDataElement());
+  ds.Replace(gdcm::Attribute<0x0028, 0x0100>{16}.GetAsDataElement());
+  ds.Replace(gdcm::Attribute<0x0028, 0x0101>{16}.GetAsDataElement());
+  ds.Replace(gdcm::Attribute<0x0028, 0x0102>{15}.GetAsDataElement());
+  ds.Replace(gdcm::Attribute<0x0028, 0x0103>{1}.GetAsDataElement());
+  gdcm::Attribute<0x0020, 0x0037> orientation;
+  for (int i = 0; i < 6; ++i) orientation.SetValue(image.orientation[i], i);
+  gdcm::Attribute<0x0028, 0x0030> spacing;
+  spacing.SetValue(image.spacing[1], 0);  // between rows
+  spacing.SetValue(image.spacing[0], 1);  // between columns
+  auto position = [&](size_t k) {
+    gdcm::Attribute<0x0020, 0x0032> p;
+    for (int i = 0; i < 3; ++i) p.SetValue(image.positions[k][i], i);
+    return p.GetAsDataElement();
+  };
+  if (image.grid_offsets) {
+    ds.Replace(orientation.GetAsDataElement());
+    ds.Replace(spacing.GetAsDataElement());
+    ds.Replace(position(0));
+    const std::array<double, 3> row = {image.orientation[0], image.orientation[1],
+                                       image.orientation[2]};
+    const std::array<double, 3> col = {image.orientation[3], image.orientation[4],
+                                       image.orientation[5]};
+    const std::array<double, 3> normal = {row[1] * col[2] - row[2] * col[1],
+                                          row[2] * col[0] - row[0] * col[2],
+                                          row[0] * col[1] - row[1] * col[0]};
+    gdcm::Attribute<0x3004, 0x000c> offsets;
+    std::vector<double> values;
+    for (size_t k = 0; k < frames; ++k) {
+      double d = 0;
+      for (int i = 0; i < 3; ++i) d += (image.positions[k][i] - image.positions[0][i]) * normal[i];
+      values.push_back(d);
+    }
+    offsets.SetValues(values.data(), static_cast<unsigned>(values.size()), true);
+    ds.Replace(offsets.GetAsDataElement());
+    if (!image.rescale.empty()) {
+      gdcm::Attribute<0x3004, 0x000e> scaling;
+      scaling.SetValue(image.rescale[0][0]);
+      ds.Replace(scaling.GetAsDataElement());
+    }
+  } else {
+    gdcm::DataSet shared;
+    gdcm::DataSet plane_orientation;
+    plane_orientation.Insert(orientation.GetAsDataElement());
+    shared.Insert(Sequence(0x0020, 0x9116, {plane_orientation}));
+    gdcm::DataSet measures;
+    measures.Insert(spacing.GetAsDataElement());
+    shared.Insert(Sequence(0x0028, 0x9110, {measures}));
+    std::vector<gdcm::DataSet> per_frame;
+    for (size_t k = 0; k < frames; ++k) {
+      gdcm::DataSet item;
+      gdcm::DataSet plane;
+      plane.Insert(position(k));
+      item.Insert(Sequence(0x0020, 0x9113, {plane}));
+      if (!image.rescale.empty()) {
+        gdcm::DataSet transform;
+        gdcm::Attribute<0x0028, 0x1053> slope;
+        slope.SetValue(image.rescale[k][0]);
+        gdcm::Attribute<0x0028, 0x1052> intercept;
+        intercept.SetValue(image.rescale[k][1]);
+        transform.Insert(slope.GetAsDataElement());
+        transform.Insert(intercept.GetAsDataElement());
+        item.Insert(Sequence(0x0028, 0x9145, {transform}));
+      }
+      per_frame.push_back(item);
+    }
+    ds.Replace(Sequence(0x5200, 0x9229, {shared}));
+    ds.Replace(Sequence(0x5200, 0x9230, per_frame));
+  }
+  std::vector<int16_t> pixels = image.pixels;
+  pixels.resize(std::max(frames, declared) * image.rows * image.columns);
+  gdcm::DataElement pixel_data(gdcm::Tag(0x7fe0, 0x0010));
+  pixel_data.SetVR(gdcm::VR::OW);
+  pixel_data.SetByteValue(reinterpret_cast<const char*>(pixels.data()),
+                          static_cast<uint32_t>(pixels.size() * 2));
+  ds.Replace(pixel_data);
+  std::ostringstream out;
+  writer.SetStream(out);
+  if (!writer.Write()) return "";
   return out.str();
 }
 

@@ -24,6 +24,27 @@ struct DicomSlice {
 // The file's bytes; empty if GDCM fails to write it.
 std::string DicomSliceFile(const DicomSlice& slice);
 
+// A multi-frame image (explicit VR little endian, int16, MONOCHROME2),
+// its frames placed as an enhanced image places them: the shared
+// functional groups hold the orientation and pixel spacing, each frame's
+// per-frame group its position and rescale. With `grid_offsets` instead,
+// as an RT dose: no functional groups, the file's ImageOrientationPatient,
+// ImagePositionPatient (the first position) and a GridFrameOffsetVector of
+// each position's distance along the normal from the first.
+struct DicomMultiFrame {
+  std::string series = "1.2.3.9";
+  std::string sop_class = "1.2.840.10008.5.1.4.1.1.4.1";  // Enhanced MR Image Storage
+  std::vector<std::array<double, 3>> positions;           // one per frame
+  std::array<double, 6> orientation = {1, 0, 0, 0, 1, 0};
+  std::array<double, 2> spacing = {0.5, 0.8};  // between columns (x), rows (y)
+  std::vector<std::array<double, 2>> rescale;  // per frame {slope, intercept}; empty: none
+  int columns = 4, rows = 3;
+  std::vector<int16_t> pixels;  // frames * rows * columns
+  bool grid_offsets = false;
+  int declared_frames = 0;  // NumberOfFrames when not 0 (else one per position)
+};
+std::string DicomMultiFrameFile(const DicomMultiFrame& image);
+
 }  // namespace transtick::testing
 
 #endif  // TRANSTICK_TESTS_DICOM_WRITER_H_

@@ -583,6 +583,113 @@ TEST_F(FormatsTest, DicomStudyDirectoryNamesItsSeries) {
   ExpectError(ReadVolume(dir + "#7.7"), "IM9", "is not positive");
 }
 
+// Multi-frame images, as enhanced CT and MR scanners and RT planning
+// systems write them: each frame a slice, placed and rescaled by its
+// functional groups or an RT dose's frame offsets, sorted with the other
+// files of the series.
+TEST_F(FormatsTest, DicomMultiFrameImagesBecomeVolumes) {
+  auto write = [&](const std::string& name, const testing::DicomMultiFrame& image) {
+    std::filesystem::create_directories(std::filesystem::path(dir_ + "/" + name).parent_path());
+    const std::string bytes = testing::DicomMultiFrameFile(image);
+    ASSERT_FALSE(bytes.empty()) << name;
+    Write(name, bytes);
+  };
+  // Frame k lies at z = 2 order[k] and stores k * 100 + i, rescaled by its
+  // own slope and intercept.
+  const int order[5] = {3, 0, 4, 1, 2};
+  testing::DicomMultiFrame mr;
+  for (int k = 0; k < 5; ++k) {
+    mr.positions.push_back({-4, 6, 10.0 + 2.0 * order[k]});
+    mr.rescale.push_back({k % 2 ? 2.0 : 1.0, -10.0 * k});
+    for (int i = 0; i < 12; ++i) mr.pixels.push_back(static_cast<int16_t>(k * 100 + i));
+  }
+  write("mr/enhanced.dcm", mr);
+  auto v = ReadVolume(dir_ + "/mr");
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ(v->dims, (std::array<int, 3>{4, 3, 5}));
+  EXPECT_NEAR(v->spacing[0], 0.5, 1e-9);
+  EXPECT_NEAR(v->spacing[1], 0.8, 1e-9);
+  EXPECT_NEAR(v->spacing[2], 2.0, 1e-9);
+  EXPECT_EQ(v->origin, (std::array<double, 3>{-4, 6, 10}));
+  EXPECT_TRUE(v->notes.empty());
+  for (int k = 0; k < 5; ++k) {
+    for (int i = 0; i < 12; ++i) {
+      ASSERT_EQ(v->At(i % 4, i / 4, order[k]), (k * 100 + i) * (k % 2 ? 2.0 : 1.0) - 10.0 * k)
+          << "frame " << k << " pixel " << i;
+    }
+  }
+  // The same frames as a sagittal stack.
+  testing::DicomMultiFrame sagittal = mr;
+  sagittal.orientation = {0, 1, 0, 0, 0, -1};
+  for (int k = 0; k < 5; ++k) sagittal.positions[k] = {3.0 * order[k], 0, 0};
+  write("sag/enhanced.dcm", sagittal);
+  v = ReadVolume(dir_ + "/sag");
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ(OrientationCode(v->direction), "PIR");
+  EXPECT_NEAR(v->spacing[2], 3.0, 1e-9);
+  EXPECT_EQ(v->At(0, 0, 0), 200 - 20);  // frame 2 (x = 12) comes first along -x
+
+  // A multi-frame file and single-frame files of one series make one
+  // volume: frames at z 0..4, slices at 5 and 6.
+  testing::DicomMultiFrame part = mr;
+  part.series = "1.2.3.4";
+  write("mixed/a_frames.dcm", part);
+  for (int z = 5; z < 7; ++z) {
+    SliceSpec s;
+    s.position = {-4, 6, 10.0 + 2.0 * z};
+    s.spacing = {0.5, 0.8};
+    s.frame_value = z;
+    WriteSlice(dir_ + "/mixed/z" + std::to_string(z), s);
+  }
+  v = ReadVolume(dir_ + "/mixed");
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ(v->dims[2], 7);
+  EXPECT_EQ(v->At(1, 0, 0), 101 * 2 - 10);  // frame 1 at z = 0
+  EXPECT_EQ(v->At(1, 0, 6), 601 - 1024);
+  auto listed = ReadVolume(dir_ + "/mixed/");
+  ASSERT_TRUE(listed.ok());
+
+  // An RT dose: no functional groups; frame offsets along the normal and a
+  // dose grid scaling.
+  testing::DicomMultiFrame dose;
+  dose.grid_offsets = true;
+  dose.sop_class = "1.2.840.10008.5.1.4.1.1.481.2";  // RT Dose Storage
+  dose.rescale = {{0.5, 0}};
+  for (int k = 0; k < 4; ++k) {
+    dose.positions.push_back({1, 2, -3.0 - 2.5 * k});  // descending z: sorted ascending
+    for (int i = 0; i < 12; ++i) dose.pixels.push_back(static_cast<int16_t>(k * 100 + i));
+  }
+  write("dose/RD.dcm", dose);
+  v = ReadVolume(dir_ + "/dose");
+  ASSERT_TRUE(v.ok()) << v.status();
+  EXPECT_EQ(v->dims, (std::array<int, 3>{4, 3, 4}));
+  EXPECT_NEAR(v->spacing[2], 2.5, 1e-9);
+  EXPECT_NEAR(v->origin[2], -10.5, 1e-9);
+  EXPECT_EQ(v->At(3, 2, 0), (300 + 11) * 0.5);  // the last frame lies lowest
+  EXPECT_EQ(v->At(3, 2, 3), 11 * 0.5);
+
+  // Refused, naming the file and what is wrong.
+  testing::DicomMultiFrame stacks = mr;
+  stacks.positions = {{0, 0, 0}, {0, 0, 2}, {0, 0, 0}, {0, 0, 2}};  // two echoes of two slices
+  stacks.rescale.resize(4);
+  write("stacks/e.dcm", stacks);
+  ExpectError(ReadVolume(dir_ + "/stacks"), "e.dcm", "the image holds several stacks");
+  testing::DicomMultiFrame short_groups = mr;
+  short_groups.declared_frames = 6;
+  write("groups/g.dcm", short_groups);
+  ExpectError(ReadVolume(dir_ + "/groups"), "g.dcm", "has 6 frames but functional groups for 5");
+  testing::DicomMultiFrame few_offsets = dose;
+  few_offsets.declared_frames = 5;
+  write("offsets/o.dcm", few_offsets);
+  ExpectError(ReadVolume(dir_ + "/offsets"), "o.dcm",
+              "has 5 frames but no position for each (no per-frame functional groups, and a "
+              "GridFrameOffsetVector of 4 values)");
+  write("cut/c.dcm", mr);
+  std::filesystem::resize_file(dir_ + "/cut/c.dcm",
+                               std::filesystem::file_size(dir_ + "/cut/c.dcm") - 2);
+  ExpectError(ReadVolume(dir_ + "/cut"), "c.dcm", "declares 120 bytes, 118 remain");
+}
+
 TEST(SeriesPathTest, OnlyADigitsAndDotsUidAfterTheLastHash) {
   auto parsed = ParseSeriesPath("data/study#1.2.840.113619.2.55");
   ASSERT_TRUE(parsed.has_value());

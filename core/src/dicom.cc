@@ -1,9 +1,14 @@
-// DICOM series reader: a directory of single-frame CT or MR slices, read
+// DICOM series reader: a directory of CT, MR or RT dose images, read
 // with GDCM (Debian's libgdcm, the library DICOM toolkits and ITK build on),
 // which lives in the module libtranstick_dicom.so (dicom_gdcm.cc, loaded on
 // first use: dicom_module.h says why).
 //
-// Each DICOM image file in the directory is one slice. DICOMDIR, names
+// Each frame of each DICOM image in the directory is one slice: a file of
+// one frame, or each frame of a multi-frame image, placed by its
+// functional groups (enhanced CT and MR, PS3.3 C.7.6.16: per frame, else
+// shared, else the file's attributes) or by an RT dose's
+// GridFrameOffsetVector (distances along the normal from the file's
+// ImagePositionPatient) and scaled by its DoseGridScaling. DICOMDIR, names
 // starting with '.', subdirectories, files that are not DICOM (no "DICM" at
 // byte 128, and not starting as a data set without one does, with group
 // 0002 or 0008) and DICOM files without pixel data (reports, presentation
@@ -14,14 +19,16 @@
 // root's confinement holds), its element lengths walked (ElementWalk, below:
 // GDCM would allocate whatever a length declares), and given to GDCM from
 // memory. Each is read twice: first its header only (up to the pixel data),
-// which is checked (sizes, pixel format, one frame) before GDCM reads any
-// pixels, then in full, which decodes the pixels in whatever transfer
-// syntax GDCM supports.
+// which is checked (sizes, pixel format, frames) before GDCM reads any
+// pixels, then in full, once per file whatever its frames, which decodes
+// the pixels in whatever transfer syntax GDCM supports.
 //
 // Attributes used:
 //   (0020,000E) SeriesInstanceUID   all slices the same: one series
 //   (0028,0010/0011) Rows, Columns  all slices the same
-//   (0028,0002) SamplesPerPixel 1, (0028,0008) NumberOfFrames 1 (or absent)
+//   (0028,0002) SamplesPerPixel 1, (0028,0008) NumberOfFrames
+//   (5200,9229/9230) Shared/PerFrameFunctionalGroupsSequence (dicom_module.h)
+//   (3004,000C) GridFrameOffsetVector, (3004,000E) DoseGridScaling
 //   (0028,0100) BitsAllocated 8/16/32, (0028,0103) PixelRepresentation
 //   (0028,0030) PixelSpacing        row spacing \ column spacing, the same
 //   (0020,0037) ImageOrientationPatient  row and column directions, the same
@@ -32,8 +39,9 @@
 // the volume's z axis is the normal and its direction a rotation. The gaps
 // between consecutive positions give the z spacing: they must all be equal
 // (to 1% or 0.01 mm). A gap that is a multiple of the others (a missing
-// slice), two slices at one position, positions off the normal (a tilted
-// gantry) are refused, naming the files.
+// slice), two slices at one position (in a multi-frame image: several
+// stacks), and positions off the normal (a tilted gantry) are refused,
+// naming the files and frames.
 #include <dirent.h>
 #include <dlfcn.h>
 #include <fcntl.h>
@@ -89,6 +97,10 @@ struct Slice {
   std::array<double, 3> position = {0, 0, 0};
   double slope = 1, intercept = 0;
   double along_normal = 0;
+  // A frame of a multi-frame image: which (from 0), of how many.
+  int frame = 0, frames = 1;
+  // The file, and the frame when it has several: what messages name.
+  std::string Name() const { return frames > 1 ? absl::StrCat(path, " frame ", frame + 1) : path; }
   bool native = true;            // pixel data not encapsulated (compressed)
   uint32_t pixel_length = 0;     // the pixel data's declared value length
   uint64_t pixel_available = 0;  // bytes of the file from its value on
@@ -112,11 +124,14 @@ enum Element : size_t {
   kModality,        // (0008,0060)
   kDescription,     // (0008,103E) SeriesDescription
   kSeriesNumber,    // (0020,0011)
+  kFrameOffsets,    // (3004,000C) GridFrameOffsetVector (RT Dose)
+  kDoseScaling,     // (3004,000E) DoseGridScaling (RT Dose)
   kElements
 };
 constexpr uint32_t kTags[kElements] = {0x0020000e, 0x00280010, 0x00280011, 0x00280002, 0x00280008,
                                        0x00280100, 0x00280103, 0x00280030, 0x00200037, 0x00200032,
-                                       0x00281053, 0x00281052, 0x00080060, 0x0008103e, 0x00200011};
+                                       0x00281053, 0x00281052, 0x00080060, 0x0008103e, 0x00200011,
+                                       0x3004000c, 0x3004000e};
 
 // libtranstick_dicom.so's functions, or why it could not be loaded.
 struct Gdcm {
@@ -148,12 +163,25 @@ const Gdcm& LoadGdcm() {
   return gdcm;
 }
 
-// A string element's value, trimmed of DICOM's padding; "" when absent.
-std::string Text(const DicomHeader& h, Element e) {
-  if (!h.values[e]) return "";
-  std::string s = *h.values[e];
+// Printable text of a header's string for a message: at most 64
+// characters, anything but printable ASCII shown as '?'.
+std::string Shown(std::string text) {
+  if (text.size() > 64) text = text.substr(0, 61) + "...";
+  for (char& c : text) {
+    if (!absl::ascii_isprint(static_cast<unsigned char>(c))) c = '?';
+  }
+  return text;
+}
+
+// A string value trimmed of DICOM's padding.
+std::string Trimmed(std::string s) {
   while (!s.empty() && (s.back() == '\0' || s.back() == ' ')) s.pop_back();
   return std::string(absl::StripAsciiWhitespace(s));
+}
+
+// A string element's value, trimmed of DICOM's padding; "" when absent.
+std::string Text(const DicomHeader& h, Element e) {
+  return h.values[e] ? Trimmed(*h.values[e]) : "";
 }
 
 // A US element's value, or -1 when absent or malformed.
@@ -164,30 +192,36 @@ int Unsigned16(const DicomHeader& h, Element e) {
   return p[0] | p[1] << 8;
 }
 
-// A decimal string's backslash-separated numbers.
-absl::StatusOr<std::vector<double>> Decimals(const std::string& path, const DicomHeader& h,
-                                             Element e, const char* name, size_t want,
-                                             bool required) {
-  const std::string text = Text(h, e);
-  if (text.empty()) {
-    if (required) {
-      return Error(
-          path, absl::StrFormat("has no %s (%04X,%04X)", name, kTags[e] >> 16, kTags[e] & 0xffff));
-    }
-    return std::vector<double>{};
-  }
+// The backslash-separated numbers of a decimal string `text` (empty: none).
+absl::StatusOr<std::vector<double>> DecimalsOf(const std::string& path, const std::string& text,
+                                               const char* name, size_t want) {
+  if (text.empty()) return std::vector<double>{};
   std::vector<double> out;
   for (absl::string_view part : absl::StrSplit(text, '\\')) {
     double v = 0;
     if (!absl::SimpleAtod(absl::StripAsciiWhitespace(part), &v) || !std::isfinite(v)) {
-      return Error(path, absl::StrCat(name, " '", text, "' is not ", want, " numbers"));
+      return Error(path, absl::StrCat(name, " '", Shown(text), "' is not ",
+                                      want == 0 ? "a list of" : absl::StrCat(want), " numbers"));
     }
     out.push_back(v);
   }
-  if (out.size() != want) {
-    return Error(path, absl::StrCat(name, " '", text, "' is not ", want, " numbers"));
+  if (want != 0 && out.size() != want) {
+    return Error(path, absl::StrCat(name, " '", Shown(text), "' is not ", want, " numbers"));
   }
   return out;
+}
+
+// The numbers of element `e` of the header, as DecimalsOf (want 0: any
+// count); an error when `required` and it is absent.
+absl::StatusOr<std::vector<double>> Decimals(const std::string& path, const DicomHeader& h,
+                                             Element e, const char* name, size_t want,
+                                             bool required) {
+  const std::string text = Text(h, e);
+  if (text.empty() && required) {
+    return Error(path,
+                 absl::StrFormat("has no %s (%04X,%04X)", name, kTags[e] >> 16, kTags[e] & 0xffff));
+  }
+  return DecimalsOf(path, text, name, want);
 }
 
 // GDCM allocates every element's declared length before it reads the
@@ -441,18 +475,10 @@ absl::StatusOr<std::string> ReadChecked(const std::string& path, const ReadOptio
   return bytes;
 }
 
-// Printable text of a header's string for a message: at most 64
-// characters, anything but printable ASCII shown as '?'.
-std::string Shown(std::string text) {
-  if (text.size() > 64) text = text.substr(0, 61) + "...";
-  for (char& c : text) {
-    if (!absl::ascii_isprint(static_cast<unsigned char>(c))) c = '?';
-  }
-  return text;
-}
-
-// Checks the image attributes of a slice whose header is `h`, and fills
-// `s` from them. The error says why the image cannot be a slice.
+// Checks the image attributes of the file whose header is `h`, and fills
+// `s` from them: its size, pixel format and frames, and, for a file of one
+// frame, where that frame lies. The error says why the image cannot be a
+// slice.
 absl::Status CheckImage(const DicomHeader& h, uint64_t file_size, Slice& s) {
   const std::string& path = s.path;
   if (h.big_endian) {
@@ -472,10 +498,12 @@ absl::Status CheckImage(const DicomHeader& h, uint64_t file_size, Slice& s) {
     return Error(path, absl::StrCat("has ", samples,
                                     " samples per pixel: only grey-level (1) images are supported"));
   }
-  const std::string frames = Text(h, kFrames);
-  if (!frames.empty() && frames != "1") {
-    return Error(path, absl::StrCat("has ", Shown(frames),
-                                    " frames: only single-frame slices are supported"));
+  if (const std::string frames = Text(h, kFrames); !frames.empty()) {
+    if (!absl::SimpleAtoi(frames, &s.frames) || s.frames < 1 ||
+        s.frames > static_cast<int>(kMaxSlices)) {
+      return Error(path, absl::StrCat("NumberOfFrames '", Shown(frames), "' is not in [1, ",
+                                      kMaxSlices, "]"));
+    }
   }
   s.bits = Unsigned16(h, kBits);
   if (s.bits != 8 && s.bits != 16 && s.bits != 32) {
@@ -486,31 +514,39 @@ absl::Status CheckImage(const DicomHeader& h, uint64_t file_size, Slice& s) {
   absl::StatusOr<std::vector<double>> v =
       Decimals(path, h, kPixelSpacing, "PixelSpacing", 2, false);
   if (!v.ok()) return v.status();
-  if (!v->empty()) {
-    if (!((*v)[0] > 0) || !((*v)[1] > 0)) {
-      return Error(path, absl::StrCat("PixelSpacing ", (*v)[0], "\\", (*v)[1], " is not positive"));
-    }
-    s.pixel_spacing = {(*v)[0], (*v)[1]};
-  }
-  v = Decimals(path, h, kOrientation, "ImageOrientationPatient", 6, true);
+  if (!v->empty()) s.pixel_spacing = {(*v)[0], (*v)[1]};
+  // The orientation and position are required of a single frame; the
+  // frames of a multi-frame image may have theirs in functional groups.
+  const bool multi = s.frames > 1 || !h.frames.empty();
+  v = Decimals(path, h, kOrientation, "ImageOrientationPatient", 6, !multi);
   if (!v.ok()) return v.status();
-  std::copy(v->begin(), v->end(), s.orientation.begin());
-  v = Decimals(path, h, kPosition, "ImagePositionPatient", 3, true);
+  if (!v->empty()) std::copy(v->begin(), v->end(), s.orientation.begin());
+  v = Decimals(path, h, kPosition, "ImagePositionPatient", 3, !multi);
   if (!v.ok()) return v.status();
-  std::copy(v->begin(), v->end(), s.position.begin());
+  if (!v->empty()) std::copy(v->begin(), v->end(), s.position.begin());
   v = Decimals(path, h, kSlope, "RescaleSlope", 1, false);
   if (!v.ok()) return v.status();
-  if (!v->empty()) s.slope = (*v)[0];
+  if (!v->empty()) {
+    s.slope = (*v)[0];
+  } else {
+    // An RT dose grid's scale to grays.
+    v = Decimals(path, h, kDoseScaling, "DoseGridScaling", 1, false);
+    if (!v.ok()) return v.status();
+    if (!v->empty()) s.slope = (*v)[0];
+  }
   v = Decimals(path, h, kIntercept, "RescaleIntercept", 1, false);
   if (!v.ok()) return v.status();
   if (!v->empty()) s.intercept = (*v)[0];
   // Before GDCM reads the pixels (and allocates their declared length):
   // native pixel data must hold the image and lie within the file.
-  const uint64_t bytes = uint64_t{static_cast<uint32_t>(s.rows)} * s.columns * (s.bits / 8);
+  const uint64_t bytes =
+      uint64_t{static_cast<uint32_t>(s.rows)} * s.columns * (s.bits / 8) * s.frames;
   if (s.native && (s.pixel_length < bytes || s.pixel_length > s.pixel_available)) {
     return Error(path, absl::StrCat("pixel data of ", s.pixel_length, " bytes (", s.pixel_available,
-                                    " in the file) for ", s.columns, "x", s.rows, " ", s.bits,
-                                    "-bit pixels that need ", bytes, " (truncated?)"));
+                                    " in the file) for ",
+                                    s.frames == 1 ? "" : absl::StrCat(s.frames, " frames of "),
+                                    s.columns, "x", s.rows, " ", s.bits, "-bit pixels that need ",
+                                    bytes, " (truncated?)"));
   }
   if (!s.native && s.pixel_length != 0xffffffffu && s.pixel_length > s.pixel_available) {
     return Error(path, absl::StrCat("pixel data of ", s.pixel_length, " bytes, the file holds ",
@@ -519,9 +555,92 @@ absl::Status CheckImage(const DicomHeader& h, uint64_t file_size, Slice& s) {
   return absl::OkStatus();
 }
 
+// The spacing, orientation, position and rescale of each frame of a file
+// checked by CheckImage (`file`), appended to `out` as slices. A frame's
+// functional groups (DicomFrame) override the file's attributes; frames
+// without them are placed by an RT dose's GridFrameOffsetVector, offsets
+// along the normal from the first frame's position.
+absl::Status Frames(const DicomHeader& h, const Slice& file, std::vector<Slice>* out) {
+  const std::string& path = file.path;
+  const int n = file.frames;
+  if (!h.frames.empty() && (h.frames.size() != static_cast<size_t>(n) || h.more_frames)) {
+    return Error(path, absl::StrCat("has ", n, " frames but functional groups for ",
+                                    h.more_frames ? "more" : absl::StrCat(h.frames.size())));
+  }
+  std::vector<double> offsets;
+  if (h.frames.empty() && n > 1) {
+    absl::StatusOr<std::vector<double>> v =
+        Decimals(path, h, kFrameOffsets, "GridFrameOffsetVector", 0, false);
+    if (!v.ok()) return v.status();
+    offsets = *std::move(v);
+    if (offsets.size() != static_cast<size_t>(n)) {
+      return Error(path, absl::StrCat("has ", n,
+                                      " frames but no position for each (no per-frame functional "
+                                      "groups, and a GridFrameOffsetVector of ",
+                                      offsets.size(), " values)"));
+    }
+  }
+  if (h.frames.empty() && n > 1) {
+    // Placed by the file's own orientation and position.
+    for (Element e : {kOrientation, kPosition}) {
+      if (Text(h, e).empty()) {
+        return Error(path, absl::StrFormat("has %d frames and no %s (%04X,%04X)", n,
+                                           e == kOrientation ? "ImageOrientationPatient"
+                                                             : "ImagePositionPatient",
+                                           kTags[e] >> 16, kTags[e] & 0xffff));
+      }
+    }
+  }
+  for (int k = 0; k < n; ++k) {
+    Slice s = file;
+    s.frame = k;
+    if (!h.frames.empty()) {
+      const DicomFrame& f = h.frames[k];
+      const std::string name = s.Name();
+      auto read = [&](const std::optional<std::string>& value, const char* what, size_t want,
+                      double* to) -> absl::Status {
+        if (!value) return absl::OkStatus();
+        absl::StatusOr<std::vector<double>> v = DecimalsOf(name, Trimmed(*value), what, want);
+        if (!v.ok()) return v.status();
+        std::copy(v->begin(), v->end(), to);
+        return absl::OkStatus();
+      };
+      if (!f.position) {
+        return Error(name, "has no ImagePositionPatient in its PlanePositionSequence (0020,9113)");
+      }
+      if (!f.orientation && Text(h, kOrientation).empty()) {
+        return Error(name,
+                     "has no ImageOrientationPatient (0020,0037), in its functional groups or "
+                     "the file's");
+      }
+      for (absl::Status st :
+           {read(f.position, "ImagePositionPatient", 3, s.position.data()),
+            read(f.orientation, "ImageOrientationPatient", 6, s.orientation.data()),
+            read(f.spacing, "PixelSpacing", 2, s.pixel_spacing.data()),
+            read(f.slope, "RescaleSlope", 1, &s.slope),
+            read(f.intercept, "RescaleIntercept", 1, &s.intercept)}) {
+        if (!st.ok()) return st;
+      }
+    } else if (n > 1) {
+      const std::array<double, 3> row = {s.orientation[0], s.orientation[1], s.orientation[2]};
+      const std::array<double, 3> column = {s.orientation[3], s.orientation[4], s.orientation[5]};
+      const std::array<double, 3> normal = {row[1] * column[2] - row[2] * column[1],
+                                            row[2] * column[0] - row[0] * column[2],
+                                            row[0] * column[1] - row[1] * column[0]};
+      for (int a = 0; a < 3; ++a) s.position[a] += (offsets[k] - offsets[0]) * normal[a];
+    }
+    if (!(s.pixel_spacing[0] > 0) || !(s.pixel_spacing[1] > 0)) {
+      return Error(s.Name(), absl::StrCat("PixelSpacing ", s.pixel_spacing[0], "\\",
+                                          s.pixel_spacing[1], " is not positive"));
+    }
+    out->push_back(std::move(s));
+  }
+  return absl::OkStatus();
+}
+
 // What a file in a series directory is.
 enum class FileKind {
-  kImage,     // a DICOM image: a slice (its problem aside)
+  kImage,     // a DICOM image: a slice, or a slice per frame (its problem aside)
   kNotDicom,  // no DICOM file at all (a text, an image of another format)
   kNoImage,   // DICOM without pixel data (a report, a presentation state)
 };
@@ -529,9 +648,10 @@ enum class FileKind {
 // Reads a file's header. A file that starts as DICOM does ("DICM" at byte
 // 128) and cannot be read is an error (a damaged slice must not go
 // unnoticed); one that does not, and is not read as a data set without a
-// preamble either, is kNotDicom.
+// preamble either, is kNotDicom. An image appends its frames to `out` as
+// slices, or one slice holding its problem.
 absl::StatusOr<FileKind> ReadHeader(const Gdcm& gdcm, const std::string& path,
-                                    const ReadOptions& options, Slice* out) {
+                                    const ReadOptions& options, std::vector<Slice>* out) {
   absl::StatusOr<std::string> prefix = vi::ReadPrefix(path, 132, options);
   if (!prefix.ok()) return prefix.status();
   const bool magic = prefix->size() == 132 && prefix->compare(128, 4, "DICM") == 0;
@@ -554,15 +674,14 @@ absl::StatusOr<FileKind> ReadHeader(const Gdcm& gdcm, const std::string& path,
   DicomHeader h;
   // Up to the pixel data: nothing of it is read, and its length is checked
   // below before GDCM reads it. The module takes the bytes.
-  gdcm.read_header(&*contents, kTags, kElements, &h);
+  gdcm.read_header(&*contents, kTags, kElements, kMaxSlices, &h);
   if (!h.read) {
     if (!magic) return FileKind::kNotDicom;
     return Error(path, "is not a DICOM file GDCM can read");
   }
   const int64_t value_at = h.pixel_value_at;
   if (value_at < 4 || static_cast<uint64_t>(value_at) > file_size) return FileKind::kNoImage;
-  Slice& s = *out;
-  s = Slice();
+  Slice s;
   s.path = path;
   s.native = !h.encapsulated;
   s.series = Text(h, kSeries);
@@ -570,6 +689,15 @@ absl::StatusOr<FileKind> ReadHeader(const Gdcm& gdcm, const std::string& path,
   s.description = Text(h, kDescription);
   s.number = Text(h, kSeriesNumber);
   s.problem = CheckImage(h, file_size, s);
+  if (s.problem.ok()) {
+    std::vector<Slice> frames;
+    s.problem = Frames(h, s, &frames);
+    if (s.problem.ok()) {
+      for (Slice& f : frames) out->push_back(std::move(f));
+      return FileKind::kImage;
+    }
+  }
+  out->push_back(std::move(s));
   return FileKind::kImage;
 }
 
@@ -584,27 +712,34 @@ ScalarType TypeOf(const Slice& s) {
   }
 }
 
-// Appends the slice's pixels, rescaled, to `out`.
-absl::Status ReadPixels(const Gdcm& gdcm, const Slice& s, const ReadOptions& options,
-                        std::vector<float>* out) {
+// Decodes the file of `slices` (frames of one file, with their places in
+// the volume: z[i] for slices[i]) once, and writes each frame, rescaled, to
+// its plane of `out`.
+absl::Status ReadPixels(const Gdcm& gdcm, const std::vector<const Slice*>& slices,
+                        const std::vector<int>& z, const ReadOptions& options, float* out) {
+  const Slice& s = *slices.front();
   // Read and walked again: the file may have changed since its header was.
   absl::StatusOr<std::string> contents = ReadChecked(s.path, options);
   if (!contents.ok()) return contents.status();
   DicomPixels pixels;
-  gdcm.read_pixels(&*contents, s.rows, s.columns, s.bits, &pixels);
+  gdcm.read_pixels(&*contents, s.rows, s.columns, s.bits, s.frames, &pixels);
   if (!pixels.error.empty()) return Error(s.path, pixels.error);
-  const size_t old = out->size();
   const size_t count = static_cast<size_t>(s.rows) * s.columns;
-  if (pixels.bytes.size() != count * (s.bits / 8)) {
+  const size_t frame_bytes = count * (s.bits / 8);
+  if (pixels.bytes.size() != frame_bytes * s.frames) {
     return Error(s.path, "GDCM decoded a different number of pixels");
   }
-  out->resize(old + count);
-  // GDCM hands pixels over in the host's byte order.
-  vi::ConvertSamples(reinterpret_cast<const unsigned char*>(pixels.bytes.data()), count, TypeOf(s),
-                     ByteOrder::kLittle, out->data() + old);
-  if (s.slope != 1 || s.intercept != 0) {
-    for (size_t i = old; i < out->size(); ++i) {
-      (*out)[i] = static_cast<float>((*out)[i] * s.slope + s.intercept);
+  for (size_t i = 0; i < slices.size(); ++i) {
+    const Slice& f = *slices[i];
+    float* plane = out + static_cast<size_t>(z[i]) * count;
+    // GDCM hands pixels over in the host's byte order.
+    vi::ConvertSamples(
+        reinterpret_cast<const unsigned char*>(pixels.bytes.data()) + frame_bytes * f.frame, count,
+        TypeOf(f), ByteOrder::kLittle, plane);
+    if (f.slope != 1 || f.intercept != 0) {
+      for (size_t k = 0; k < count; ++k) {
+        plane[k] = static_cast<float>(plane[k] * f.slope + f.intercept);
+      }
     }
   }
   return absl::OkStatus();
@@ -638,11 +773,12 @@ std::string NameSome(const std::vector<std::string>& names, size_t limit = 3) {
   return out;
 }
 
-// One series of a directory: its slices in file name order.
+// One series of a directory: its slices (frames) in file name order.
 struct Series {
   std::string uid;
   std::vector<Slice> slices;
-  // "1.2.3 (CT, series 2 'AX 5mm', 120 files)"
+  size_t files = 0;
+  // "1.2.3 (CT, series 2 'AX 5mm', 120 files)", "... 1 file, 96 frames)"
   std::string Describe() const {
     const Slice& f = slices.front();
     std::string what = f.modality.empty() ? "" : Shown(f.modality);
@@ -650,8 +786,8 @@ struct Series {
       absl::StrAppend(&what, what.empty() ? "" : ", ", "series ", Shown(f.number));
     if (!f.description.empty())
       absl::StrAppend(&what, what.empty() ? "" : " ", "'", Shown(f.description), "'");
-    absl::StrAppend(&what, what.empty() ? "" : ", ", slices.size(),
-                    slices.size() == 1 ? " file" : " files");
+    absl::StrAppend(&what, what.empty() ? "" : ", ", files, files == 1 ? " file" : " files");
+    if (slices.size() != files) absl::StrAppend(&what, ", ", slices.size(), " frames");
     return absl::StrCat(uid.empty() ? "(no SeriesInstanceUID)" : Shown(uid), " (", what, ")");
   }
 };
@@ -705,8 +841,8 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
       subdirectories.push_back(name + "/");
       continue;
     }
-    Slice slice;
-    absl::StatusOr<FileKind> kind = ReadHeader(gdcm, file, options, &slice);
+    std::vector<Slice> frames;
+    absl::StatusOr<FileKind> kind = ReadHeader(gdcm, file, options, &frames);
     if (!kind.ok()) return kind.status();
     if (*kind == FileKind::kNotDicom) {
       not_dicom.push_back(name);
@@ -716,13 +852,17 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
       no_image.push_back(name);
       continue;
     }
-    auto it = std::find_if(all.begin(), all.end(),
-                           [&](const Series& x) { return x.uid == slice.series; });
+    const std::string& uid = frames.front().series;
+    auto it = std::find_if(all.begin(), all.end(), [&](const Series& x) { return x.uid == uid; });
     if (it == all.end()) {
-      all.push_back({slice.series, {}});
+      all.push_back({uid, {}, 0});
       it = all.end() - 1;
     }
-    it->slices.push_back(std::move(slice));
+    ++it->files;
+    for (Slice& f : frames) it->slices.push_back(std::move(f));
+    if (it->slices.size() > kMaxSlices) {
+      return Error(path, absl::StrCat("more than ", kMaxSlices, " slices in series ", Shown(uid)));
+    }
   }
   std::vector<std::string> notes;
   if (!subdirectories.empty()) {
@@ -776,19 +916,20 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
   for (const Slice& s : slices) {
     if (s.rows != first.rows || s.columns != first.columns || s.bits != first.bits ||
         s.is_signed != first.is_signed) {
-      return Error(path, absl::StrCat(s.path, " is ", s.columns, "x", s.rows, " ", s.bits,
-                                      "-bit, ", first.path, " ", first.columns, "x", first.rows,
+      return Error(path, absl::StrCat(s.Name(), " is ", s.columns, "x", s.rows, " ", s.bits,
+                                      "-bit, ", first.Name(), " ", first.columns, "x", first.rows,
                                       " ", first.bits, "-bit: the slices differ"));
     }
     for (int i = 0; i < 6; ++i) {
       if (std::fabs(s.orientation[i] - first.orientation[i]) > 1e-4) {
-        return Error(path, absl::StrCat(s.path, " and ", first.path,
+        return Error(path, absl::StrCat(s.Name(), " and ", first.Name(),
                                         " have different ImageOrientationPatient"));
       }
     }
     for (int i = 0; i < 2; ++i) {
       if (std::fabs(s.pixel_spacing[i] - first.pixel_spacing[i]) > 1e-4 * first.pixel_spacing[i]) {
-        return Error(path, absl::StrCat(s.path, " and ", first.path, " have different PixelSpacing"));
+        return Error(path,
+                     absl::StrCat(s.Name(), " and ", first.Name(), " have different PixelSpacing"));
       }
     }
   }
@@ -799,7 +940,7 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
                                   row[0] * column[1] - row[1] * column[0]};
   const double n_len = std::sqrt(Dot(normal, normal));
   if (!(n_len > 0.5)) {
-    return Error(path, absl::StrCat(first.path,
+    return Error(path, absl::StrCat(first.Name(),
                                     ": ImageOrientationPatient's row and column are not "
                                     "orthogonal unit vectors"));
   }
@@ -821,16 +962,18 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
       const Slice& a = slices[i];
       const Slice& b = slices[i + 1];
       if (gaps[i] < 1e-3) {
-        return Error(path, absl::StrCat(a.path, " and ", b.path,
-                                        " lie at the same position (a duplicate slice, or two "
-                                        "series in one directory)"));
+        return Error(path, absl::StrCat(a.Name(), " and ", b.Name(), " lie at the same position",
+                                        a.path == b.path
+                                            ? " (the image holds several stacks: echoes, phases or "
+                                              "time points, which are not supported)"
+                                            : " (a duplicate slice, or two series with one UID)"));
       }
       if (std::fabs(gaps[i] - typical) > 0.01 * typical + 0.01) {
-        return Error(path, absl::StrFormat(
-                               "%s a gap of %.3f mm between %s and %s, where the slices are "
-                               "%.3f mm apart (a missing slice?)",
-                               gaps[i] > typical ? "" : "uneven spacing:", gaps[i], a.path, b.path,
-                               typical));
+        return Error(path,
+                     absl::StrFormat("%s a gap of %.3f mm between %s and %s, where the slices are "
+                                     "%.3f mm apart (a missing slice?)",
+                                     gaps[i] > typical ? "" : "uneven spacing:", gaps[i], a.Name(),
+                                     b.Name(), typical));
       }
       // Successive positions must move along the normal only.
       std::array<double, 3> step;
@@ -840,7 +983,7 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
         return Error(path, absl::StrFormat(
                                "%s lies %.3f mm off the normal of %s (a tilted gantry or a sheared "
                                "series), which is not supported",
-                               b.path, off, a.path));
+                               b.Name(), off, a.Name()));
       }
     }
     double sum = 0;
@@ -856,9 +999,32 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
   volume.dims = {first.columns, first.rows, static_cast<int>(slices.size())};
   volume.spacing = {first.pixel_spacing[1], first.pixel_spacing[0], z_spacing};
   volume.source_type = TypeOf(first);
-  volume.values.reserve(volume.VoxelCount());
-  for (const Slice& s : slices) {
-    if (absl::Status st = ReadPixels(gdcm, s, options, &volume.values); !st.ok()) return st;
+  volume.values.resize(volume.VoxelCount());
+  // Each file once, in the order of its first plane, with every frame of
+  // it the volume holds.
+  std::vector<size_t> order(slices.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(),
+                   [&](size_t a, size_t b) { return slices[a].path < slices[b].path; });
+  std::vector<std::pair<size_t, size_t>> runs;  // [begin, end) of order, by first plane
+  for (size_t i = 0; i < order.size();) {
+    size_t j = i;
+    while (j < order.size() && slices[order[j]].path == slices[order[i]].path) ++j;
+    runs.push_back({i, j});
+    i = j;
+  }
+  std::sort(runs.begin(), runs.end(),
+            [&](const auto& a, const auto& b) { return order[a.first] < order[b.first]; });
+  for (const auto& [begin, end] : runs) {
+    std::vector<const Slice*> frames;
+    std::vector<int> z;
+    for (size_t i = begin; i < end; ++i) {
+      frames.push_back(&slices[order[i]]);
+      z.push_back(static_cast<int>(order[i]));
+    }
+    if (absl::Status st = ReadPixels(gdcm, frames, z, options, volume.values.data()); !st.ok()) {
+      return st;
+    }
   }
   if (absl::Status s = SetOrientation(path, {row, column, normal}, slices.front().position, &volume);
       !s.ok()) {

@@ -3,8 +3,10 @@
 #include <gdcmImage.h>
 #include <gdcmImageReader.h>
 #include <gdcmReader.h>
+#include <gdcmSequenceOfItems.h>
 #include <gdcmTrace.h>
 
+#include <optional>
 #include <set>
 #include <sstream>
 #include <utility>
@@ -22,7 +24,57 @@ void Quiet() {
   gdcm::Trace::ErrorOff();
 }
 
-void ReadHeader(std::string* bytes, const uint32_t* tags, size_t count,
+// The byte value of `tag` in the first item of sequence `sequence` of
+// `ds`, or nullopt.
+std::optional<std::string> InItem(const gdcm::DataSet& ds, const gdcm::Tag& sequence,
+                                  const gdcm::Tag& tag) {
+  if (!ds.FindDataElement(sequence)) return std::nullopt;
+  gdcm::SmartPointer<gdcm::SequenceOfItems> items = ds.GetDataElement(sequence).GetValueAsSQ();
+  if (!items || items->GetNumberOfItems() < 1) return std::nullopt;
+  const gdcm::DataSet& item = items->GetItem(1).GetNestedDataSet();
+  if (!item.FindDataElement(tag)) return std::nullopt;
+  const gdcm::ByteValue* bv = item.GetDataElement(tag).GetByteValue();
+  if (bv == nullptr) return std::nullopt;
+  return std::string(bv->GetPointer(), bv->GetLength());
+}
+
+// A frame's values from one functional groups item (PS3.3 C.7.6.16).
+transtick::DicomFrame FrameOf(const gdcm::DataSet& groups) {
+  transtick::DicomFrame f;
+  f.position = InItem(groups, gdcm::Tag(0x0020, 0x9113), gdcm::Tag(0x0020, 0x0032));
+  f.orientation = InItem(groups, gdcm::Tag(0x0020, 0x9116), gdcm::Tag(0x0020, 0x0037));
+  f.spacing = InItem(groups, gdcm::Tag(0x0028, 0x9110), gdcm::Tag(0x0028, 0x0030));
+  f.slope = InItem(groups, gdcm::Tag(0x0028, 0x9145), gdcm::Tag(0x0028, 0x1053));
+  f.intercept = InItem(groups, gdcm::Tag(0x0028, 0x9145), gdcm::Tag(0x0028, 0x1052));
+  return f;
+}
+
+// The per-frame functional groups, each value the frame's own or else the
+// shared groups'.
+void ReadFrames(const gdcm::DataSet& ds, size_t max_frames, transtick::DicomHeader* out) {
+  const gdcm::Tag per_frame(0x5200, 0x9230), shared(0x5200, 0x9229);
+  if (!ds.FindDataElement(per_frame)) return;
+  gdcm::SmartPointer<gdcm::SequenceOfItems> items = ds.GetDataElement(per_frame).GetValueAsSQ();
+  if (!items) return;
+  transtick::DicomFrame common;
+  if (ds.FindDataElement(shared)) {
+    gdcm::SmartPointer<gdcm::SequenceOfItems> s = ds.GetDataElement(shared).GetValueAsSQ();
+    if (s && s->GetNumberOfItems() >= 1) common = FrameOf(s->GetItem(1).GetNestedDataSet());
+  }
+  const size_t n = items->GetNumberOfItems();
+  out->more_frames = n > max_frames;
+  for (size_t i = 1; i <= n && i <= max_frames; ++i) {
+    transtick::DicomFrame f = FrameOf(items->GetItem(i).GetNestedDataSet());
+    if (!f.position) f.position = common.position;
+    if (!f.orientation) f.orientation = common.orientation;
+    if (!f.spacing) f.spacing = common.spacing;
+    if (!f.slope) f.slope = common.slope;
+    if (!f.intercept) f.intercept = common.intercept;
+    out->frames.push_back(std::move(f));
+  }
+}
+
+void ReadHeader(std::string* bytes, const uint32_t* tags, size_t count, size_t max_frames,
                 transtick::DicomHeader* out) {
   *out = transtick::DicomHeader();
   const uint64_t file_size = bytes->size();
@@ -71,9 +123,11 @@ void ReadHeader(std::string* bytes, const uint32_t* tags, size_t count,
     if (bv == nullptr) continue;
     out->values[i] = std::string(bv->GetPointer(), bv->GetLength());
   }
+  ReadFrames(ds, max_frames, out);
 }
 
-void ReadPixels(std::string* bytes, int rows, int columns, int bits, transtick::DicomPixels* out) {
+void ReadPixels(std::string* bytes, int rows, int columns, int bits, int frames,
+                transtick::DicomPixels* out) {
   *out = transtick::DicomPixels();
   std::istringstream stream(std::move(*bytes));
   gdcm::ImageReader reader;
@@ -85,14 +139,14 @@ void ReadPixels(std::string* bytes, int rows, int columns, int bits, transtick::
   const gdcm::Image& image = reader.GetImage();
   const unsigned int* dims = image.GetDimensions();
   const gdcm::PixelFormat& pf = image.GetPixelFormat();
+  const unsigned depth = image.GetNumberOfDimensions() == 3 ? dims[2] : 1;
   if (image.GetNumberOfDimensions() < 2 || dims[0] != static_cast<unsigned>(columns) ||
-      dims[1] != static_cast<unsigned>(rows) ||
-      (image.GetNumberOfDimensions() == 3 && dims[2] != 1) || pf.GetSamplesPerPixel() != 1 ||
-      pf.GetBitsAllocated() != bits) {
+      dims[1] != static_cast<unsigned>(rows) || depth != static_cast<unsigned>(frames) ||
+      pf.GetSamplesPerPixel() != 1 || pf.GetBitsAllocated() != bits) {
     out->error = "its pixel data does not match its header";
     return;
   }
-  const size_t want = static_cast<size_t>(rows) * columns * (bits / 8);
+  const size_t want = static_cast<size_t>(rows) * columns * (bits / 8) * frames;
   // GDCM accepts native pixel data cut short (it keeps what it read, and
   // GetBuffer pads): check what the file held.
   const gdcm::DataSet& ds = reader.GetFile().GetDataSet();
@@ -104,9 +158,9 @@ void ReadPixels(std::string* bytes, int rows, int columns, int bits, transtick::
   const gdcm::DataElement& pixel_data = ds.GetDataElement(pixel_tag);
   if (const gdcm::ByteValue* bv = pixel_data.GetByteValue();
       bv != nullptr && bv->GetLength() < want) {
-    out->error =
-        absl::StrCat("pixel data holds ", static_cast<uint32_t>(bv->GetLength()), " bytes, ",
-                     columns, "x", rows, " ", bits, "-bit pixels need ", want, " (truncated?)");
+    out->error = absl::StrCat("pixel data holds ", static_cast<uint32_t>(bv->GetLength()),
+                              " bytes, ", frames, " frame", frames == 1 ? "" : "s", " of ", columns,
+                              "x", rows, " ", bits, "-bit pixels need ", want, " (truncated?)");
     return;
   }
   if (image.GetBufferLength() != want) {
@@ -130,20 +184,21 @@ extern "C" __attribute__((visibility("default"))) int transtick_module_abi() {
 }
 
 extern "C" __attribute__((visibility("default"))) void transtick_dicom_read_header(
-    std::string* bytes, const uint32_t* tags, size_t count, transtick::DicomHeader* out) {
+    std::string* bytes, const uint32_t* tags, size_t count, size_t max_frames,
+    transtick::DicomHeader* out) {
   Quiet();
   try {
-    ReadHeader(bytes, tags, count, out);
+    ReadHeader(bytes, tags, count, max_frames, out);
   } catch (...) {
     *out = transtick::DicomHeader();  // not read
   }
 }
 
 extern "C" __attribute__((visibility("default"))) void transtick_dicom_read_pixels(
-    std::string* bytes, int rows, int columns, int bits, transtick::DicomPixels* out) {
+    std::string* bytes, int rows, int columns, int bits, int frames, transtick::DicomPixels* out) {
   Quiet();
   try {
-    ReadPixels(bytes, rows, columns, bits, out);
+    ReadPixels(bytes, rows, columns, bits, frames, out);
   } catch (const std::exception& e) {
     *out = transtick::DicomPixels();
     out->error = absl::StrCat("GDCM failed on its pixel data (", e.what(), ")");

@@ -25,7 +25,19 @@ namespace transtick {
 // transtick_module_abi (module_loader.h): a program refuses a module of
 // another version, built by another transtick (its types may differ).
 // Bump it with any change to the types or functions below.
-inline constexpr int kDicomModuleAbi = 2;
+inline constexpr int kDicomModuleAbi = 3;
+
+// What a multi-frame image's functional groups say of one frame (PS3.3
+// C.7.6.16): the byte values of ImagePositionPatient in its
+// PlanePositionSequence (0020,9113), ImageOrientationPatient in
+// PlaneOrientationSequence (0020,9116), PixelSpacing in
+// PixelMeasuresSequence (0028,9110), and RescaleSlope and RescaleIntercept
+// in PixelValueTransformationSequence (0028,9145); the frame's own item of
+// the per-frame groups first, else the shared groups' item. nullopt when
+// neither has it.
+struct DicomFrame {
+  std::optional<std::string> position, orientation, spacing, slope, intercept;
+};
 
 // A slice file's header, up to its pixel data, as GDCM reads it.
 struct DicomHeader {
@@ -39,23 +51,31 @@ struct DicomHeader {
   // The byte value of each element asked for, in order (tags as group <<
   // 16 | element); nullopt when absent or without a byte value.
   std::vector<std::optional<std::string>> values;
+  // One per item of the PerFrameFunctionalGroupsSequence (5200,9230), at
+  // most `max_frames` (read_header's argument) of them: empty when the
+  // file has none (a single-frame image, or frames placed otherwise).
+  std::vector<DicomFrame> frames;
+  bool more_frames = false;  // the sequence held more items than max_frames
 };
 
-// A slice's pixels, decoded.
+// An image's pixels, decoded.
 struct DicomPixels {
-  std::string error;        // why they could not be, or "" when `bytes` holds them
-  std::vector<char> bytes;  // rows x columns samples of bits / 8 bytes, host byte order
+  std::string error;  // why they could not be, or "" when `bytes` holds them
+  // frames x rows x columns samples of bits / 8 bytes, host byte order
+  std::vector<char> bytes;
 };
 
 extern "C" {
 // Reads the header of the file in `bytes`, which it may move from (a
-// slice's whole file: not copied).
+// slice's whole file: not copied), and at most `max_frames` frames'
+// functional groups.
 typedef void (*TranstickDicomReadHeader)(std::string* bytes, const uint32_t* tags, size_t count,
-                                         DicomHeader* out);
+                                         size_t max_frames, DicomHeader* out);
 // Decodes the pixels of the file in `bytes`, which it may move from, and
-// which must be one frame of `rows` x `columns` grey samples of `bits` bits.
+// which must be `frames` frames of `rows` x `columns` grey samples of
+// `bits` bits.
 typedef void (*TranstickDicomReadPixels)(std::string* bytes, int rows, int columns, int bits,
-                                         DicomPixels* out);
+                                         int frames, DicomPixels* out);
 }
 
 }  // namespace transtick

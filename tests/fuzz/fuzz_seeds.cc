@@ -154,6 +154,8 @@ bool WriteVolumes(const fs::path& dir) {
   }
   // The volume fuzzer makes a directory of this input's slices.
   ok &= Write(dir / "series.dicom", DicomSeriesInput(v));
+  ok &= Write(dir / "enhanced.dicom", DicomMultiFrameInput(v, false));
+  ok &= Write(dir / "rtdose.dicom", DicomMultiFrameInput(v, true));
   ok &= WriteVolume(dir / "little.den", DenFile(v, ByteOrder::kLittle), v);
   ok &= WriteVolume(dir / "big.den", DenFile(v, ByteOrder::kBig), v);
   return ok;

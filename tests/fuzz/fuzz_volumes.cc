@@ -205,4 +205,23 @@ std::string DicomSeriesInput(const Volume& volume) {
   return out;
 }
 
+std::string DicomMultiFrameInput(const Volume& volume, bool grid_offsets) {
+  testing::DicomMultiFrame image;
+  image.columns = volume.dims[0];
+  image.rows = volume.dims[1];
+  image.spacing = {volume.spacing[0], volume.spacing[1]};
+  image.grid_offsets = grid_offsets;
+  for (int z = 0; z < volume.dims[2]; ++z) {
+    image.positions.push_back({0, 0, z * volume.spacing[2]});
+    image.rescale.push_back({1, 0});
+    for (int y = 0; y < volume.dims[1]; ++y) {
+      for (int x = 0; x < volume.dims[0]; ++x) {
+        image.pixels.push_back(static_cast<int16_t>(std::lround(volume.At(x, y, z))));
+      }
+    }
+  }
+  return absl::StrCat(kDicomSeriesMagic, testing::DicomMultiFrameFile(image), kDicomSliceSeparator,
+                      "a note beside the image");
+}
+
 }  // namespace transtick::fuzz

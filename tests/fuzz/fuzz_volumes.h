@@ -37,6 +37,10 @@ std::string VtiFile(const Volume& volume, ScalarType type, ByteOrder order, bool
 inline constexpr char kDicomSeriesMagic[] = "DICOM-SERIES\n";
 inline constexpr char kDicomSliceSeparator[] = "\n--next-slice--\n";
 std::string DicomSeriesInput(const Volume& volume);
+// The same as one multi-frame file: an enhanced image's functional groups,
+// or with `grid_offsets` an RT dose's frame offsets; then a file that is
+// not DICOM, which the reader passes over.
+std::string DicomMultiFrameInput(const Volume& volume, bool grid_offsets);
 
 // The gzip form of `data`.
 std::string Gzip(const std::string& data);

@@ -79,9 +79,11 @@ absl::StatusOr<Volume> ReadMetaImage(const std::string& path, const ReadOptions&
 // Spacing and Direction for the orientation.
 absl::StatusOr<Volume> ReadVti(const std::string& path, const ReadOptions& options = {});
 
-// A DICOM series of single-frame CT or MR slices in a directory, read with
-// GDCM: sorted by position along the slice normal, rescaled by slope and
-// intercept, spacing from PixelSpacing and the positions. Missing slices
+// A DICOM series of CT, MR or RT dose images in a directory, read with
+// GDCM: single-frame slices, and multi-frame images whose frames become
+// slices (placed by their functional groups, or an RT dose's frame
+// offsets), sorted by position along the slice normal, rescaled by slope
+// and intercept, spacing from PixelSpacing and the positions. Missing slices
 // (gaps), duplicate positions, tilted gantries and slices of different
 // sizes are refused. Subdirectories, files that are not DICOM and DICOM
 // files without an image (reports, presentation states) are passed over
