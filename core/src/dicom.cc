@@ -884,9 +884,16 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
     return Error(path, absl::StrCat("the directory holds no DICOM images",
                                     notes.empty() ? "" : "; it ", absl::StrJoin(notes, "; ")));
   }
+  // Each series as the path that reads it, "DIR#UID (CT, ...)"; a UID
+  // that is not one (empty, or not digits and dots) cannot be named so.
+  const std::string base(absl::StripSuffix(directory, "/"));
   auto list = [&] {
     std::vector<std::string> lines;
-    for (const Series& x : all) lines.push_back(x.Describe());
+    for (const Series& x : all) {
+      const bool nameable = ParseSeriesPath(absl::StrCat("d#", x.uid)).has_value();
+      lines.push_back(nameable ? absl::StrCat(base, "#", x.Describe())
+                               : absl::StrCat(x.Describe(), ", which no path can name"));
+    }
     return absl::StrJoin(lines, "; ");
   };
   const Series* chosen = nullptr;
@@ -896,13 +903,13 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
     }
     if (chosen == nullptr) {
       return absl::NotFoundError(
-          absl::StrCat(path, ": no series ", wanted, " in ", directory, ", which holds ", list()));
+          absl::StrCat(path, ": no series ", wanted, " in ", base, ", which holds ", list()));
     }
   } else if (all.size() == 1) {
     chosen = &all.front();
   } else {
-    return Error(path, absl::StrCat(all.size(), " series in one directory; name one as ",
-                                    absl::StripSuffix(directory, "/"), "#UID: ", list()));
+    return Error(
+        path, absl::StrCat(all.size(), " series in one directory; read one by its path: ", list()));
   }
   if (all.size() > 1) {
     notes.push_back(
