@@ -775,6 +775,13 @@ int Render(int argc, char** argv) {
     co.threads_per_worker = *threads;
     co.data_dir = abs.parent_path().string();
     dataset.set_volume(abs.filename().string());
+    if (series && !std::filesystem::exists(abs, ec)) {
+      // The series' directory is the dataset ("study/#UID" as "study#UID").
+      std::filesystem::path d = std::filesystem::path(series->dir).lexically_normal();
+      if (!d.has_filename()) d = d.parent_path();
+      co.data_dir = d.parent_path().string();
+      dataset.set_volume(absl::StrCat(d.filename().string(), "#", series->series));
+    }
     auto c = LocalCluster::Start(co);
     if (!c.ok()) return fail(c.status());
     cluster = *std::move(c);
