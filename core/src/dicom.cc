@@ -81,6 +81,22 @@ absl::Status Error(const std::string& path, absl::string_view message) {
   return absl::InvalidArgumentError(absl::StrCat(path, ": ", message));
 }
 
+// The slice normal of an ImageOrientationPatient (row x column), of unit
+// length; nullopt when row and column are too far from orthogonal unit
+// vectors to give one.
+std::optional<std::array<double, 3>> UnitNormal(const std::array<double, 6>& o) {
+  std::array<double, 3> n = {o[1] * o[5] - o[2] * o[4], o[2] * o[3] - o[0] * o[5],
+                             o[0] * o[4] - o[1] * o[3]};
+  const double length = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+  if (!(length > 0.5)) return std::nullopt;
+  for (double& c : n) c /= length;
+  return n;
+}
+
+absl::Status NotOrthonormal(const std::string& name) {
+  return Error(name, "ImageOrientationPatient's row and column are not orthogonal unit vectors");
+}
+
 struct Slice {
   std::string path;
   std::string series;
@@ -622,12 +638,9 @@ absl::Status Frames(const DicomHeader& h, const Slice& file, std::vector<Slice>*
         if (!st.ok()) return st;
       }
     } else if (n > 1) {
-      const std::array<double, 3> row = {s.orientation[0], s.orientation[1], s.orientation[2]};
-      const std::array<double, 3> column = {s.orientation[3], s.orientation[4], s.orientation[5]};
-      const std::array<double, 3> normal = {row[1] * column[2] - row[2] * column[1],
-                                            row[2] * column[0] - row[0] * column[2],
-                                            row[0] * column[1] - row[1] * column[0]};
-      for (int a = 0; a < 3; ++a) s.position[a] += (offsets[k] - offsets[0]) * normal[a];
+      const std::optional<std::array<double, 3>> normal = UnitNormal(s.orientation);
+      if (!normal) return NotOrthonormal(path);
+      for (int a = 0; a < 3; ++a) s.position[a] += (offsets[k] - offsets[0]) * (*normal)[a];
     }
     if (!(s.pixel_spacing[0] > 0) || !(s.pixel_spacing[1] > 0)) {
       return Error(s.Name(), absl::StrCat("PixelSpacing ", s.pixel_spacing[0], "\\",
@@ -940,18 +953,11 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
       }
     }
   }
+  const std::optional<std::array<double, 3>> unit = UnitNormal(first.orientation);
+  if (!unit) return Error(path, NotOrthonormal(first.Name()).message());
   const std::array<double, 3> row = {first.orientation[0], first.orientation[1], first.orientation[2]};
   const std::array<double, 3> column = {first.orientation[3], first.orientation[4], first.orientation[5]};
-  std::array<double, 3> normal = {row[1] * column[2] - row[2] * column[1],
-                                  row[2] * column[0] - row[0] * column[2],
-                                  row[0] * column[1] - row[1] * column[0]};
-  const double n_len = std::sqrt(Dot(normal, normal));
-  if (!(n_len > 0.5)) {
-    return Error(path, absl::StrCat(first.Name(),
-                                    ": ImageOrientationPatient's row and column are not "
-                                    "orthogonal unit vectors"));
-  }
-  for (double& c : normal) c /= n_len;
+  const std::array<double, 3>& normal = *unit;
   for (Slice& s : slices) s.along_normal = Dot(s.position, normal);
   std::sort(slices.begin(), slices.end(),
             [](const Slice& a, const Slice& b) { return a.along_normal < b.along_normal; });
