@@ -24,12 +24,22 @@ void Quiet() {
   gdcm::Trace::ErrorOff();
 }
 
+// The items of sequence `tag` of `ds`, when the element is one whose items
+// the walk (dicom.cc, ElementWalk) has checked before GDCM read the file:
+// of VR SQ, or of undefined length. Null otherwise: GDCM would parse the
+// bytes of any other element as items, lengths unchecked.
+gdcm::SmartPointer<gdcm::SequenceOfItems> Items(const gdcm::DataSet& ds, const gdcm::Tag& tag) {
+  if (!ds.FindDataElement(tag)) return nullptr;
+  const gdcm::DataElement& de = ds.GetDataElement(tag);
+  if (de.GetVR() != gdcm::VR::SQ && !de.GetVL().IsUndefined()) return nullptr;
+  return de.GetValueAsSQ();
+}
+
 // The byte value of `tag` in the first item of sequence `sequence` of
 // `ds`, or nullopt.
 std::optional<std::string> InItem(const gdcm::DataSet& ds, const gdcm::Tag& sequence,
                                   const gdcm::Tag& tag) {
-  if (!ds.FindDataElement(sequence)) return std::nullopt;
-  gdcm::SmartPointer<gdcm::SequenceOfItems> items = ds.GetDataElement(sequence).GetValueAsSQ();
+  gdcm::SmartPointer<gdcm::SequenceOfItems> items = Items(ds, sequence);
   if (!items || items->GetNumberOfItems() < 1) return std::nullopt;
   const gdcm::DataSet& item = items->GetItem(1).GetNestedDataSet();
   if (!item.FindDataElement(tag)) return std::nullopt;
@@ -53,13 +63,12 @@ transtick::DicomFrame FrameOf(const gdcm::DataSet& groups) {
 // shared groups'.
 void ReadFrames(const gdcm::DataSet& ds, size_t max_frames, transtick::DicomHeader* out) {
   const gdcm::Tag per_frame(0x5200, 0x9230), shared(0x5200, 0x9229);
-  if (!ds.FindDataElement(per_frame)) return;
-  gdcm::SmartPointer<gdcm::SequenceOfItems> items = ds.GetDataElement(per_frame).GetValueAsSQ();
+  gdcm::SmartPointer<gdcm::SequenceOfItems> items = Items(ds, per_frame);
   if (!items) return;
   transtick::DicomFrame common;
-  if (ds.FindDataElement(shared)) {
-    gdcm::SmartPointer<gdcm::SequenceOfItems> s = ds.GetDataElement(shared).GetValueAsSQ();
-    if (s && s->GetNumberOfItems() >= 1) common = FrameOf(s->GetItem(1).GetNestedDataSet());
+  if (gdcm::SmartPointer<gdcm::SequenceOfItems> s = Items(ds, shared);
+      s && s->GetNumberOfItems() >= 1) {
+    common = FrameOf(s->GetItem(1).GetNestedDataSet());
   }
   const size_t n = items->GetNumberOfItems();
   out->more_frames = n > max_frames;
