@@ -737,6 +737,18 @@ TEST_F(FormatsTest, DicomElementThatLiesAboutItsLength) {
   high_bit += std::string("\x28\x00\x02\x01" "DS" "\x02\x00" "15", 10);
   Write("lie/slice", high_bit);
   ExpectError(ReadVolume(dir), "slice", "has VR DS, not US");
+  // Also found by volume_fuzzer: a RecognitionCode (0008,0010) that does
+  // not name ACR-NEMA made GDCM's image reader fail an assertion.
+  std::string recognition = file.substr(0, 160);
+  recognition += std::string(
+      "\x08\x00\x10\x00"
+      "LO"
+      "\x06\x00"
+      "1.2.3 ",
+      14);
+  Write("lie/slice", recognition);
+  ExpectError(ReadVolume(dir), "slice",
+              "RecognitionCode (0008,0010) at byte 160 is not an ACR-NEMA one");
 }
 
 TEST_F(FormatsTest, DicomSeriesGoesThroughTheHooks) {

@@ -427,6 +427,18 @@ class ElementWalk {
                               "element (%04X,%04X) at byte %d declares %d bytes, %d remain",
                               group, element, pos, length, end - value));
     }
+    // GDCM's image reader asserts that a RecognitionCode (0008,0010,
+    // retired) that is not empty names ACR-NEMA (found by volume_fuzzer: a
+    // UID written there aborted the process).
+    if (depth == 0 && group == 0x0008 && element == 0x0010 && length > 0) {
+      const std::string code = bytes_.substr(value, length);
+      if (code != "ACR-NEMA 1.0" && code != "ACR-NEMA 2.0" && code != "ACRNEMA_LIBIDO_1.0" &&
+          code != "ACRNEMA_LIBIDO_1.1") {
+        return Error(
+            path_,
+            absl::StrFormat("RecognitionCode (0008,0010) at byte %d is not an ACR-NEMA one", pos));
+      }
+    }
     if (sequence) {
       absl::StatusOr<size_t> done = Items(value, value + length, depth + 1, false);
       if (!done.ok()) return done.status();
