@@ -46,6 +46,15 @@ std::string DicomSliceFile(const DicomSlice& slice) {
   gdcm::Attribute<0x0020, 0x000e> series;
   series.SetValue(slice.series);
   ds.Replace(series.GetAsDataElement());
+  if (slice.number != 0) {
+    gdcm::Attribute<0x0020, 0x0011> number = {slice.number};
+    ds.Replace(number.GetAsDataElement());
+  }
+  if (!slice.description.empty()) {
+    gdcm::Attribute<0x0008, 0x103e> description;
+    description.SetValue(slice.description);
+    ds.Replace(description.GetAsDataElement());
+  }
   std::ostringstream first;
   writer.SetStream(first);
   if (!writer.Write()) return "";

@@ -19,6 +19,8 @@ struct DicomSlice {
   double slope = 1, intercept = -1024;
   int columns = 4, rows = 3;
   std::vector<int16_t> pixels;  // columns * rows, row by row
+  int number = 0;               // SeriesNumber (0020,0011) when not 0
+  std::string description;      // SeriesDescription (0008,103E) when not empty
 };
 
 // The file's bytes; empty if GDCM fails to write it.

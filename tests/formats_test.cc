@@ -580,6 +580,45 @@ TEST_F(FormatsTest, DicomStudyDirectoryNamesItsSeries) {
   WriteSlice(dir + "/IM9", odd);
   EXPECT_TRUE(ReadVolume(dir + "#1.2.3.4").ok());
   ExpectError(ReadVolume(dir + "#7.7"), "IM9", "is not positive");
+  // The listing a viewer offers: each series as the path that reads it,
+  // and the reader's own refusal for the one that would not read.
+  auto listed = ListDicomSeries(dir);
+  ASSERT_TRUE(listed.ok()) << listed.status();
+  ASSERT_EQ(listed->size(), 3u);
+  const DicomSeriesInfo& first = (*listed)[0];
+  EXPECT_EQ(first.uid, "1.2.3.4");
+  EXPECT_EQ(first.path, dir + "#1.2.3.4");
+  EXPECT_EQ(first.modality, "CT");
+  EXPECT_EQ(first.summary, "CT, 4 files");
+  EXPECT_EQ(first.files, 4u);
+  EXPECT_EQ(first.frames, 4u);
+  EXPECT_EQ(first.columns, 4);
+  EXPECT_EQ(first.rows, 3);
+  EXPECT_EQ(first.problem, "");
+  uint64_t bytes = 0;
+  for (int n : {0, 1, 3, 4}) bytes += std::filesystem::file_size(dir + "/IM" + std::to_string(n));
+  EXPECT_EQ(first.bytes, bytes);
+  EXPECT_EQ((*listed)[1].path, dir + "#1.2.3.40");
+  EXPECT_EQ((*listed)[1].files, 2u);
+  EXPECT_EQ((*listed)[2].path, dir + "#7.7");
+  EXPECT_THAT((*listed)[2].problem, HasSubstr("is not positive"));
+  // A directory of one series is listed as itself; a gap is what the
+  // reader says it is.
+  auto one = ListDicomSeries(dir_ + "/one#2");
+  ASSERT_TRUE(one.ok()) << one.status();
+  ASSERT_EQ(one->size(), 1u);
+  EXPECT_EQ((*one)[0].path, dir_ + "/one#2");
+  SliceSpec far;
+  far.position = {0, 0, 8};
+  WriteSlice(dir_ + "/one#2/f9", far);
+  one = ListDicomSeries(dir_ + "/one#2");
+  ASSERT_TRUE(one.ok()) << one.status();
+  const absl::StatusOr<Volume> refused = ReadVolume(dir_ + "/one#2");
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ((*one)[0].problem, refused.status().message());
+  EXPECT_THAT((*one)[0].problem, HasSubstr("a missing slice"));
+  // Nothing to list.
+  EXPECT_FALSE(ListDicomSeries(dir + "/more").ok());
 }
 
 // Multi-frame images, as enhanced CT and MR scanners and RT planning

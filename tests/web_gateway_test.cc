@@ -5,6 +5,7 @@
 // only on a loopback Host; the volume listing finds what ReadVolume reads
 // and nothing outside the data directory.
 #include <arpa/inet.h>
+#include <fcntl.h>
 #include <httplib.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -18,6 +19,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <random>
 #include <thread>
 
@@ -27,6 +29,7 @@
 #include "absl/strings/str_split.h"
 #include "absl/synchronization/mutex.h"
 #include "convert.h"
+#include "dicom_writer.h"
 #include "gateway.h"
 #include "gtest/gtest.h"
 #include "local_cluster.h"
@@ -38,6 +41,7 @@
 #include "transtick/scene.h"
 #include "transtick/synthetic.h"
 #include "transtick/volume_io.h"
+#include "volumes.h"
 #include "web.pb.h"
 
 namespace transtick {
@@ -541,6 +545,9 @@ TEST_F(WebGatewayTest, VolumesListsWhatCanBeOpenedAndNothingOutside) {
     }
     if (v.series()) {
       EXPECT_EQ(v.bytes(), 400u);
+      // Its files start as DICOM does and do not read: listed, saying so.
+      EXPECT_TRUE(absl::StrContains(v.error(), "ct/series1/IM0001")) << v.error();
+      EXPECT_EQ(v.description(), "");
     }
   }
   EXPECT_EQ(paths, (std::vector<std::string>{"caf\xc3\xa9.nrrd", "ct/head.nii.gz", "ct/series1/",
@@ -550,6 +557,160 @@ TEST_F(WebGatewayTest, VolumesListsWhatCanBeOpenedAndNothingOutside) {
   bool bone = false;
   for (const auto& p : reply.presets()) bone |= p.name() == "ct-bone" && p.surfaces();
   EXPECT_TRUE(bone);
+}
+
+TEST_F(WebGatewayTest, VolumesListsEachSeriesOfAStudyAsThePathThatOpensIt) {
+  namespace fs = std::filesystem;
+  // A study of two series whose files interleave, a report beside them; a
+  // directory of one series; one whose series misses a slice.
+  auto write = [&](const std::string& dir, const std::string& name, testing::DicomSlice s) {
+    fs::create_directories(dir_ + "/" + dir);
+    s.pixels.assign(static_cast<size_t>(s.columns) * s.rows, 0);
+    for (size_t k = 0; k < s.pixels.size(); ++k) s.pixels[k] = static_cast<int16_t>(1024 + 40 * k);
+    const std::string bytes = testing::DicomSliceFile(s);
+    ASSERT_FALSE(bytes.empty());
+    std::ofstream(dir_ + "/" + dir + "/" + name, std::ios::binary) << bytes;
+  };
+  for (int i = 0; i < 3; ++i) {
+    testing::DicomSlice a;
+    a.series = "1.2.840.99.1";
+    a.number = 3;
+    a.description = "AX BONE";
+    a.position = {0, 0, 2.0 * i};
+    write("study", absl::StrCat("A", i), a);
+    testing::DicomSlice b;
+    b.series = "1.2.840.99.12";
+    b.number = 4;
+    b.columns = 6;
+    b.rows = 5;
+    b.position = {0, 0, 1.5 * i};
+    write("study", absl::StrCat("B", i), b);
+  }
+  std::ofstream(dir_ + "/study/README.txt") << "scanned on a Tuesday";
+  for (int i = 0; i < 2; ++i) {
+    testing::DicomSlice c;
+    c.series = "1.2.840.99.7";
+    c.position = {0, 0, 1.0 * i};
+    write("one", absl::StrCat("IM", i, ".dcm"), c);
+  }
+  for (double z : {0.0, 1.0, 3.0}) {
+    testing::DicomSlice d;
+    d.series = "1.2.840.99.8";
+    d.position = {0, 0, z};
+    write("gap", absl::StrCat("IM", z, ".dcm"), d);
+  }
+  auto list = [&] {
+    auto res = http_->Get("/api/volumes");
+    EXPECT_TRUE(res);
+    v1::VolumesReply reply;
+    if (!res) return reply;
+    EXPECT_EQ(res->status, 200) << res->body;
+    EXPECT_TRUE(ParseJson(res->body, "volumes", &reply).ok()) << res->body;
+    return reply;
+  };
+  v1::VolumesReply reply = list();
+  EXPECT_FALSE(reply.truncated());
+  std::map<std::string, v1::VolumeEntry> by_path;
+  for (const auto& v : reply.volumes()) by_path[v.path()] = v;
+  ASSERT_TRUE(by_path.count("study#1.2.840.99.1")) << reply.DebugString();
+  ASSERT_TRUE(by_path.count("study#1.2.840.99.12")) << reply.DebugString();
+  EXPECT_FALSE(by_path.count("study"));
+  const v1::VolumeEntry& bone = by_path["study#1.2.840.99.1"];
+  EXPECT_TRUE(bone.series());
+  EXPECT_EQ(bone.description(), "CT, series 3 'AX BONE', 3 files, 4x3x3");
+  EXPECT_EQ(bone.error(), "");
+  uint64_t bone_bytes = 0;
+  for (int i = 0; i < 3; ++i) bone_bytes += fs::file_size(dir_ + "/study/A" + std::to_string(i));
+  EXPECT_EQ(bone.bytes(), bone_bytes);
+  EXPECT_EQ(by_path["study#1.2.840.99.12"].description(), "CT, series 4, 3 files, 6x5x3");
+  ASSERT_TRUE(by_path.count("one"));
+  EXPECT_EQ(by_path["one"].description(), "CT, 2 files, 4x3x2");
+  EXPECT_EQ(by_path["one"].error(), "");
+  ASSERT_TRUE(by_path.count("gap"));
+  EXPECT_TRUE(absl::StrContains(by_path["gap"].error(), "a missing slice"))
+      << by_path["gap"].error();
+  // Each listed path opens: a session on the study's second series.
+  {
+    v1::WebOpenRequest r;
+    r.mutable_dataset()->set_volume("study#1.2.840.99.12");
+    r.mutable_dataset()->mutable_preset()->set_name("grey");
+    *r.mutable_dataset()->add_views() = Camera(0);
+    auto res = http_->Post("/api/sessions", ToJson(r, false), "application/json");
+    ASSERT_TRUE(res);
+    ASSERT_EQ(res->status, 200) << res->body;
+    v1::WebOpenReply open;
+    ASSERT_TRUE(ParseJson(res->body, "open", &open).ok()) << res->body;
+    ASSERT_EQ(open.ready().dims_size(), 3);
+    EXPECT_EQ(open.ready().dims(0), 6);
+    EXPECT_EQ(open.ready().dims(1), 5);
+    EXPECT_EQ(open.ready().dims(2), 3);
+  }
+  // The headers are read again when a directory changes, and only then: a
+  // third series appears in "one", and the missing slice in "gap".
+  testing::DicomSlice extra;
+  extra.series = "1.2.840.99.20";
+  write("one", "X0.dcm", extra);
+  testing::DicomSlice fill;
+  fill.series = "1.2.840.99.8";
+  fill.position = {0, 0, 2.0};
+  write("gap", "IM2.dcm", fill);
+  reply = list();
+  by_path.clear();
+  for (const auto& v : reply.volumes()) by_path[v.path()] = v;
+  EXPECT_FALSE(by_path.count("one"));
+  EXPECT_TRUE(by_path.count("one#1.2.840.99.7"));
+  EXPECT_EQ(by_path["one#1.2.840.99.20"].description(), "CT, 1 file, 4x3x1");
+  ASSERT_TRUE(by_path.count("gap"));
+  EXPECT_EQ(by_path["gap"].error(), "");
+  EXPECT_EQ(by_path["gap"].description(), "CT, 4 files, 4x3x4");
+  // What a directory's headers said is kept while its files keep their
+  // names, sizes and times: a file rewritten to the same size with its
+  // time put back is not read again; touched, it is.
+  {
+    const std::string a0 = dir_ + "/study/A0";
+    struct stat before {};
+    ASSERT_EQ(stat(a0.c_str(), &before), 0);
+    testing::DicomSlice a;
+    a.series = "1.2.840.99.1";
+    a.number = 3;
+    a.description = "AX SOFT";
+    write("study", "A0", a);
+    ASSERT_EQ(fs::file_size(a0), static_cast<uintmax_t>(before.st_size));
+    const timespec times[2] = {before.st_atim, before.st_mtim};
+    ASSERT_EQ(utimensat(AT_FDCWD, a0.c_str(), times, 0), 0);
+    reply = list();
+    for (const auto& v : reply.volumes()) by_path[v.path()] = v;
+    EXPECT_EQ(by_path["study#1.2.840.99.1"].description(),
+              "CT, series 3 'AX BONE', 3 files, 4x3x3");
+    const timespec later[2] = {{before.st_mtim.tv_sec + 5, 0}, {before.st_mtim.tv_sec + 5, 0}};
+    ASSERT_EQ(utimensat(AT_FDCWD, a0.c_str(), later, 0), 0);
+    reply = list();
+    for (const auto& v : reply.volumes()) by_path[v.path()] = v;
+    EXPECT_EQ(by_path["study#1.2.840.99.1"].description(),
+              "CT, series 3 'AX SOFT', 3 files, 4x3x3");
+  }
+  // Past the bounds on headers read, a directory is listed once, unread.
+  auto data = ConfinedDir::Open(dir_);
+  ASSERT_TRUE(data.ok());
+  for (int bound = 0; bound < 2; ++bound) {
+    VolumeListingBounds bounds;
+    if (bound == 0) {
+      bounds.dicom_headers = 0;
+    } else {
+      bounds.dicom_bytes = 0;
+    }
+    auto bounded = ListVolumes(**data, bounds);
+    ASSERT_TRUE(bounded.ok()) << bounded.status();
+    EXPECT_TRUE(bounded->truncated());
+    std::vector<std::string> series;
+    for (const auto& v : bounded->volumes()) {
+      if (!v.series()) continue;
+      series.push_back(v.path());
+      EXPECT_EQ(v.description(), "");
+      EXPECT_EQ(v.error(), "");
+    }
+    EXPECT_EQ(series, (std::vector<std::string>{"gap", "one", "study"}));
+  }
 }
 
 }  // namespace

@@ -66,6 +66,17 @@ cleanup() {
 trap cleanup EXIT
 trap 'exit 1' INT TERM
 
+# The data directory the viewer serves: the head, and a DICOM study written
+# by tests/dicom_study beside it when that is built.
+study=0
+if [[ -x $build/tests/dicom_study ]]; then
+  mkdir "$dir/data"
+  cp "$data/cthead.nrrd" "$dir/data/"
+  "$build/tests/dicom_study" "$dir/data" >/dev/null || { echo "web_viewer_test: dicom_study failed"; exit 1; }
+  data=$dir/data
+  study=1
+fi
+
 static=()
 [[ -n ${TRANSTICK_WEB_STATIC:-} ]] && static=(--static-dir "$TRANSTICK_WEB_STATIC")
 start=$(date +%s%N)
@@ -89,7 +100,7 @@ if [[ -z $url || -z $root ]]; then
 fi
 echo "web_viewer_test: $url (root $root) up in $(( ($(date +%s%N) - start) / 1000000 )) ms"
 
-TRANSTICK_VIEW_URL=$url TRANSTICK_ROOT=$root TRANSTICK_BIN=$bin TRANSTICK_DATA_DIR=$data \
+TRANSTICK_VIEW_URL=$url TRANSTICK_ROOT=$root TRANSTICK_BIN=$bin TRANSTICK_DATA_DIR=$data TRANSTICK_STUDY=$study \
   WEB_TEST_DIR=$mods WEB_TEST_TMP=$dir TRANSTICK_CHROMIUM=$chromium \
   timeout 170 node "$here/web/viewer_test.mjs"
 rc=$?

@@ -120,6 +120,7 @@ struct Slice {
   bool native = true;            // pixel data not encapsulated (compressed)
   uint32_t pixel_length = 0;     // the pixel data's declared value length
   uint64_t pixel_available = 0;  // bytes of the file from its value on
+  uint64_t file_bytes = 0;       // the file's size
 };
 
 // The elements a slice's header is read for (group << 16 | element), in
@@ -708,6 +709,7 @@ absl::StatusOr<FileKind> ReadHeader(const Gdcm& gdcm, const std::string& path,
   if (value_at < 4 || static_cast<uint64_t>(value_at) > file_size) return FileKind::kNoImage;
   Slice s;
   s.path = path;
+  s.file_bytes = file_size;
   s.native = !h.encapsulated;
   s.series = Text(h, kSeries);
   s.modality = Text(h, kModality);
@@ -803,8 +805,9 @@ struct Series {
   std::string uid;
   std::vector<Slice> slices;
   size_t files = 0;
-  // "1.2.3 (CT, series 2 'AX 5mm', 120 files)", "... 1 file, 96 frames)"
-  std::string Describe() const {
+  uint64_t bytes = 0;  // the files' sizes
+  // "CT, series 2 'AX 5mm', 120 files", "... 1 file, 96 frames"
+  std::string Summary() const {
     const Slice& f = slices.front();
     std::string what = f.modality.empty() ? "" : Shown(f.modality);
     if (!f.number.empty())
@@ -813,47 +816,33 @@ struct Series {
       absl::StrAppend(&what, what.empty() ? "" : " ", "'", Shown(f.description), "'");
     absl::StrAppend(&what, what.empty() ? "" : ", ", files, files == 1 ? " file" : " files");
     if (slices.size() != files) absl::StrAppend(&what, ", ", slices.size(), " frames");
-    return absl::StrCat(uid.empty() ? "(no SeriesInstanceUID)" : Shown(uid), " (", what, ")");
+    return what;
   }
+  // "1.2.3 (CT, series 2 'AX 5mm', 120 files)"
+  std::string Describe() const {
+    return absl::StrCat(uid.empty() ? "(no SeriesInstanceUID)" : Shown(uid), " (", Summary(), ")");
+  }
+  // Whether a path can name it, "DIR#UID" (ParseSeriesPath): a UID of
+  // digits and dots.
+  bool Nameable() const { return ParseSeriesPath(absl::StrCat("d#", uid)).has_value(); }
 };
 
-}  // namespace
+// What a directory holds: its series, and notes naming what was passed over.
+struct DirectoryScan {
+  std::vector<Series> all;
+  std::vector<std::string> notes;
+};
 
-std::optional<SeriesPath> ParseSeriesPath(std::string_view path) {
-  const size_t hash = path.rfind('#');
-  if (hash == std::string_view::npos || hash == 0) return std::nullopt;
-  const std::string_view uid = path.substr(hash + 1);
-  // A UID: digits and dots, at most 64 characters (PS3.5 9.1).
-  if (uid.empty() || uid.size() > 64) return std::nullopt;
-  for (char c : uid) {
-    if (!(absl::ascii_isdigit(static_cast<unsigned char>(c)) || c == '.')) return std::nullopt;
-  }
-  return SeriesPath{std::string(path.substr(0, hash)), std::string(uid)};
-}
-
-absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOptions& options) {
-  const Gdcm& gdcm = LoadGdcm();
-  if (!gdcm.status.ok()) {
-    return absl::UnavailableError(
-        absl::StrCat(path, ": cannot read DICOM: ", gdcm.status.message()));
-  }
-  // The directory, and the series the path names in it (if any).
-  std::string directory = path;
-  std::string wanted;
-  bool select = false;
-  if (!vi::IsDirectory(path, options)) {
-    if (std::optional<SeriesPath> sp = ParseSeriesPath(path);
-        sp && vi::IsDirectory(sp->dir, options)) {
-      directory = sp->dir;
-      wanted = sp->series;
-      select = true;
-    }
-  }
+// Reads the header of every file in `directory` (errors name `path`).
+absl::StatusOr<DirectoryScan> ScanDirectory(const Gdcm& gdcm, const std::string& path,
+                                            const std::string& directory,
+                                            const ReadOptions& options) {
   absl::StatusOr<std::vector<std::string>> names = ListDirectory(directory, options);
   if (!names.ok()) return names.status();
   std::sort(names->begin(), names->end());
   const std::string dir = absl::StrCat(absl::StripSuffix(directory, "/"), "/");
-  std::vector<Series> all;
+  DirectoryScan scan;
+  std::vector<Series>& all = scan.all;
   std::vector<std::string> subdirectories, not_dicom, no_image;
   size_t files = 0;
   for (const std::string& name : *names) {
@@ -880,16 +869,17 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
     const std::string& uid = frames.front().series;
     auto it = std::find_if(all.begin(), all.end(), [&](const Series& x) { return x.uid == uid; });
     if (it == all.end()) {
-      all.push_back({uid, {}, 0});
+      all.push_back({uid, {}, 0, 0});
       it = all.end() - 1;
     }
     ++it->files;
+    it->bytes += frames.front().file_bytes;
     for (Slice& f : frames) it->slices.push_back(std::move(f));
     if (it->slices.size() > kMaxSlices) {
       return Error(path, absl::StrCat("more than ", kMaxSlices, " slices in series ", Shown(uid)));
     }
   }
-  std::vector<std::string> notes;
+  std::vector<std::string>& notes = scan.notes;
   if (!subdirectories.empty()) {
     notes.push_back(absl::StrCat("passed over ", subdirectories.size(), " subdirector",
                                  subdirectories.size() == 1 ? "y" : "ies", " (",
@@ -909,38 +899,22 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
     return Error(path, absl::StrCat("the directory holds no DICOM images",
                                     notes.empty() ? "" : "; it ", absl::StrJoin(notes, "; ")));
   }
-  // Each series as the path that reads it, "DIR#UID (CT, ...)"; a UID
-  // that is not one (empty, or not digits and dots) cannot be named so.
-  const std::string base(absl::StripSuffix(directory, "/"));
-  auto list = [&] {
-    std::vector<std::string> lines;
-    for (const Series& x : all) {
-      const bool nameable = ParseSeriesPath(absl::StrCat("d#", x.uid)).has_value();
-      lines.push_back(nameable ? absl::StrCat(base, "#", x.Describe())
-                               : absl::StrCat(x.Describe(), ", which no path can name"));
-    }
-    return absl::StrJoin(lines, "; ");
-  };
-  const Series* chosen = nullptr;
-  if (select) {
-    for (const Series& x : all) {
-      if (x.uid == wanted) chosen = &x;
-    }
-    if (chosen == nullptr) {
-      return absl::NotFoundError(
-          absl::StrCat(path, ": no series ", wanted, " in ", base, ", which holds ", list()));
-    }
-  } else if (all.size() == 1) {
-    chosen = &all.front();
-  } else {
-    return Error(
-        path, absl::StrCat(all.size(), " series in one directory; read one by its path: ", list()));
-  }
-  if (all.size() > 1) {
-    notes.push_back(
-        absl::StrCat("read series ", chosen->Describe(), " of ", all.size(), " in the directory"));
-  }
-  std::vector<Slice> slices = chosen->slices;
+  return scan;
+}
+
+// Where a series' slices lie: the directions of its rows, columns and
+// slices, and the slices' spacing.
+struct Geometry {
+  std::array<double, 3> row, column, normal;
+  double z_spacing = 1;
+};
+
+// Checks that `slices` (frames) make one volume, one problem at a time
+// (each file's own, then sizes, orientation, spacing, gaps, tilt, the
+// volume's size), and sorts them along their normal.
+absl::StatusOr<Geometry> Arrange(const std::string& path, const ReadOptions& options,
+                                 std::vector<Slice>* slices_in) {
+  std::vector<Slice>& slices = *slices_in;
   const Slice& first = slices.front();
   for (const Slice& s : slices) {
     if (!s.problem.ok()) return s.problem;
@@ -967,14 +941,15 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
   }
   const std::optional<std::array<double, 3>> unit = UnitNormal(first.orientation);
   if (!unit) return Error(path, NotOrthonormal(first.Name()).message());
-  const std::array<double, 3> row = {first.orientation[0], first.orientation[1], first.orientation[2]};
-  const std::array<double, 3> column = {first.orientation[3], first.orientation[4], first.orientation[5]};
-  const std::array<double, 3>& normal = *unit;
+  Geometry g;
+  g.row = {first.orientation[0], first.orientation[1], first.orientation[2]};
+  g.column = {first.orientation[3], first.orientation[4], first.orientation[5]};
+  g.normal = *unit;
+  const std::array<double, 3>& normal = g.normal;
   for (Slice& s : slices) s.along_normal = Dot(s.position, normal);
   std::sort(slices.begin(), slices.end(),
             [](const Slice& a, const Slice& b) { return a.along_normal < b.along_normal; });
 
-  double z_spacing = 1;
   if (slices.size() > 1) {
     std::vector<double> gaps;
     for (size_t i = 1; i < slices.size(); ++i) {
@@ -1012,13 +987,87 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
       }
     }
     double sum = 0;
-    for (double g : gaps) sum += g;
-    z_spacing = sum / gaps.size();
+    for (double gap : gaps) sum += gap;
+    g.z_spacing = sum / gaps.size();
   }
   const std::array<int64_t, 3> dims = {first.columns, first.rows,
                                        static_cast<int64_t>(slices.size())};
   absl::StatusOr<uint64_t> data_bytes = vi::CheckedDataBytes(path, dims, TypeOf(first), options);
   if (!data_bytes.ok()) return data_bytes.status();
+  return g;
+}
+
+}  // namespace
+
+std::optional<SeriesPath> ParseSeriesPath(std::string_view path) {
+  const size_t hash = path.rfind('#');
+  if (hash == std::string_view::npos || hash == 0) return std::nullopt;
+  const std::string_view uid = path.substr(hash + 1);
+  // A UID: digits and dots, at most 64 characters (PS3.5 9.1).
+  if (uid.empty() || uid.size() > 64) return std::nullopt;
+  for (char c : uid) {
+    if (!(absl::ascii_isdigit(static_cast<unsigned char>(c)) || c == '.')) return std::nullopt;
+  }
+  return SeriesPath{std::string(path.substr(0, hash)), std::string(uid)};
+}
+
+absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOptions& options) {
+  const Gdcm& gdcm = LoadGdcm();
+  if (!gdcm.status.ok()) {
+    return absl::UnavailableError(
+        absl::StrCat(path, ": cannot read DICOM: ", gdcm.status.message()));
+  }
+  // The directory, and the series the path names in it (if any).
+  std::string directory = path;
+  std::string wanted;
+  bool select = false;
+  if (!vi::IsDirectory(path, options)) {
+    if (std::optional<SeriesPath> sp = ParseSeriesPath(path);
+        sp && vi::IsDirectory(sp->dir, options)) {
+      directory = sp->dir;
+      wanted = sp->series;
+      select = true;
+    }
+  }
+  absl::StatusOr<DirectoryScan> scan = ScanDirectory(gdcm, path, directory, options);
+  if (!scan.ok()) return scan.status();
+  const std::vector<Series>& all = scan->all;
+  std::vector<std::string>& notes = scan->notes;
+  // Each series as the path that reads it, "DIR#UID (CT, ...)"; a UID
+  // that is not one (empty, or not digits and dots) cannot be named so.
+  const std::string base(absl::StripSuffix(directory, "/"));
+  auto list = [&] {
+    std::vector<std::string> lines;
+    for (const Series& x : all) {
+      lines.push_back(x.Nameable() ? absl::StrCat(base, "#", x.Describe())
+                                   : absl::StrCat(x.Describe(), ", which no path can name"));
+    }
+    return absl::StrJoin(lines, "; ");
+  };
+  const Series* chosen = nullptr;
+  if (select) {
+    for (const Series& x : all) {
+      if (x.uid == wanted) chosen = &x;
+    }
+    if (chosen == nullptr) {
+      return absl::NotFoundError(
+          absl::StrCat(path, ": no series ", wanted, " in ", base, ", which holds ", list()));
+    }
+  } else if (all.size() == 1) {
+    chosen = &all.front();
+  } else {
+    return Error(
+        path, absl::StrCat(all.size(), " series in one directory; read one by its path: ", list()));
+  }
+  if (all.size() > 1) {
+    notes.push_back(
+        absl::StrCat("read series ", chosen->Describe(), " of ", all.size(), " in the directory"));
+  }
+  std::vector<Slice> slices = chosen->slices;
+  absl::StatusOr<Geometry> geometry = Arrange(path, options, &slices);
+  if (!geometry.ok()) return geometry.status();
+  const Slice& first = slices.front();
+  const double z_spacing = geometry->z_spacing;
 
   Volume volume;
   volume.dims = {first.columns, first.rows, static_cast<int>(slices.size())};
@@ -1051,12 +1100,53 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
       return st;
     }
   }
-  if (absl::Status s = SetOrientation(path, {row, column, normal}, slices.front().position, &volume);
+  if (absl::Status s = SetOrientation(path, {geometry->row, geometry->column, geometry->normal},
+                                      slices.front().position, &volume);
       !s.ok()) {
     return s;
   }
   volume.notes = std::move(notes);
   return volume;
+}
+
+absl::StatusOr<std::vector<DicomSeriesInfo>> ListDicomSeries(const std::string& path,
+                                                             const ReadOptions& options) {
+  const Gdcm& gdcm = LoadGdcm();
+  if (!gdcm.status.ok()) {
+    return absl::UnavailableError(
+        absl::StrCat(path, ": cannot read DICOM: ", gdcm.status.message()));
+  }
+  absl::StatusOr<DirectoryScan> scan = ScanDirectory(gdcm, path, path, options);
+  if (!scan.ok()) return scan.status();
+  const std::string base(absl::StripSuffix(path, "/"));
+  std::vector<DicomSeriesInfo> out;
+  for (const Series& x : scan->all) {
+    DicomSeriesInfo info;
+    const Slice& f = x.slices.front();
+    info.uid = x.uid;
+    if (scan->all.size() == 1) {
+      info.path = base;
+    } else if (x.Nameable()) {
+      info.path = absl::StrCat(base, "#", x.uid);
+    }
+    info.modality = f.modality;
+    info.number = f.number;
+    info.description = f.description;
+    info.summary = x.Summary();
+    info.files = x.files;
+    info.bytes = x.bytes;
+    info.frames = x.slices.size();
+    info.columns = f.columns;
+    info.rows = f.rows;
+    std::vector<Slice> slices = x.slices;
+    if (absl::StatusOr<Geometry> g =
+            Arrange(info.path.empty() ? base : info.path, options, &slices);
+        !g.ok()) {
+      info.problem = std::string(g.status().message());
+    }
+    out.push_back(std::move(info));
+  }
+  return out;
 }
 
 }  // namespace transtick

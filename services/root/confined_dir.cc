@@ -64,6 +64,7 @@ absl::StatusOr<ConfinedDir::Entry> ConfinedDir::Stat(const std::string& relative
   e.directory = S_ISDIR(st.st_mode);
   e.regular = S_ISREG(st.st_mode);
   e.bytes = e.regular ? static_cast<uint64_t>(st.st_size) : 0;
+  e.mtime_ns = int64_t{st.st_mtim.tv_sec} * 1000000000 + st.st_mtim.tv_nsec;
   return e;
 }
 

@@ -44,6 +44,7 @@ class ConfinedDir {
     bool directory = false;
     bool regular = false;
     uint64_t bytes = 0;
+    int64_t mtime_ns = 0;  // last modification, ns since the epoch
   };
   absl::StatusOr<Entry> Stat(const std::string& relative) const;
 

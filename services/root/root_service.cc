@@ -109,7 +109,7 @@ grpc::Status RootService::Volumes(grpc::ServerContext* ctx, const v1::VolumesReq
   if (!client.ok()) return ToGrpc(client.status());
   auto dir = ConfinedDir::Open(options_.data_dir);
   if (!dir.ok()) return ToGrpc(absl::UnavailableError("the root's data directory cannot be opened"));
-  auto listed = ListVolumes(**dir);
+  auto listed = ListVolumes(**dir, {}, &series_cache_);
   if (!listed.ok()) return ToGrpc(listed.status());
   *reply = *std::move(listed);
   return grpc::Status::OK;

@@ -12,11 +12,12 @@
 
 #include "cluster.grpc.pb.h"
 #include "job_queue.h"
-#include "job_store.h"
 #include "job_runner.h"
+#include "job_store.h"
 #include "metrics.h"
 #include "registry.h"
 #include "session.h"
+#include "volumes.h"
 
 namespace transtick {
 
@@ -67,6 +68,7 @@ class RootService final : public v1::Root::Service {
   Registry registry_;
   JobRunner runner_;  // after queue_ and registry_: it uses both
   Sessions sessions_;  // after runner_: it renders through it
+  DicomSeriesCache series_cache_;  // what the data directory's DICOM headers said (Volumes)
 };
 
 }  // namespace transtick

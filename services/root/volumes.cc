@@ -5,12 +5,15 @@
 #include <algorithm>
 #include <cstring>
 #include <deque>
+#include <functional>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
 #include "transtick/presets.h"
 #include "transtick/volume_io.h"
 
@@ -59,14 +62,93 @@ bool Listable(const std::string& name) {
   return true;
 }
 
+// `text` as a listing may carry it: unchanged when Listable, else with
+// every byte outside printable ASCII shown as '?'.
+std::string Printable(std::string text) {
+  if (Listable(text)) return text;
+  for (char& c : text) {
+    const auto u = static_cast<unsigned char>(c);
+    if (u < 0x20 || u >= 0x7f) c = '?';
+  }
+  return text;
+}
+
+// The entries of a DICOM directory `path`: one per series it holds as
+// `found` describes them, or the directory alone (unread, or unreadable).
+void AddDicomDirectory(const std::string& path, uint64_t bytes,
+                       const DicomSeriesCache::Found* found, std::vector<v1::VolumeEntry>* out) {
+  v1::VolumeEntry dir_entry;
+  dir_entry.set_path(path);
+  dir_entry.set_series(true);
+  dir_entry.set_bytes(bytes);
+  if (found == nullptr) {
+    out->push_back(std::move(dir_entry));
+    return;
+  }
+  if (!found->ok()) {
+    dir_entry.set_error(Printable(std::string(found->status().message())));
+    out->push_back(std::move(dir_entry));
+    return;
+  }
+  for (const DicomSeriesInfo& info : **found) {
+    v1::VolumeEntry v = dir_entry;
+    v.set_bytes(info.bytes);
+    v.set_description(Printable(
+        absl::StrCat(info.summary, ", ", info.columns, "x", info.rows, "x", info.frames)));
+    if (info.path.empty()) {
+      // Opening the directory gives the error that lists the series.
+      v.set_error(Printable(absl::StrCat("series '", info.uid,
+                                         "': its SeriesInstanceUID is not digits and dots, so "
+                                         "no path can name it")));
+    } else {
+      v.set_path(info.path);
+      v.set_error(Printable(info.problem));
+    }
+    out->push_back(std::move(v));
+  }
+}
+
 }  // namespace
 
+std::optional<DicomSeriesCache::Found> DicomSeriesCache::Get(const std::string& relative,
+                                                             uint64_t fingerprint) {
+  absl::MutexLock lock(&mu_);
+  for (auto it = entries_.begin(); it != entries_.end(); ++it) {
+    if (it->relative != relative) continue;
+    if (it->fingerprint != fingerprint) return std::nullopt;
+    entries_.splice(entries_.begin(), entries_, it);
+    return entries_.front().found;
+  }
+  return std::nullopt;
+}
+
+void DicomSeriesCache::Put(const std::string& relative, uint64_t fingerprint, Found found) {
+  absl::MutexLock lock(&mu_);
+  entries_.remove_if([&](const Entry& e) { return e.relative == relative; });
+  entries_.push_front({relative, fingerprint, std::move(found)});
+  while (entries_.size() > capacity_) entries_.pop_back();
+}
+
+size_t DicomSeriesCache::size() const {
+  absl::MutexLock lock(&mu_);
+  return entries_.size();
+}
+
 absl::StatusOr<v1::VolumesReply> ListVolumes(const ConfinedDir& dir,
-                                             const VolumeListingBounds& bounds) {
+                                             const VolumeListingBounds& bounds,
+                                             DicomSeriesCache* cache) {
+  // Every file a DICOM directory's headers are read from is opened beneath
+  // the data directory, as a job's volume is.
+  ReadOptions confined;
+  confined.open = [&dir](const std::string& path) { return dir.OpenFile(path); };
+  confined.list = [&dir](const std::string& path) { return dir.ListDir(path); };
+  size_t headers_left = bounds.dicom_headers;
+  uint64_t header_bytes_left = bounds.dicom_bytes;
   v1::VolumesReply reply;
   std::vector<v1::VolumeEntry> found;
   size_t examined = 0;
-  bool truncated = false;
+  bool truncated = false;  // the walk stopped at a bound
+  bool unread = false;     // a DICOM directory's headers were past theirs
   std::deque<std::pair<std::string, int>> pending = {{".", 0}};  // directory, depth
   while (!pending.empty() && !truncated) {
     auto [path, depth] = pending.front();
@@ -74,9 +156,14 @@ absl::StatusOr<v1::VolumesReply> ListVolumes(const ConfinedDir& dir,
     auto names = dir.ListDir(path);
     if (!names.ok()) continue;  // vanished, or unreadable: not listed
     std::sort(names->begin(), names->end());
-    uint64_t dicom_bytes = 0;
+    uint64_t dicom_bytes = 0;  // the files not listed as volumes of their own
+    uint64_t file_bytes = 0;   // all its files
     bool dicom = false;
     int probed = 0;
+    // The directory's files as the cache tells them apart: names, sizes,
+    // modification times.
+    std::string files_seen;
+    size_t files = 0;
     for (const std::string& name : *names) {
       if (name.empty() || name.front() == '.' || !Listable(name)) continue;
       if (++examined > bounds.examined) {
@@ -95,6 +182,9 @@ absl::StatusOr<v1::VolumesReply> ListVolumes(const ConfinedDir& dir,
         continue;
       }
       if (!entry->regular) continue;
+      ++files;
+      file_bytes += entry->bytes;
+      absl::StrAppend(&files_seen, name, "/", entry->bytes, "/", entry->mtime_ns, "\n");
       if (IsVolumeFileName(name)) {
         v1::VolumeEntry v;
         v.set_path(child);
@@ -112,11 +202,18 @@ absl::StatusOr<v1::VolumesReply> ListVolumes(const ConfinedDir& dir,
       dicom_bytes += entry->bytes;
     }
     if (dicom && path != ".") {
-      v1::VolumeEntry v;
-      v.set_path(path);
-      v.set_series(true);
-      v.set_bytes(dicom_bytes);
-      found.push_back(std::move(v));
+      // A directory the walk left part-way is not read.
+      const uint64_t fingerprint = std::hash<std::string>{}(files_seen) ^ files;
+      std::optional<DicomSeriesCache::Found> series;
+      if (cache && !truncated) series = cache->Get(path, fingerprint);
+      if (!series && !truncated && files <= headers_left && file_bytes <= header_bytes_left) {
+        headers_left -= files;
+        header_bytes_left -= file_bytes;
+        series = ListDicomSeries(path, confined);
+        if (cache) cache->Put(path, fingerprint, *series);
+      }
+      if (!series) unread = true;  // its headers are past the bound
+      AddDicomDirectory(path, dicom_bytes, series ? &*series : nullptr, &found);
     }
   }
   if (!pending.empty()) truncated = true;
@@ -127,7 +224,7 @@ absl::StatusOr<v1::VolumesReply> ListVolumes(const ConfinedDir& dir,
     truncated = true;
   }
   for (v1::VolumeEntry& v : found) *reply.add_volumes() = std::move(v);
-  reply.set_truncated(truncated);
+  reply.set_truncated(truncated || unread);
   for (const PresetInfo& p : ListPresets()) {
     v1::PresetInfo* out = reply.add_presets();
     out->set_name(p.name);

@@ -104,6 +104,32 @@ struct SeriesPath {
 };
 std::optional<SeriesPath> ParseSeriesPath(std::string_view path);
 
+// One series of a DICOM directory, as its files' headers describe it.
+struct DicomSeriesInfo {
+  std::string uid;  // SeriesInstanceUID; "" when the files have none
+  // The path that reads it: the directory when it is the only series,
+  // else "DIR#UID"; "" when no path can name it (a UID that is not digits
+  // and dots).
+  std::string path;
+  std::string modality, number, description;  // (0008,0060), (0020,0011), (0008,103E)
+  std::string summary;  // "CT, series 2 'AX 5mm', 120 files" (each value shown printable)
+  size_t files = 0;     // files of the series
+  uint64_t bytes = 0;   // their sizes
+  size_t frames = 0;    // slices: one per frame
+  int columns = 0, rows = 0;
+  // Why ReadDicomSeries would refuse it, as far as the headers tell (a
+  // file's own problem, slices that differ, a gap, a tilt, the size): the
+  // error it would give. "" when the headers raise none (the pixels may
+  // still fail to decode).
+  std::string problem;
+};
+// The series of the DICOM directory `path`, in the order their first files
+// come by name. Errors as ReadDicomSeries gives them for the directory (it
+// cannot be listed, holds no DICOM image, a file starting as DICOM does
+// cannot be read). Reads every file's header through `options`.
+absl::StatusOr<std::vector<DicomSeriesInfo>> ListDicomSeries(const std::string& path,
+                                                             const ReadOptions& options = {});
+
 absl::StatusOr<Volume> ReadRaw(const std::string& path, const RawSpec& spec,
                                const ReadOptions& options = {});
 

@@ -1358,10 +1358,7 @@ async function loadVolumes() {
   const vsel = $('volume');
   const keep = vsel.value;
   const vols = reply.volumes || [];
-  vsel.replaceChildren(...vols.map((v) => el('option', {
-    value: v.path,
-    text: `${v.path}${v.series ? '  [DICOM series]' : ''}  (${fmtBytes(num(v.bytes))})`,
-  })));
+  vsel.replaceChildren(...vols.map(volumeOption));
   if (vols.length === 0) vsel.append(el('option', {value: '', text: '(no volumes in the data directory)'}));
   if (reply.truncated) setStatus('The data directory holds more than the listing shows (it was truncated).', 'warn');
   if (keep) vsel.value = keep;
@@ -1377,6 +1374,26 @@ async function loadVolumes() {
   if (pkeep) psel.value = pkeep;
   if (!psel.value) psel.value = presets.some((p) => p.name === 'grey') ? 'grey|DVR' : (options[0] && options[0].value) || '';
   return true;
+}
+
+// A volume of the listing as an option: a DICOM series with what its
+// headers say (one of a study is shown by its directory; the path that
+// opens it, DIR#UID, is the value and the tooltip), and one the root says
+// would not open, disabled, with why.
+function volumeOption(v) {
+  const hash = v.series ? v.path.lastIndexOf('#') : -1;
+  const shown = hash > 0 ? v.path.slice(0, hash) : v.path;
+  let text = shown;
+  if (v.series) text += v.description ? `  [DICOM: ${v.description}]` : '  [DICOM series]';
+  text += `  (${fmtBytes(num(v.bytes))})`;
+  const o = el('option', {value: v.path, text, title: v.path});
+  if (v.error) {
+    const why = v.error.length > 160 ? `${v.error.slice(0, 157)}...` : v.error;
+    o.textContent = `${text}  cannot open: ${why}`;
+    o.title = `${v.path}: ${v.error}`;
+    o.disabled = true;
+  }
+  return o;
 }
 
 function fmtBytes(n) {
