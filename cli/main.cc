@@ -20,28 +20,30 @@
 
 #include "absl/strings/escaping.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "client.h"
 #include "clock.h"
 #include "cluster.grpc.pb.h"
-#include "convert.h"
 #include "cluster_model.h"
+#include "convert.h"
 #include "daemon.h"
-#include "heap.h"
-#include "gateway.h"
-#include "progress.h"
 #include "flags.h"
+#include "gateway.h"
+#include "heap.h"
 #include "local_cluster.h"
+#include "progress.h"
 #include "rpc_channel.h"
 #include "rpc_status.h"
 #include "transtick/camera.h"
 #include "transtick/image_io.h"
-#include "transtick/render.h"
-#include "transtick/scene.h"
 #include "transtick/orientation.h"
 #include "transtick/presets.h"
+#include "transtick/render.h"
+#include "transtick/scene.h"
 #include "transtick/volume_io.h"
 #include "version.h"
+#include "volumes.h"
 
 namespace transtick {
 namespace {
@@ -60,6 +62,7 @@ commands:
   health    exit 0 when every daemon named reports SERVING
   view      the web viewer: look around volumes live in a browser
   presets   list the named classifications (--preset)
+  volumes   list what a cluster's root (or a data directory) offers to open
   version   print the version
 
 docs: README.md, docs/formats.md (materials, transfer functions, job files, stats)
@@ -186,6 +189,20 @@ const CommandDoc kStatusDoc = {"transtick status", "",
                                With({{"root", "HOST:PORT", "the cluster's root (required)"}},
                                     ClientSecurityFlagDocs()),
                                ""};
+
+const CommandDoc kVolumesDoc = {
+    "transtick volumes",
+    "",
+    "Lists the volumes a running cluster's root offers (--root), or that a root\n"
+    "serving --data-dir DIR would offer: each as the path a job's \"volume\" takes,\n"
+    "its size, and for a DICOM series what its headers say (one line per series of\n"
+    "a study, as DIR#UID) and why it would not open (docs/formats.md#volumes-listing).",
+    0,
+    0,
+    With({{"root", "HOST:PORT", "the cluster's root"},
+          {"data-dir", "DIR", "list DIR here, as a root serving it would"}},
+         ClientSecurityFlagDocs()),
+    ""};
 
 const CommandDoc kCancelDoc = {"transtick cancel", "JOB_ID", "Cancels a queued or running job.",
                                1, 1,
@@ -935,6 +952,59 @@ int StatusCommand(int argc, char** argv) {
   return 0;
 }
 
+// "6.9 MiB", "512 KiB", "300 B"
+std::string ShowBytes(uint64_t n) {
+  if (n >= uint64_t{1} << 30) return absl::StrFormat("%.1f GiB", n / 1073741824.0);
+  if (n >= uint64_t{1} << 20) return absl::StrFormat("%.1f MiB", n / 1048576.0);
+  if (n >= uint64_t{1} << 10) return absl::StrFormat("%.0f KiB", n / 1024.0);
+  return absl::StrCat(n, " B");
+}
+
+int VolumesCommand(int argc, char** argv) {
+  auto fail = [](const absl::Status& s) { return Fail("volumes", s); };
+  int exit = 0;
+  auto flags = ParseCommand(argc, argv, kVolumesDoc, &exit);
+  if (!flags) return exit;
+  if (flags->Has("root") == flags->Has("data-dir")) {
+    return fail(absl::InvalidArgumentError("give one of --root HOST:PORT and --data-dir DIR"));
+  }
+  v1::VolumesReply reply;
+  if (flags->Has("root")) {
+    if (absl::Status s = UseSecurity(*flags); !s.ok()) return fail(s);
+    auto stub = v1::Root::NewStub(MakeChannel(flags->Get("root"), Role::kRoot));
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(60));
+    grpc::Status s = stub->Volumes(&ctx, v1::VolumesRequest(), &reply);
+    if (!s.ok()) return fail(FromGrpc(s));
+  } else {
+    auto dir = ConfinedDir::Open(flags->Get("data-dir"));
+    if (!dir.ok()) return fail(dir.status());
+    auto listed = ListVolumes(**dir);
+    if (!listed.ok()) return fail(listed.status());
+    reply = *std::move(listed);
+  }
+  size_t width = 0;
+  for (const auto& v : reply.volumes()) width = std::max(width, v.path().size());
+  for (const auto& v : reply.volumes()) {
+    // The root's strings: escaped, they cannot move the cursor.
+    std::string line = absl::StrFormat("%-*s %10s", static_cast<int>(width), Printable(v.path()),
+                                       ShowBytes(v.bytes()));
+    if (v.series()) {
+      absl::StrAppend(&line, "  DICOM", v.description().empty() ? "" : ": ",
+                      Printable(v.description()));
+    }
+    if (!v.error().empty()) absl::StrAppend(&line, "  cannot open: ", Printable(v.error()));
+    std::printf("%s\n", line.c_str());
+  }
+  if (reply.volumes().empty()) std::printf("no volumes\n");
+  if (reply.truncated()) {
+    std::fprintf(stderr,
+                 "transtick volumes: the listing stopped at its bounds; there is more "
+                 "(docs/formats.md#volumes-listing)\n");
+  }
+  return 0;
+}
+
 int CancelCommand(int argc, char** argv) {
   int exit = 0;
   auto flags = ParseCommand(argc, argv, kCancelDoc, &exit);
@@ -1150,6 +1220,7 @@ int main(int argc, char** argv) {
   if (cmd == "health") return Health(argc, argv);
   if (cmd == "view") return View(argc, argv);
   if (cmd == "presets") return PresetsCommand(argc, argv);
+  if (cmd == "volumes") return VolumesCommand(argc, argv);
   if (cmd == "version" || cmd == "--version") {
     int exit = 0;
     if (cmd == "version" && !ParseCommand(argc, argv, kVersionDoc, &exit)) return exit;

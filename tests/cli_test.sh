@@ -222,7 +222,16 @@ if [[ -n ${3:-} ]]; then
   expect 0 "32x32 surfaces" -- render --volume "$s#1.2.840.99.1" --preset ct-bone --size 32x32 \
     --azimuth 30 --local 0 --out "$dir/d0.png"
   cmp "$dir/d2.png" "$dir/d0.png" || { echo "FAIL: DICOM series: cluster and in-process images differ"; fails=$((fails + 1)); }
+  # What a root serving the directory would list: a line per series of the
+  # study, and the series with a gap, saying why it would not open.
+  expect 0 "^study#1.2.840.99.1 .* DICOM: CT, series 3 'AX BONE', 12 files, 16x16x12$" -- \
+    volumes --data-dir "$dir/dicom"
+  expect 0 "^study#1.2.840.99.12 .* DICOM: CT, series 4, 6 files, 16x16x6$" -- volumes --data-dir "$dir/dicom"
+  expect 0 "^gap .* cannot open: gap: a gap of 2.000 mm" -- volumes --data-dir "$dir/dicom"
+  grep -q "^study " "$dir/out" && { echo "FAIL: volumes lists the study's directory itself"; fails=$((fails + 1)); }
 fi
+expect 2 "give one of --root HOST:PORT and --data-dir DIR" -- volumes
+expect 1 "nowhere" -- volumes --data-dir "$dir/nowhere"
 
 echo "cli_test: $fails failed"
 [[ $fails == 0 ]]

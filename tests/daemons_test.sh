@@ -73,6 +73,10 @@ timeout 10 "$build/services/display/transtick-display" --listen 127.0.0.1:$rport
 grep -q "cannot listen on 127.0.0.1:$rport" "$dir/dup.log" ||
   fail "second daemon on a taken port: $(cat "$dir/dup.log")"
 "$T" status --root 127.0.0.1:$rport >"$dir/status.log"
+# What the root offers to open, with its size.
+"$T" volumes --root 127.0.0.1:$rport >"$dir/volumes.log" 2>&1 &&
+  grep -qE "^box.nrrd +[0-9]+ (B|KiB)$" "$dir/volumes.log" ||
+  fail "volumes: $(cat "$dir/volumes.log")"
 sed -n 's/.* at 127.0.0.1:\([0-9]*\),.*/\1/p' "$dir/status.log" >"$dir/ports"
 # Each worker offers its host's memory (no --memory-mb, no cgroup limit
 # here unless the machine has one), shown with it.

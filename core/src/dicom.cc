@@ -970,9 +970,9 @@ absl::StatusOr<Geometry> Arrange(const std::string& path, const ReadOptions& opt
       }
       if (std::fabs(gaps[i] - typical) > 0.01 * typical + 0.01) {
         return Error(path,
-                     absl::StrFormat("%s a gap of %.3f mm between %s and %s, where the slices are "
+                     absl::StrFormat("%sa gap of %.3f mm between %s and %s, where the slices are "
                                      "%.3f mm apart (a missing slice?)",
-                                     gaps[i] > typical ? "" : "uneven spacing:", gaps[i], a.Name(),
+                                     gaps[i] > typical ? "" : "uneven spacing: ", gaps[i], a.Name(),
                                      b.Name(), typical));
       }
       // Successive positions must move along the normal only.

@@ -62,9 +62,9 @@ bool Listable(const std::string& name) {
   return true;
 }
 
-// `text` as a listing may carry it: unchanged when Listable, else with
+// `text` as a reply may carry it: unchanged when Listable, else with
 // every byte outside printable ASCII shown as '?'.
-std::string Printable(std::string text) {
+std::string ListableText(std::string text) {
   if (Listable(text)) return text;
   for (char& c : text) {
     const auto u = static_cast<unsigned char>(c);
@@ -86,23 +86,23 @@ void AddDicomDirectory(const std::string& path, uint64_t bytes,
     return;
   }
   if (!found->ok()) {
-    dir_entry.set_error(Printable(std::string(found->status().message())));
+    dir_entry.set_error(ListableText(std::string(found->status().message())));
     out->push_back(std::move(dir_entry));
     return;
   }
   for (const DicomSeriesInfo& info : **found) {
     v1::VolumeEntry v = dir_entry;
     v.set_bytes(info.bytes);
-    v.set_description(Printable(
+    v.set_description(ListableText(
         absl::StrCat(info.summary, ", ", info.columns, "x", info.rows, "x", info.frames)));
     if (info.path.empty()) {
       // Opening the directory gives the error that lists the series.
-      v.set_error(Printable(absl::StrCat("series '", info.uid,
-                                         "': its SeriesInstanceUID is not digits and dots, so "
-                                         "no path can name it")));
+      v.set_error(ListableText(absl::StrCat("series '", info.uid,
+                                            "': its SeriesInstanceUID is not digits and dots, so "
+                                            "no path can name it")));
     } else {
       v.set_path(info.path);
-      v.set_error(Printable(info.problem));
+      v.set_error(ListableText(info.problem));
     }
     out->push_back(std::move(v));
   }
@@ -165,7 +165,7 @@ absl::StatusOr<v1::VolumesReply> ListVolumes(const ConfinedDir& dir,
     std::string files_seen;
     size_t files = 0;
     for (const std::string& name : *names) {
-      if (name.empty() || name.front() == '.' || !Listable(name)) continue;
+      if (name.empty() || name.front() == '.') continue;
       if (++examined > bounds.examined) {
         truncated = true;
         break;
@@ -173,6 +173,16 @@ absl::StatusOr<v1::VolumesReply> ListVolumes(const ConfinedDir& dir,
       const std::string child = Join(path, name);
       auto entry = dir.Stat(child);
       if (!entry.ok()) continue;
+      if (!Listable(name)) {
+        // Not listed, but a DICOM directory's reader reads it: it counts
+        // among the files the cache tells apart.
+        if (entry->regular) {
+          ++files;
+          file_bytes += entry->bytes;
+          absl::StrAppend(&files_seen, name, "/", entry->bytes, "/", entry->mtime_ns, "\n");
+        }
+        continue;
+      }
       if (entry->directory) {
         if (depth + 1 < bounds.depth) {
           pending.emplace_back(child, depth + 1);
