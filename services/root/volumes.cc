@@ -129,11 +129,6 @@ void DicomSeriesCache::Put(const std::string& relative, uint64_t fingerprint, Fo
   while (entries_.size() > capacity_) entries_.pop_back();
 }
 
-size_t DicomSeriesCache::size() const {
-  absl::MutexLock lock(&mu_);
-  return entries_.size();
-}
-
 absl::StatusOr<v1::VolumesReply> ListVolumes(const ConfinedDir& dir,
                                              const VolumeListingBounds& bounds,
                                              DicomSeriesCache* cache) {

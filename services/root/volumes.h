@@ -42,7 +42,6 @@ class DicomSeriesCache {
   std::optional<Found> Get(const std::string& relative, uint64_t fingerprint)
       ABSL_LOCKS_EXCLUDED(mu_);
   void Put(const std::string& relative, uint64_t fingerprint, Found found) ABSL_LOCKS_EXCLUDED(mu_);
-  size_t size() const ABSL_LOCKS_EXCLUDED(mu_);
 
  private:
   struct Entry {
@@ -51,7 +50,7 @@ class DicomSeriesCache {
     Found found;
   };
   const size_t capacity_;
-  mutable absl::Mutex mu_;
+  absl::Mutex mu_;
   std::list<Entry> entries_ ABSL_GUARDED_BY(mu_);  // most recently used first
 };
 

@@ -158,7 +158,19 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     for (int i = files; i < tf::kMaxSlices; ++i) {
       unlink((tf::ScratchDir() + "/s" + std::to_string(i)).c_str());
     }
-    tf::Check(transtick::ReadDicomSeries(tf::ScratchDir(), options));
+    const absl::StatusOr<transtick::Volume> read =
+        transtick::ReadDicomSeries(tf::ScratchDir(), options);
+    tf::Check(read);
+    // The root's listing reads the same files and judges every series as
+    // the reader does: where the reader reads the directory, the listing
+    // finds that one series and no problem with it.
+    const auto listed = transtick::ListDicomSeries(tf::ScratchDir(), options);
+    if (read.ok()) {
+      TRANSTICK_CHECK(listed.ok());
+      TRANSTICK_CHECK_EQ(listed->size(), 1u);
+      TRANSTICK_CHECK((*listed)[0].problem.empty());
+      TRANSTICK_CHECK_EQ((*listed)[0].frames, static_cast<size_t>(read->dims[2]));
+    }
     return 0;
   }
   const std::string& path = tf::ScratchPath();

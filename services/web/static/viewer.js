@@ -1358,7 +1358,14 @@ async function loadVolumes() {
   const vsel = $('volume');
   const keep = vsel.value;
   const vols = reply.volumes || [];
-  vsel.replaceChildren(...vols.map(volumeOption));
+  // A study's series are DIR#UID, several with one DIR: shown by DIR (a
+  // directory named with a '#' holding one series keeps its whole name).
+  const studies = new Map();
+  for (const v of vols) {
+    const hash = v.series ? v.path.lastIndexOf('#') : -1;
+    if (hash > 0) studies.set(v.path.slice(0, hash), (studies.get(v.path.slice(0, hash)) || 0) + 1);
+  }
+  vsel.replaceChildren(...vols.map((v) => volumeOption(v, studies)));
   if (vols.length === 0) vsel.append(el('option', {value: '', text: '(no volumes in the data directory)'}));
   if (reply.truncated) setStatus('The data directory holds more than the listing shows (it was truncated).', 'warn');
   if (keep) vsel.value = keep;
@@ -1377,12 +1384,14 @@ async function loadVolumes() {
 }
 
 // A volume of the listing as an option: a DICOM series with what its
-// headers say (one of a study is shown by its directory; the path that
-// opens it, DIR#UID, is the value and the tooltip), and one the root says
-// would not open, disabled, with why.
-function volumeOption(v) {
+// headers say (one of a study, whose directory `studies` counts more than
+// once, is shown by its directory; the path that opens it, DIR#UID, is the
+// value and the tooltip), and one the root says would not open, disabled,
+// with why.
+function volumeOption(v, studies) {
   const hash = v.series ? v.path.lastIndexOf('#') : -1;
-  const shown = hash > 0 ? v.path.slice(0, hash) : v.path;
+  const study = hash > 0 && studies.get(v.path.slice(0, hash)) > 1;
+  const shown = study ? v.path.slice(0, hash) : v.path;
   let text = shown;
   if (v.series) text += v.description ? `  [DICOM: ${v.description}]` : '  [DICOM series]';
   text += `  (${fmtBytes(num(v.bytes))})`;
