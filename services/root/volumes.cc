@@ -168,16 +168,14 @@ absl::StatusOr<v1::VolumesReply> ListVolumes(const ConfinedDir& dir,
       const std::string child = Join(path, name);
       auto entry = dir.Stat(child);
       if (!entry.ok()) continue;
-      if (!Listable(name)) {
-        // Not listed, but a DICOM directory's reader reads it: it counts
-        // among the files the cache tells apart.
-        if (entry->regular) {
-          ++files;
-          file_bytes += entry->bytes;
-          absl::StrAppend(&files_seen, name, "/", entry->bytes, "/", entry->mtime_ns, "\n");
-        }
-        continue;
+      if (entry->regular) {
+        // Every file a DICOM directory's reader reads, those whose names
+        // are not listed included, counts among what the cache tells apart.
+        ++files;
+        file_bytes += entry->bytes;
+        absl::StrAppend(&files_seen, name, "/", entry->bytes, "/", entry->mtime_ns, "\n");
       }
+      if (!Listable(name)) continue;
       if (entry->directory) {
         if (depth + 1 < bounds.depth) {
           pending.emplace_back(child, depth + 1);
@@ -187,9 +185,6 @@ absl::StatusOr<v1::VolumesReply> ListVolumes(const ConfinedDir& dir,
         continue;
       }
       if (!entry->regular) continue;
-      ++files;
-      file_bytes += entry->bytes;
-      absl::StrAppend(&files_seen, name, "/", entry->bytes, "/", entry->mtime_ns, "\n");
       if (IsVolumeFileName(name)) {
         v1::VolumeEntry v;
         v.set_path(child);
