@@ -2,6 +2,8 @@
 
 #include <gdcmAttribute.h>
 #include <gdcmImage.h>
+#include <gdcmImageChangeTransferSyntax.h>
+#include <gdcmImageReader.h>
 #include <gdcmImageWriter.h>
 #include <gdcmItem.h>
 #include <gdcmReader.h>
@@ -14,6 +16,48 @@
 #include <sstream>
 
 namespace transtick::testing {
+
+namespace {
+
+// `bytes` with ImagePositionPatient set to `position` by a plain writer,
+// which leaves the other attributes as they are (GDCM's image writer
+// writes a 2-D image's origin without its z).
+std::string WithPosition(const std::string& bytes, const std::array<double, 3>& position) {
+  std::istringstream in(bytes);
+  gdcm::Reader reader;
+  reader.SetStream(in);
+  if (!reader.Read()) return "";
+  gdcm::Attribute<0x0020, 0x0032> at;
+  for (int i = 0; i < 3; ++i) at.SetValue(position[i], i);
+  reader.GetFile().GetDataSet().Replace(at.GetAsDataElement());
+  std::ostringstream out;
+  gdcm::Writer rewrite;
+  rewrite.SetFile(reader.GetFile());
+  rewrite.SetStream(out);
+  if (!rewrite.Write()) return "";
+  return out.str();
+}
+
+// `bytes` with its pixels compressed, RLE lossless.
+std::string RleCompressed(const std::string& bytes) {
+  std::istringstream in(bytes);
+  gdcm::ImageReader reader;
+  reader.SetStream(in);
+  if (!reader.Read()) return "";
+  gdcm::ImageChangeTransferSyntax change;
+  change.SetTransferSyntax(gdcm::TransferSyntax::RLELossless);
+  change.SetInput(reader.GetImage());
+  if (!change.Change()) return "";
+  gdcm::ImageWriter writer;
+  writer.SetFile(reader.GetFile());
+  writer.SetImage(change.GetOutput());
+  std::ostringstream out;
+  writer.SetStream(out);
+  if (!writer.Write()) return "";
+  return out.str();
+}
+
+}  // namespace
 
 std::string DicomSliceFile(const DicomSlice& slice) {
   gdcm::Trace::WarningOff();
@@ -55,24 +99,23 @@ std::string DicomSliceFile(const DicomSlice& slice) {
     description.SetValue(slice.description);
     ds.Replace(description.GetAsDataElement());
   }
+  if (slice.private_bytes > 0) {
+    gdcm::DataElement creator(gdcm::Tag(0x0009, 0x0010));
+    creator.SetVR(gdcm::VR::LO);
+    creator.SetByteValue("TRANSTICK TEST ", 16);
+    ds.Replace(creator);
+    gdcm::DataElement blob(gdcm::Tag(0x0009, 0x1010));
+    blob.SetVR(gdcm::VR::OB);
+    const std::string bytes(slice.private_bytes + slice.private_bytes % 2, '\x5a');
+    blob.SetByteValue(bytes.data(), static_cast<uint32_t>(bytes.size()));
+    ds.Replace(blob);
+  }
   std::ostringstream first;
   writer.SetStream(first);
   if (!writer.Write()) return "";
-  // GDCM writes a 2-D image's origin without its z: put the whole position
-  // in with a plain writer, which leaves the other attributes as they are.
-  std::istringstream in(first.str());
-  gdcm::Reader reader;
-  reader.SetStream(in);
-  if (!reader.Read()) return "";
-  gdcm::Attribute<0x0020, 0x0032> position;
-  for (int i = 0; i < 3; ++i) position.SetValue(slice.position[i], i);
-  reader.GetFile().GetDataSet().Replace(position.GetAsDataElement());
-  std::ostringstream out;
-  gdcm::Writer rewrite;
-  rewrite.SetFile(reader.GetFile());
-  rewrite.SetStream(out);
-  if (!rewrite.Write()) return "";
-  return out.str();
+  std::string out = first.str();
+  if (slice.rle) out = RleCompressed(out);
+  return out.empty() ? "" : WithPosition(out, slice.position);
 }
 
 namespace {

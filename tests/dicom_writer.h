@@ -21,6 +21,10 @@ struct DicomSlice {
   std::vector<int16_t> pixels;  // columns * rows, row by row
   int number = 0;               // SeriesNumber (0020,0011) when not 0
   std::string description;      // SeriesDescription (0008,103E) when not empty
+  // A private OB element (0009,1010) of this many bytes before the pixel
+  // data, when not 0: a header longer than a reader's first look.
+  size_t private_bytes = 0;
+  bool rle = false;  // the pixels RLE lossless (encapsulated), not native
 };
 
 // The file's bytes; empty if GDCM fails to write it.

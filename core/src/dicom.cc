@@ -18,10 +18,12 @@
 // file is read through ReadOptions::open (so the
 // root's confinement holds), its element lengths walked (ElementWalk, below:
 // GDCM would allocate whatever a length declares), and given to GDCM from
-// memory. Each is read twice: first its header only (up to the pixel data),
-// which is checked (sizes, pixel format, frames) before GDCM reads any
-// pixels, then in full, once per file whatever its frames, which decodes
-// the pixels in whatever transfer syntax GDCM supports.
+// memory. Each is read twice: first its header only (its bytes up to the
+// pixel data's value, ReadHeaderChecked), which is checked (sizes, pixel
+// format, frames) before GDCM reads any pixels, then in full, once per file
+// whatever its frames, which decodes the pixels in whatever transfer syntax
+// GDCM supports. A listing of a directory's series (ListDicomSeries) reads
+// the headers only.
 //
 // Attributes used:
 //   (0020,000E) SeriesInstanceUID   all slices the same: one series
@@ -280,9 +282,24 @@ const char* ImageAttributeVr(uint16_t group, uint16_t element) {
   return nullptr;
 }
 
+// A walk of the header only (`header_only`) stops at the data set's pixel
+// data element (7FE0,0010) once its tag, VR and length are read, and says
+// where its value begins (pixel_value_at): what follows is not looked at,
+// so `bytes` may be a prefix of the file that ends there. GDCM's header
+// reader stops at that element too (ReadUpToTag).
 class ElementWalk {
  public:
-  ElementWalk(const std::string& path, const std::string& bytes) : path_(path), bytes_(bytes) {}
+  ElementWalk(const std::string& path, const std::string& bytes, bool header_only = false)
+      : path_(path), bytes_(bytes), header_only_(header_only) {}
+
+  // Where the pixel data's value begins, once a header-only walk stopped
+  // there.
+  std::optional<size_t> pixel_value_at() const { return pixel_value_at_; }
+  // The transfer syntax UID the meta group names ("" without one).
+  const std::string& syntax() const { return syntax_; }
+  // The items of the data set's encapsulated pixel data, in order (the
+  // basic offset table first): where each value begins, and its length.
+  const std::vector<std::pair<size_t, size_t>>& fragments() const { return fragments_; }
 
   absl::Status Run() {
     size_t pos = 0;
@@ -307,6 +324,7 @@ class ElementWalk {
       }
       if (bytes_.size() - pos < 8) return Error(path_, "no data set after the file meta group");
       while (!syntax.empty() && (syntax.back() == '\0' || syntax.back() == ' ')) syntax.pop_back();
+      syntax_ = syntax;
       if (syntax == "1.2.840.10008.1.2") {
         explicit_ = false;
       } else if (syntax == "1.2.840.10008.1.2.2") {
@@ -414,12 +432,24 @@ class ElementWalk {
     }
     const size_t value = pos + header;
     const bool pixels = group == 0x7fe0 && element == 0x0010;
+    if (header_only_ && depth == 0 && pixels) {
+      // The data set's own pixel data (depth 0: not an icon's in a
+      // sequence): the walk ends at its value.
+      pixel_value_at_ = value;
+      return end;
+    }
     if (length == kUndefined) {
       if (meta) return Error(path_, absl::StrCat("an undefined length in the file meta group at byte ", pos));
       if (!sequence && !pixels) {
         return Error(path_, absl::StrFormat(
                                 "element (%04X,%04X) at byte %d has an undefined length", group,
                                 element, pos));
+      }
+      if (pixels && depth == 0) {
+        collect_ = true;
+        absl::StatusOr<size_t> done = Items(value, end, depth + 1, /*fragments=*/true);
+        collect_ = false;
+        return done;
       }
       return Items(value, end, depth + 1, /*fragments=*/pixels);
     }
@@ -472,6 +502,8 @@ class ElementWalk {
       if (!fragments) {
         absl::StatusOr<size_t> inner = Elements(value, value + length, depth, false);
         if (!inner.ok()) return inner.status();
+      } else if (collect_) {
+        fragments_.emplace_back(value, length);
       }
       pos = value + length;
     }
@@ -480,13 +512,90 @@ class ElementWalk {
 
   const std::string& path_;
   const std::string& bytes_;
+  const bool header_only_;
+  std::optional<size_t> pixel_value_at_;
+  std::string syntax_;
+  bool collect_ = false;  // in the data set's encapsulated pixel data
+  std::vector<std::pair<size_t, size_t>> fragments_;
   bool explicit_ = true;
   bool big_ = false;
 };
 
+// Checks RLE Lossless pixel data (PS3.5 Annex G) before GDCM decodes it:
+// GDCM's decoder divides by the segment count a frame's header gives (0
+// raised SIGFPE: found by volume_fuzzer), reads as many segment offsets as
+// it says (over 15 read past the header), and asserts (aborting the
+// process) on segments that run past their fragment, decode to more bytes
+// than a plane holds, or end more than 2 bytes before the next begins.
+// So: one fragment per frame after the basic offset table, each with a
+// 64-byte header of bits / 8 segments, the first at byte 64, and each
+// segment's runs (PackBits) decoding to exactly rows x columns bytes
+// within the fragment, ending at most 2 bytes before the next segment.
+absl::Status CheckRle(const std::string& path, const std::string& bytes,
+                      const std::vector<std::pair<size_t, size_t>>& items, int rows, int columns,
+                      int bits, int frames) {
+  if (items.size() != static_cast<size_t>(frames) + 1) {
+    return Error(path, absl::StrCat("RLE pixel data of ", items.empty() ? 0 : items.size() - 1,
+                                    " fragments for ", frames, " frames"));
+  }
+  const uint64_t plane = static_cast<uint64_t>(rows) * columns;
+  const uint32_t segments = static_cast<uint32_t>(bits / 8);
+  auto u32 = [&](size_t at) {
+    const auto* p = reinterpret_cast<const unsigned char*>(bytes.data() + at);
+    return uint32_t{p[0]} | uint32_t{p[1]} << 8 | uint32_t{p[2]} << 16 | uint32_t{p[3]} << 24;
+  };
+  for (int f = 0; f < frames; ++f) {
+    const auto [at, length] = items[f + 1];
+    auto bad = [&](const std::string& what) {
+      return Error(path, absl::StrCat("RLE frame ", f, " is damaged: ", what));
+    };
+    if (length < 64) return bad(absl::StrCat("a fragment of ", length, " bytes"));
+    if (u32(at) != segments) {
+      return bad(absl::StrCat(u32(at), " segments where ", bits, "-bit pixels take ", segments));
+    }
+    for (uint32_t i = 0; i < segments; ++i) {
+      const uint64_t begin = u32(at + 4 + 4 * i);
+      const uint64_t end = i + 1 < segments ? u32(at + 8 + 4 * i) : length;
+      if ((i == 0 && begin != 64) || begin >= end || end > length) {
+        return bad(absl::StrCat("segment ", i, " at bytes [", begin, ", ", end, ") of ", length));
+      }
+      // The runs: n in 0..127 copies the next n + 1 bytes, -127..-1 repeats
+      // the next byte 1 - n times, -128 is nothing.
+      uint64_t out = 0, pos = begin;
+      while (out < plane) {
+        if (pos >= end) return bad(absl::StrCat("segment ", i, " ends after ", out, " bytes"));
+        const auto n = static_cast<int8_t>(bytes[at + pos]);
+        ++pos;
+        if (n >= 0) {
+          out += uint64_t(n) + 1;
+          pos += uint64_t(n) + 1;
+        } else if (n != -128) {
+          out += uint64_t(1 - n);
+          pos += 1;
+        }
+        if (pos > end) return bad(absl::StrCat("segment ", i, " runs past its end"));
+      }
+      if (out != plane) {
+        return bad(absl::StrCat("segment ", i, " decodes to ", out, " bytes, not ", plane));
+      }
+      if (i + 1 < segments && end - pos > 2) {
+        return bad(
+            absl::StrCat("segment ", i + 1, " begins ", end - pos, " bytes after ", i, " ends"));
+      }
+    }
+  }
+  return absl::OkStatus();
+}
+
 // A slice file's bytes, read through the hook and walked (ElementWalk):
-// what GDCM then reads from memory.
-absl::StatusOr<std::string> ReadChecked(const std::string& path, const ReadOptions& options) {
+// what GDCM then reads from memory. With `rle`, its RLE Lossless pixel
+// data is set there, so that the caller can check it (CheckRle).
+struct RleItems {
+  bool rle = false;
+  std::vector<std::pair<size_t, size_t>> items;
+};
+absl::StatusOr<std::string> ReadChecked(const std::string& path, const ReadOptions& options,
+                                        RleItems* rle = nullptr) {
   absl::StatusOr<uint64_t> size = vi::FileSize(path, options);
   if (!size.ok()) return size.status();
   // A slice is far smaller than the volume it belongs to.
@@ -496,12 +605,70 @@ absl::StatusOr<std::string> ReadChecked(const std::string& path, const ReadOptio
   }
   absl::StatusOr<std::string> bytes = vi::ReadPrefix(path, *size, options);
   if (!bytes.ok()) return bytes.status();
-  if (absl::Status s = ElementWalk(path, *bytes).Run(); !s.ok()) {
+  ElementWalk walk(path, *bytes);
+  if (absl::Status s = walk.Run(); !s.ok()) {
     // The walk's message starts with the path.
     return Error(path, absl::StrCat("not a DICOM file, or a damaged one: ",
                                     s.message().substr(path.size() + 2)));
   }
+  if (rle) {
+    rle->rle = walk.syntax() == "1.2.840.10008.1.2.5";
+    rle->items = walk.fragments();
+  }
   return bytes;
+}
+
+// A slice file's header: its bytes up to the pixel data's value (or the
+// whole file when it has none), read in growing prefixes, each walked
+// (ElementWalk, header only) before GDCM sees it; and the file's size. A
+// walk that fails on a prefix tries a longer one, so an error is the one
+// the whole file gives. `budget` (may be null) bounds the bytes read: past
+// it, ResourceExhausted, and budget->exhausted is set.
+struct HeaderBytes {
+  std::string bytes;
+  uint64_t file_size = 0;
+};
+absl::StatusOr<HeaderBytes> ReadHeaderChecked(const std::string& path, const ReadOptions& options,
+                                              DicomReadBudget* budget) {
+  absl::StatusOr<uint64_t> size = vi::FileSize(path, options);
+  if (!size.ok()) return size.status();
+  if (*size > options.max_bytes) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat(path, ": a slice file of ", *size, " bytes, more than the volume limit"));
+  }
+  // Most headers take a few KiB; an enhanced image's functional groups
+  // may take MiBs.
+  uint64_t want = std::min<uint64_t>(*size, kDicomFirstHeaderBytes);
+  for (;;) {
+    if (budget) {
+      if (want > budget->bytes) {
+        budget->exhausted = true;
+        return absl::ResourceExhaustedError(
+            absl::StrCat(path, ": past the bound on header bytes read"));
+      }
+      budget->bytes -= want;
+    }
+    absl::StatusOr<std::string> bytes = vi::ReadPrefix(path, want, options);
+    if (!bytes.ok()) return bytes.status();
+    // The whole file: as long as it said, or shorter (it shrank).
+    const bool whole = bytes->size() >= *size || bytes->size() < want;
+    ElementWalk walk(path, *bytes, /*header_only=*/true);
+    absl::Status walked = walk.Run();
+    if (walked.ok() && walk.pixel_value_at()) {
+      bytes->resize(*walk.pixel_value_at());
+      return HeaderBytes{*std::move(bytes), *size};
+    }
+    if (whole) {
+      if (!walked.ok()) {
+        // The walk's message starts with the path.
+        return Error(path, absl::StrCat("not a DICOM file, or a damaged one: ",
+                                        walked.message().substr(path.size() + 2)));
+      }
+      const uint64_t read = bytes->size();
+      return HeaderBytes{*std::move(bytes), read};
+    }
+    want = std::min(*size, want * 4);
+  }
 }
 
 // Checks the image attributes of the file whose header is `h`, and fills
@@ -677,7 +844,8 @@ enum class FileKind {
 // preamble either, is kNotDicom. An image appends its frames to `out` as
 // slices, or one slice holding its problem.
 absl::StatusOr<FileKind> ReadHeader(const Gdcm& gdcm, const std::string& path,
-                                    const ReadOptions& options, std::vector<Slice>* out) {
+                                    const ReadOptions& options, DicomReadBudget* budget,
+                                    std::vector<Slice>* out) {
   absl::StatusOr<std::string> prefix = vi::ReadPrefix(path, 132, options);
   if (!prefix.ok()) return prefix.status();
   const bool magic = prefix->size() == 132 && prefix->compare(128, 4, "DICM") == 0;
@@ -689,18 +857,19 @@ absl::StatusOr<FileKind> ReadHeader(const Gdcm& gdcm, const std::string& path,
                                                : 0;
     if (group != 0x0002 && group != 0x0008) return FileKind::kNotDicom;
   }
-  absl::StatusOr<std::string> contents = ReadChecked(path, options);
-  if (!contents.ok()) {
-    if (!magic && contents.status().code() == absl::StatusCode::kInvalidArgument) {
+  absl::StatusOr<HeaderBytes> header = ReadHeaderChecked(path, options, budget);
+  if (!header.ok()) {
+    if (!magic && header.status().code() == absl::StatusCode::kInvalidArgument) {
       return FileKind::kNotDicom;
     }
-    return contents.status();
+    return header.status();
   }
-  const uint64_t file_size = contents->size();
+  const uint64_t file_size = header->file_size;
   DicomHeader h;
-  // Up to the pixel data: nothing of it is read, and its length is checked
-  // below before GDCM reads it. The module takes the bytes.
-  gdcm.read_header(&*contents, kTags, kElements, kMaxSlices, &h);
+  // Up to the pixel data: nothing of it is read (the bytes end at its
+  // value), and its length is checked below before GDCM reads it. The
+  // module takes the bytes.
+  gdcm.read_header(&header->bytes, kTags, kElements, kMaxSlices, &h);
   if (!h.read) {
     if (!magic) return FileKind::kNotDicom;
     return Error(path, "is not a DICOM file GDCM can read");
@@ -746,8 +915,14 @@ absl::Status ReadPixels(const Gdcm& gdcm, const std::vector<const Slice*>& slice
                         const std::vector<int>& z, const ReadOptions& options, float* out) {
   const Slice& s = *slices.front();
   // Read and walked again: the file may have changed since its header was.
-  absl::StatusOr<std::string> contents = ReadChecked(s.path, options);
+  RleItems rle;
+  absl::StatusOr<std::string> contents = ReadChecked(s.path, options, &rle);
   if (!contents.ok()) return contents.status();
+  if (rle.rle) {
+    absl::Status checked =
+        CheckRle(s.path, *contents, rle.items, s.rows, s.columns, s.bits, s.frames);
+    if (!checked.ok()) return checked;
+  }
   DicomPixels pixels;
   gdcm.read_pixels(&*contents, s.rows, s.columns, s.bits, s.frames, &pixels);
   if (!pixels.error.empty()) return Error(s.path, pixels.error);
@@ -836,7 +1011,8 @@ struct DirectoryScan {
 // Reads the header of every file in `directory` (errors name `path`).
 absl::StatusOr<DirectoryScan> ScanDirectory(const Gdcm& gdcm, const std::string& path,
                                             const std::string& directory,
-                                            const ReadOptions& options) {
+                                            const ReadOptions& options,
+                                            DicomReadBudget* budget = nullptr) {
   absl::StatusOr<std::vector<std::string>> names = ListDirectory(directory, options);
   if (!names.ok()) return names.status();
   std::sort(names->begin(), names->end());
@@ -856,7 +1032,7 @@ absl::StatusOr<DirectoryScan> ScanDirectory(const Gdcm& gdcm, const std::string&
       continue;
     }
     std::vector<Slice> frames;
-    absl::StatusOr<FileKind> kind = ReadHeader(gdcm, file, options, &frames);
+    absl::StatusOr<FileKind> kind = ReadHeader(gdcm, file, options, budget, &frames);
     if (!kind.ok()) return kind.status();
     if (*kind == FileKind::kNotDicom) {
       not_dicom.push_back(name);
@@ -1110,13 +1286,14 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
 }
 
 absl::StatusOr<std::vector<DicomSeriesInfo>> ListDicomSeries(const std::string& path,
-                                                             const ReadOptions& options) {
+                                                             const ReadOptions& options,
+                                                             DicomReadBudget* budget) {
   const Gdcm& gdcm = LoadGdcm();
   if (!gdcm.status.ok()) {
     return absl::UnavailableError(
         absl::StrCat(path, ": cannot read DICOM: ", gdcm.status.message()));
   }
-  absl::StatusOr<DirectoryScan> scan = ScanDirectory(gdcm, path, path, options);
+  absl::StatusOr<DirectoryScan> scan = ScanDirectory(gdcm, path, path, options, budget);
   if (!scan.ok()) return scan.status();
   const std::string base(absl::StripSuffix(path, "/"));
   std::vector<DicomSeriesInfo> out;

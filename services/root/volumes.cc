@@ -138,7 +138,7 @@ absl::StatusOr<v1::VolumesReply> ListVolumes(const ConfinedDir& dir,
   confined.open = [&dir](const std::string& path) { return dir.OpenFile(path); };
   confined.list = [&dir](const std::string& path) { return dir.ListDir(path); };
   size_t headers_left = bounds.dicom_headers;
-  uint64_t header_bytes_left = bounds.dicom_bytes;
+  DicomReadBudget header_bytes{bounds.dicom_bytes};
   v1::VolumesReply reply;
   std::vector<v1::VolumeEntry> found;
   size_t examined = 0;
@@ -152,7 +152,6 @@ absl::StatusOr<v1::VolumesReply> ListVolumes(const ConfinedDir& dir,
     if (!names.ok()) continue;  // vanished, or unreadable: not listed
     std::sort(names->begin(), names->end());
     uint64_t dicom_bytes = 0;  // the files not listed as volumes of their own
-    uint64_t file_bytes = 0;   // all its files
     bool dicom = false;
     int probed = 0;
     // The directory's files as the cache tells them apart: names, sizes,
@@ -172,7 +171,6 @@ absl::StatusOr<v1::VolumesReply> ListVolumes(const ConfinedDir& dir,
         // Every file a DICOM directory's reader reads, those whose names
         // are not listed included, counts among what the cache tells apart.
         ++files;
-        file_bytes += entry->bytes;
         absl::StrAppend(&files_seen, name, "/", entry->bytes, "/", entry->mtime_ns, "\n");
       }
       if (!Listable(name)) continue;
@@ -206,11 +204,14 @@ absl::StatusOr<v1::VolumesReply> ListVolumes(const ConfinedDir& dir,
       const uint64_t fingerprint = std::hash<std::string>{}(files_seen) ^ files;
       std::optional<DicomSeriesCache::Found> series;
       if (cache && !truncated) series = cache->Get(path, fingerprint);
-      if (!series && !truncated && files <= headers_left && file_bytes <= header_bytes_left) {
+      if (!series && !truncated && files <= headers_left && !header_bytes.exhausted) {
         headers_left -= files;
-        header_bytes_left -= file_bytes;
-        series = ListDicomSeries(path, confined);
-        if (cache) cache->Put(path, fingerprint, *series);
+        series = ListDicomSeries(path, confined, &header_bytes);
+        if (header_bytes.exhausted) {
+          series.reset();  // read in part: listed as unread, and not kept
+        } else if (cache) {
+          cache->Put(path, fingerprint, *series);
+        }
       }
       if (!series) unread = true;  // its headers are past the bound
       AddDicomDirectory(path, dicom_bytes, series ? &*series : nullptr, &found);

@@ -23,10 +23,11 @@ struct VolumeListingBounds {
   int depth = 4;                 // directory levels beneath the data directory
   size_t examined = 20000;       // names looked at in all
   size_t listed = 2000;          // volumes returned
-  // DICOM files whose headers one listing reads, and their bytes (the
-  // reader reads a file whole to check its elements before GDCM parses it).
+  // DICOM files whose headers one listing reads, and the bytes it reads of
+  // them (each file's bytes up to its pixel data, in prefixes of 16 KiB and
+  // more: ListDicomSeries).
   size_t dicom_headers = 5000;
-  uint64_t dicom_bytes = uint64_t{2} << 30;
+  uint64_t dicom_bytes = uint64_t{512} << 20;
 };
 
 // The series of DICOM directories as ListDicomSeries found them, each kept

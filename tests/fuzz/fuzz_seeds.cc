@@ -154,6 +154,7 @@ bool WriteVolumes(const fs::path& dir) {
   }
   // The volume fuzzer makes a directory of this input's slices.
   ok &= Write(dir / "series.dicom", DicomSeriesInput(v));
+  ok &= Write(dir / "series_rle.dicom", DicomSeriesInput(v, /*rle=*/true));
   ok &= Write(dir / "enhanced.dicom", DicomMultiFrameInput(v, false));
   ok &= Write(dir / "rtdose.dicom", DicomMultiFrameInput(v, true));
   ok &= WriteVolume(dir / "little.den", DenFile(v, ByteOrder::kLittle), v);

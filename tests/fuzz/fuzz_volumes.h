@@ -33,10 +33,11 @@ std::string MetaImageFile(const Volume& volume, ScalarType type, ByteOrder order
 std::string VtiFile(const Volume& volume, ScalarType type, ByteOrder order, bool compressed);
 
 // The volume fuzzer's form of a DICOM series: kDicomSeriesMagic, then the
-// slices' files (written by GDCM, int16) joined by kDicomSliceSeparator.
+// slices' files (written by GDCM, int16; with `rle` their pixels RLE
+// lossless, encapsulated) joined by kDicomSliceSeparator.
 inline constexpr char kDicomSeriesMagic[] = "DICOM-SERIES\n";
 inline constexpr char kDicomSliceSeparator[] = "\n--next-slice--\n";
-std::string DicomSeriesInput(const Volume& volume);
+std::string DicomSeriesInput(const Volume& volume, bool rle = false);
 // The same as one multi-frame file: an enhanced image's functional groups,
 // or with `grid_offsets` an RT dose's frame offsets; then a file that is
 // not DICOM, which the reader passes over.

@@ -123,12 +123,32 @@ struct DicomSeriesInfo {
   // still fail to decode).
   std::string problem;
 };
+// A DICOM file's header is read in prefixes: this many bytes first, then
+// 4 times more each time while the header goes on (at least to the pixel
+// data's value). Most headers take a few KiB. In a fuzzing build less, so
+// that the fuzzers' inputs of at most 4 KiB are read in several looks.
+#ifdef FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION
+inline constexpr uint64_t kDicomFirstHeaderBytes = 256;
+#else
+inline constexpr uint64_t kDicomFirstHeaderBytes = 16 << 10;
+#endif
+// Bytes a listing may still read (ListDicomSeries); `exhausted` once a
+// read would have gone past them.
+struct DicomReadBudget {
+  uint64_t bytes = 0;
+  bool exhausted = false;
+};
 // The series of the DICOM directory `path`, in the order their first files
 // come by name. Errors as ReadDicomSeries gives them for the directory (it
 // cannot be listed, holds no DICOM image, a file starting as DICOM does
-// cannot be read). Reads every file's header through `options`.
+// cannot be read). Reads every file's header through `options`: its bytes
+// up to the pixel data only, so a file damaged past that point is found
+// when the series is read. With a `budget`, the bytes read are taken from
+// it, and a read that would go past it gives ResourceExhausted (and sets
+// budget->exhausted).
 absl::StatusOr<std::vector<DicomSeriesInfo>> ListDicomSeries(const std::string& path,
-                                                             const ReadOptions& options = {});
+                                                             const ReadOptions& options = {},
+                                                             DicomReadBudget* budget = nullptr);
 
 absl::StatusOr<Volume> ReadRaw(const std::string& path, const RawSpec& spec,
                                const ReadOptions& options = {});
