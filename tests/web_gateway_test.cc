@@ -674,7 +674,13 @@ TEST_F(WebGatewayTest, VolumesListsEachSeriesOfAStudyAsThePathThatOpensIt) {
     a.series = "1.2.840.99.1";
     a.number = 3;
     a.description = "AX SOFT";
+    // GDCM's UIDs differ in length from one write to the next: written
+    // again until the file has its old size.
     write("study", "A0", a);
+    for (int tries = 0; tries < 100 && fs::file_size(a0) != static_cast<uintmax_t>(before.st_size);
+         ++tries) {
+      write("study", "A0", a);
+    }
     ASSERT_EQ(fs::file_size(a0), static_cast<uintmax_t>(before.st_size));
     const timespec times[2] = {before.st_atim, before.st_mtim};
     ASSERT_EQ(utimensat(AT_FDCWD, a0.c_str(), times, 0), 0);

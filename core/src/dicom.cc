@@ -594,23 +594,33 @@ struct RleItems {
   bool rle = false;
   std::vector<std::pair<size_t, size_t>> items;
 };
-absl::StatusOr<std::string> ReadChecked(const std::string& path, const ReadOptions& options,
-                                        RleItems* rle = nullptr) {
+
+// A slice file's size, refused past the volume limit (a slice is far
+// smaller than the volume it belongs to).
+absl::StatusOr<uint64_t> SliceFileSize(const std::string& path, const ReadOptions& options) {
   absl::StatusOr<uint64_t> size = vi::FileSize(path, options);
-  if (!size.ok()) return size.status();
-  // A slice is far smaller than the volume it belongs to.
-  if (*size > options.max_bytes) {
+  if (size.ok() && *size > options.max_bytes) {
     return absl::ResourceExhaustedError(absl::StrCat(path, ": a slice file of ", *size,
                                                      " bytes, more than the volume limit"));
   }
+  return size;
+}
+
+// The error of an ElementWalk that failed on `path` (its message starts
+// with the path).
+absl::Status Damaged(const std::string& path, const absl::Status& walked) {
+  return Error(path, absl::StrCat("not a DICOM file, or a damaged one: ",
+                                  walked.message().substr(path.size() + 2)));
+}
+
+absl::StatusOr<std::string> ReadChecked(const std::string& path, const ReadOptions& options,
+                                        RleItems* rle = nullptr) {
+  absl::StatusOr<uint64_t> size = SliceFileSize(path, options);
+  if (!size.ok()) return size.status();
   absl::StatusOr<std::string> bytes = vi::ReadPrefix(path, *size, options);
   if (!bytes.ok()) return bytes.status();
   ElementWalk walk(path, *bytes);
-  if (absl::Status s = walk.Run(); !s.ok()) {
-    // The walk's message starts with the path.
-    return Error(path, absl::StrCat("not a DICOM file, or a damaged one: ",
-                                    s.message().substr(path.size() + 2)));
-  }
+  if (absl::Status s = walk.Run(); !s.ok()) return Damaged(path, s);
   if (rle) {
     rle->rle = walk.syntax() == "1.2.840.10008.1.2.5";
     rle->items = walk.fragments();
@@ -630,12 +640,8 @@ struct HeaderBytes {
 };
 absl::StatusOr<HeaderBytes> ReadHeaderChecked(const std::string& path, const ReadOptions& options,
                                               DicomReadBudget* budget) {
-  absl::StatusOr<uint64_t> size = vi::FileSize(path, options);
+  absl::StatusOr<uint64_t> size = SliceFileSize(path, options);
   if (!size.ok()) return size.status();
-  if (*size > options.max_bytes) {
-    return absl::ResourceExhaustedError(
-        absl::StrCat(path, ": a slice file of ", *size, " bytes, more than the volume limit"));
-  }
   // Most headers take a few KiB; an enhanced image's functional groups
   // may take MiBs.
   uint64_t want = std::min<uint64_t>(*size, kDicomFirstHeaderBytes);
@@ -659,11 +665,7 @@ absl::StatusOr<HeaderBytes> ReadHeaderChecked(const std::string& path, const Rea
       return HeaderBytes{*std::move(bytes), *size};
     }
     if (whole) {
-      if (!walked.ok()) {
-        // The walk's message starts with the path.
-        return Error(path, absl::StrCat("not a DICOM file, or a damaged one: ",
-                                        walked.message().substr(path.size() + 2)));
-      }
+      if (!walked.ok()) return Damaged(path, walked);
       const uint64_t read = bytes->size();
       return HeaderBytes{*std::move(bytes), read};
     }
