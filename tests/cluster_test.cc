@@ -275,10 +275,12 @@ TEST_F(ClusterTest, OneSeriesOfADicomStudyRendersAsInProcess) {
   const std::array<int, 3> dims = {24, 20, 14};
   const Volume phantom = MakeNoisyPhantom(dims, 33);
   fs::create_directories(dir_ + "/study");
-  auto write = [&](const std::string& name, const testing::DicomSlice& s) {
+  fs::create_directories(dir_ + "/jpegls");
+  auto write = [&](const std::string& name, const testing::DicomSlice& s,
+                   const std::string& where = "study") {
     const std::string bytes = testing::DicomSliceFile(s);
     ASSERT_FALSE(bytes.empty()) << name;
-    std::ofstream(dir_ + "/study/" + name, std::ios::binary) << bytes;
+    std::ofstream(dir_ + "/" + where + "/" + name, std::ios::binary) << bytes;
   };
   for (int z = 0; z < dims[2]; ++z) {
     testing::DicomSlice s;
@@ -293,6 +295,8 @@ TEST_F(ClusterTest, OneSeriesOfADicomStudyRendersAsInProcess) {
       for (int x = 0; x < dims[0]; ++x)
         s.pixels.push_back(static_cast<int16_t>(std::lround(phantom.At(x, y, z))));
     write("IM" + std::to_string(z), s);
+    s.codec = testing::DicomCodec::kJpegLs;
+    write("IM" + std::to_string(z), s, "jpegls");
   }
   testing::DicomSlice scout;
   scout.series = "1.2.3.5";
@@ -345,6 +349,32 @@ TEST_F(ClusterTest, OneSeriesOfADicomStudyRendersAsInProcess) {
   ASSERT_FALSE(refused.ok());
   EXPECT_NE(std::string(refused.status().message()).find("nostudy#1.2"), std::string::npos)
       << refused.status();
+
+  // Slices on which GDCM's JPEG decoder aborts (volume_fuzzer found them):
+  // decoded in a process of its own, they fail their job with an error
+  // naming the file, and the root goes on. The series compressed with
+  // JPEG-LS, decoded there too, renders the native series' image.
+  ASSERT_EQ(testing::WriteFuzzSeries(TRANSTICK_SOURCE_DIR
+                                     "/tests/fuzz/corpus/volume/dicom-jpeg16-assertion",
+                                     dir_ + "/damaged")
+                .size(),
+            4u);
+  v1::Job damaged = MakeJob({View(0, 0, true, "damaged.png")});
+  damaged.mutable_datasets(0)->set_volume("damaged");
+  refused = SubmitAndWatch((*cluster)->root_address(), damaged, WatchOptions{});
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(std::string(refused.status().message())
+                .find("damaged/s1: the DICOM decoder (GDCM, in a process of its own) was killed "
+                      "by signal 6 (Aborted)"),
+            std::string::npos)
+      << refused.status();
+  v1::Job compressed = MakeJob({View(40, 15, true, "jpegls.exr")});
+  compressed.mutable_datasets(0)->set_volume("jpegls");
+  stats = SubmitAndWatch((*cluster)->root_address(), compressed, WatchOptions{});
+  ASSERT_TRUE(stats.ok()) << stats.status();
+  got = ReadImage(compressed.datasets(0).views(0).output());
+  ASSERT_TRUE(got.ok()) << got.status();
+  EXPECT_EQ(got->rgb, want.rgb);
 }
 
 // The surface model travels with the materials to every worker: the

@@ -5,11 +5,19 @@
 #define TRANSTICK_TESTS_DICOM_WRITER_H_
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <string>
 #include <vector>
 
 namespace transtick::testing {
+
+enum class DicomCodec { kNative, kRle, kJpegLossless, kJpegLs, kJpeg2000 };
+// The least bytes of pixels a slice of kJpeg2000 may have (DicomSliceFile
+// fails on fewer): GDCM's encoder overruns its buffer on small frames.
+inline constexpr size_t kLeastJpeg2000Bytes = 4096;
+// The codec's name, for test names and messages.
+const char* CodecName(DicomCodec codec);
 
 struct DicomSlice {
   std::string series = "1.2.3.4";
@@ -24,7 +32,9 @@ struct DicomSlice {
   // A private OB element (0009,1010) of this many bytes before the pixel
   // data, when not 0: a header longer than a reader's first look.
   size_t private_bytes = 0;
-  bool rle = false;  // the pixels RLE lossless (encapsulated), not native
+  // How the pixels are stored: native, or losslessly compressed
+  // (encapsulated) in this transfer syntax.
+  DicomCodec codec = DicomCodec::kNative;
 };
 
 // The file's bytes; empty if GDCM fails to write it.
@@ -50,6 +60,11 @@ struct DicomMultiFrame {
   int declared_frames = 0;  // NumberOfFrames when not 0 (else one per position)
 };
 std::string DicomMultiFrameFile(const DicomMultiFrame& image);
+
+// Writes the slices of a volume_fuzzer input of a DICOM series (its
+// format: tests/fuzz/fuzz_volumes.h) to `dir` as s0, s1, ...; returns
+// their paths, none when the input is not one.
+std::vector<std::string> WriteFuzzSeries(const std::string& input_path, const std::string& dir);
 
 }  // namespace transtick::testing
 

@@ -22,7 +22,9 @@
 // pixel data's value, ReadHeaderChecked), which is checked (sizes, pixel
 // format, frames) before GDCM reads any pixels, then in full, once per file
 // whatever its frames, which decodes the pixels in whatever transfer syntax
-// GDCM supports. A listing of a directory's series (ListDicomSeries) reads
+// GDCM supports: native and RLE here, codecs' (JPEG, JPEG-LS, JPEG 2000) in
+// a process of their own (dicom_decoder.h), where a crash or a hang on a
+// damaged file is an error naming it. A listing of a directory's series (ListDicomSeries) reads
 // the headers only.
 //
 // Attributes used:
@@ -65,6 +67,7 @@
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
+#include "dicom_decoder.h"
 #include "dicom_module.h"
 #include "module_loader.h"
 #include "transtick/orientation.h"
@@ -588,11 +591,20 @@ absl::Status CheckRle(const std::string& path, const std::string& bytes,
 }
 
 // A slice file's bytes, read through the hook and walked (ElementWalk):
-// what GDCM then reads from memory. With `rle`, its RLE Lossless pixel
-// data is set there, so that the caller can check it (CheckRle).
-struct RleItems {
-  bool rle = false;
-  std::vector<std::pair<size_t, size_t>> items;
+// what GDCM then reads from memory. With `encoding`, how its pixel data is
+// stored is set there, so that the caller can check RLE (CheckRle) and
+// send compressed data to the decoder process.
+struct PixelEncoding {
+  std::string syntax;  // the transfer syntax UID ("" without a meta group)
+  std::vector<std::pair<size_t, size_t>> items;  // its fragments, when encapsulated
+  bool Rle() const { return syntax == "1.2.840.10008.1.2.5"; }
+  // Native (the walk refuses the other native syntaxes: big endian, and
+  // deflated) or RLE: decoded in this process. Every other syntax is a
+  // codec's (JPEG, JPEG-LS, JPEG 2000, ...): decoded by transtick-dicom-decode.
+  bool InProcess() const {
+    return syntax.empty() || syntax == "1.2.840.10008.1.2" || syntax == "1.2.840.10008.1.2.1" ||
+           Rle();
+  }
 };
 
 // A slice file's size, refused past the volume limit (a slice is far
@@ -614,16 +626,16 @@ absl::Status Damaged(const std::string& path, const absl::Status& walked) {
 }
 
 absl::StatusOr<std::string> ReadChecked(const std::string& path, const ReadOptions& options,
-                                        RleItems* rle = nullptr) {
+                                        PixelEncoding* encoding = nullptr) {
   absl::StatusOr<uint64_t> size = SliceFileSize(path, options);
   if (!size.ok()) return size.status();
   absl::StatusOr<std::string> bytes = vi::ReadPrefix(path, *size, options);
   if (!bytes.ok()) return bytes.status();
   ElementWalk walk(path, *bytes);
   if (absl::Status s = walk.Run(); !s.ok()) return Damaged(path, s);
-  if (rle) {
-    rle->rle = walk.syntax() == "1.2.840.10008.1.2.5";
-    rle->items = walk.fragments();
+  if (encoding) {
+    encoding->syntax = walk.syntax();
+    encoding->items = walk.fragments();
   }
   return bytes;
 }
@@ -910,24 +922,64 @@ ScalarType TypeOf(const Slice& s) {
   }
 }
 
+// The decoder process of one series read (dicom_decoder.h), started for
+// its first file of compressed pixel data, with an address space of
+// `max_memory` bytes.
+struct Decoding {
+  uint64_t max_memory = 0;
+  std::unique_ptr<DicomDecoder> decoder;
+};
+
+// Room for the decoder to decode any of `slices`' files: its own code and
+// GDCM's (about 100 MiB), a file's bytes twice and its pixels three times
+// over (GDCM's buffers, and ours).
+uint64_t DecoderMemory(const std::vector<Slice>& slices) {
+  uint64_t most = 0;
+  for (const Slice& s : slices) {
+    const uint64_t pixels = uint64_t(s.rows) * s.columns * (s.bits / 8) * s.frames;
+    most = std::max(most, 2 * s.file_bytes + 3 * pixels);
+  }
+  return (uint64_t{1} << 30) + most;
+}
+
 // Decodes the file of `slices` (frames of one file, with their places in
 // the volume: z[i] for slices[i]) once, and writes each frame, rescaled, to
-// its plane of `out`.
-absl::Status ReadPixels(const Gdcm& gdcm, const std::vector<const Slice*>& slices,
-                        const std::vector<int>& z, const ReadOptions& options, float* out) {
+// its plane of `out`. Native and RLE pixel data is decoded here, the rest
+// by `decoding`'s process.
+absl::Status ReadPixels(const Gdcm& gdcm, Decoding& decoding,
+                        const std::vector<const Slice*>& slices, const std::vector<int>& z,
+                        const ReadOptions& options, float* out) {
   const Slice& s = *slices.front();
   // Read and walked again: the file may have changed since its header was.
-  RleItems rle;
-  absl::StatusOr<std::string> contents = ReadChecked(s.path, options, &rle);
+  PixelEncoding encoding;
+  absl::StatusOr<std::string> contents = ReadChecked(s.path, options, &encoding);
   if (!contents.ok()) return contents.status();
-  if (rle.rle) {
+  if (encoding.Rle()) {
     absl::Status checked =
-        CheckRle(s.path, *contents, rle.items, s.rows, s.columns, s.bits, s.frames);
+        CheckRle(s.path, *contents, encoding.items, s.rows, s.columns, s.bits, s.frames);
     if (!checked.ok()) return checked;
   }
   DicomPixels pixels;
-  gdcm.read_pixels(&*contents, s.rows, s.columns, s.bits, s.frames, &pixels);
-  if (!pixels.error.empty()) return Error(s.path, pixels.error);
+  if (encoding.InProcess()) {
+    gdcm.read_pixels(&*contents, s.rows, s.columns, s.bits, s.frames, &pixels);
+    if (!pixels.error.empty()) return Error(s.path, pixels.error);
+  } else {
+    if (!decoding.decoder) {
+      absl::StatusOr<std::unique_ptr<DicomDecoder>> started =
+          DicomDecoder::Start(decoding.max_memory, options.decode_seconds);
+      if (!started.ok()) {
+        return absl::Status(
+            started.status().code(),
+            absl::StrCat(s.path, ": cannot decode its compressed pixel data (",
+                         Shown(encoding.syntax), "): ", started.status().message()));
+      }
+      decoding.decoder = *std::move(started);
+    }
+    absl::Status decoded =
+        decoding.decoder->Decode(s.path, *contents, s.rows, s.columns, s.bits, s.frames,
+                                 options.decode_seconds, &pixels.bytes);
+    if (!decoded.ok()) return decoded;
+  }
   const size_t count = static_cast<size_t>(s.rows) * s.columns;
   const size_t frame_bytes = count * (s.bits / 8);
   if (pixels.bytes.size() != frame_bytes * s.frames) {
@@ -1267,6 +1319,8 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
   }
   std::sort(runs.begin(), runs.end(),
             [&](const auto& a, const auto& b) { return order[a.first] < order[b.first]; });
+  Decoding decoding;
+  decoding.max_memory = DecoderMemory(slices);
   for (const auto& [begin, end] : runs) {
     std::vector<const Slice*> frames;
     std::vector<int> z;
@@ -1274,7 +1328,8 @@ absl::StatusOr<Volume> ReadDicomSeries(const std::string& path, const ReadOption
       frames.push_back(&slices[order[i]]);
       z.push_back(static_cast<int>(order[i]));
     }
-    if (absl::Status st = ReadPixels(gdcm, frames, z, options, volume.values.data()); !st.ok()) {
+    if (absl::Status st = ReadPixels(gdcm, decoding, frames, z, options, volume.values.data());
+        !st.ok()) {
       return st;
     }
   }

@@ -12,8 +12,8 @@
 
 namespace transtick {
 
-absl::StatusOr<void*> OpenModule(const char* file_name, const char* env_var, const char* build_path,
-                                 const char* what, const char* const* symbols, int abi) {
+std::vector<std::string> CompanionCandidates(const char* file_name, const char* env_var,
+                                             const char* build_path) {
   std::vector<std::string> candidates;
   if (const char* env = std::getenv(env_var); env && *env) candidates.push_back(env);
   char exe[PATH_MAX];
@@ -27,6 +27,12 @@ absl::StatusOr<void*> OpenModule(const char* file_name, const char* env_var, con
   // Through StrCat: a std::string made from a literal draws a false
   // -Wstringop-overread from GCC 12 when linked with -flto.
   if (build_path != nullptr) candidates.push_back(absl::StrCat(build_path));
+  return candidates;
+}
+
+absl::StatusOr<void*> OpenModule(const char* file_name, const char* env_var, const char* build_path,
+                                 const char* what, const char* const* symbols, int abi) {
+  std::vector<std::string> candidates = CompanionCandidates(file_name, env_var, build_path);
   candidates.push_back(absl::StrCat(file_name));
   std::string tried;
   auto failed = [&tried](const std::string& path, absl::string_view why) {

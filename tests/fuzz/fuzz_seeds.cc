@@ -154,7 +154,14 @@ bool WriteVolumes(const fs::path& dir) {
   }
   // The volume fuzzer makes a directory of this input's slices.
   ok &= Write(dir / "series.dicom", DicomSeriesInput(v));
-  ok &= Write(dir / "series_rle.dicom", DicomSeriesInput(v, /*rle=*/true));
+  // Compressed: RLE (checked before GDCM decodes it), and JPEG codecs that
+  // transtick-dicom-decode runs in a process of its own. (JPEG 2000 slices
+  // must be larger than an input of the fuzzer: kLeastJpeg2000Bytes.)
+  for (testing::DicomCodec codec : {testing::DicomCodec::kRle, testing::DicomCodec::kJpegLossless,
+                                    testing::DicomCodec::kJpegLs}) {
+    ok &= Write(dir / absl::StrCat("series_", testing::CodecName(codec), ".dicom"),
+                DicomSeriesInput(v, codec));
+  }
   ok &= Write(dir / "enhanced.dicom", DicomMultiFrameInput(v, false));
   ok &= Write(dir / "rtdose.dicom", DicomMultiFrameInput(v, true));
   ok &= WriteVolume(dir / "little.den", DenFile(v, ByteOrder::kLittle), v);

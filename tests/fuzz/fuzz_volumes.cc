@@ -185,7 +185,7 @@ std::string VtiFile(const Volume& volume, ScalarType type, ByteOrder order, bool
       appended, "\n</AppendedData>\n</VTKFile>\n");
 }
 
-std::string DicomSeriesInput(const Volume& volume, bool rle) {
+std::string DicomSeriesInput(const Volume& volume, testing::DicomCodec codec) {
   std::string out = kDicomSeriesMagic;
   for (int z = 0; z < volume.dims[2]; ++z) {
     testing::DicomSlice slice;
@@ -199,7 +199,7 @@ std::string DicomSeriesInput(const Volume& volume, bool rle) {
       }
     }
     slice.intercept = 0;
-    slice.rle = rle;
+    slice.codec = codec;
     if (z > 0) out += kDicomSliceSeparator;
     out += testing::DicomSliceFile(slice);
   }

@@ -6,6 +6,7 @@
 
 #include <string>
 
+#include "dicom_writer.h"
 #include "transtick/volume.h"
 #include "transtick/volume_io.h"
 
@@ -37,7 +38,8 @@ std::string VtiFile(const Volume& volume, ScalarType type, ByteOrder order, bool
 // lossless, encapsulated) joined by kDicomSliceSeparator.
 inline constexpr char kDicomSeriesMagic[] = "DICOM-SERIES\n";
 inline constexpr char kDicomSliceSeparator[] = "\n--next-slice--\n";
-std::string DicomSeriesInput(const Volume& volume, bool rle = false);
+std::string DicomSeriesInput(const Volume& volume,
+                             testing::DicomCodec codec = testing::DicomCodec::kNative);
 // The same as one multi-frame file: an enhanced image's functional groups,
 // or with `grid_offsets` an RT dose's frame offsets; then a file that is
 // not DICOM, which the reader passes over.

@@ -35,6 +35,11 @@ struct ReadOptions {
   // Null lists the path as given. The root passes one that stays inside its
   // data directory, as `open` does.
   std::function<absl::StatusOr<std::vector<std::string>>(const std::string& path)> list;
+  // Seconds allowed to decode one DICOM file of compressed pixel data, plus
+  // one per 4 MiB of its pixels; and to start the decoder process
+  // (docs/formats.md, "DICOM decoder process"). Past them the decoder is
+  // stopped and the file's read fails.
+  double decode_seconds = 10;
 };
 
 enum class ByteOrder { kLittle, kBig };

@@ -1,0 +1,130 @@
+// transtick-dicom-decode: decodes compressed DICOM pixel data with GDCM in
+// a process of its own, for the DICOM reader (dicom.cc, dicom_decoder.h),
+// so that a codec that crashes, hangs or leaks on a damaged file takes only
+// this process down. It reads requests on standard input and answers on
+// standard output (docs/formats.md, "DICOM decoder process"); not a
+// program for people to run.
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <new>
+#include <string>
+#include <string_view>
+
+#include "dicom_decoder_protocol.h"
+#include "dicom_module.h"
+
+// dicom_gdcm.cc, compiled into this program.
+extern "C" void transtick_dicom_read_pixels(std::string* bytes, int rows, int columns, int bits,
+                                            int frames, transtick::DicomPixels* out);
+
+namespace {
+
+namespace dd = transtick::dicom_decoder;
+
+#if defined(__SANITIZE_ADDRESS__)
+constexpr bool kAddressSanitizer = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+constexpr bool kAddressSanitizer = true;
+#else
+constexpr bool kAddressSanitizer = false;
+#endif
+#else
+constexpr bool kAddressSanitizer = false;
+#endif
+
+// Reads exactly n bytes; false at the end of the input or on an error
+// (`*clean` says whether the input ended before the first byte).
+bool ReadAll(char* p, size_t n, bool* clean) {
+  *clean = false;
+  size_t got = 0;
+  while (got < n) {
+    const ssize_t r = ::read(0, p + got, n - got);
+    if (r < 0 && errno == EINTR) continue;
+    if (r <= 0) {
+      *clean = r == 0 && got == 0;
+      return false;
+    }
+    got += static_cast<size_t>(r);
+  }
+  return true;
+}
+
+bool WriteAll(const char* p, size_t n) {
+  while (n > 0) {
+    const ssize_t w = ::write(1, p, n);
+    if (w < 0 && errno == EINTR) continue;
+    if (w <= 0) return false;
+    p += w;
+    n -= static_cast<size_t>(w);
+  }
+  return true;
+}
+
+bool Answer(uint32_t status, std::string_view body) {
+  char head[dd::kReplyBytes];
+  dd::MakeReply({status, body.size()}, head);
+  return WriteAll(head, sizeof(head)) && WriteAll(body.data(), body.size());
+}
+
+int Fail(const char* message) {
+  std::fprintf(stderr, "transtick-dicom-decode: %s\n", message);
+  return 2;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  uint64_t max_memory = 0;
+  for (int i = 1; i < argc; ++i) {
+    const std::string_view arg = argv[i];
+    if (arg.substr(0, 13) == "--max-memory=") {
+      max_memory = std::strtoull(argv[i] + 13, nullptr, 10);
+    } else {
+      return Fail("usage: transtick-dicom-decode [--max-memory=BYTES] (run by transtick's reader)");
+    }
+  }
+  // A crash leaves no core file of a hostile file's pixels behind.
+  const rlimit no_core = {0, 0};
+  ::setrlimit(RLIMIT_CORE, &no_core);
+  if (max_memory > 0 && !kAddressSanitizer) {
+    const rlimit memory = {max_memory, max_memory};
+    if (::setrlimit(RLIMIT_AS, &memory) != 0) return Fail("cannot limit its address space");
+  }
+  char hello[dd::kHelloBytes];
+  dd::MakeHello(hello);
+  if (!WriteAll(hello, sizeof(hello))) return 1;
+  for (;;) {
+    char head[dd::kRequestBytes];
+    bool clean = false;
+    if (!ReadAll(head, sizeof(head), &clean)) return clean ? 0 : Fail("request cut short");
+    const std::optional<dd::Request> request = dd::ReadRequest(head);
+    if (!request || !request->Valid()) return Fail("not a request it can take");
+    std::string bytes;
+    try {
+      bytes.resize(request->length);
+    } catch (const std::bad_alloc&) {
+      return Fail("out of memory for the file's bytes");
+    }
+    if (!ReadAll(bytes.data(), bytes.size(), &clean)) return Fail("request cut short");
+    transtick::DicomPixels pixels;
+    transtick_dicom_read_pixels(&bytes, static_cast<int>(request->rows),
+                                static_cast<int>(request->columns), static_cast<int>(request->bits),
+                                static_cast<int>(request->frames), &pixels);
+    bool sent;
+    if (!pixels.error.empty()) {
+      sent = Answer(dd::kRefused, std::string_view(pixels.error).substr(0, dd::kMaxReason));
+    } else if (pixels.bytes.size() != request->DecodedBytes()) {
+      sent = Answer(dd::kRefused, "GDCM decoded a different number of pixels");
+    } else {
+      sent = Answer(dd::kDecoded, std::string_view(pixels.bytes.data(), pixels.bytes.size()));
+    }
+    if (!sent) return 1;
+  }
+}
