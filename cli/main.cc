@@ -328,19 +328,21 @@ absl::Status CheckRawFlags(const Flags& flags) {
   return absl::OkStatus();
 }
 
+// Prints the error; the exit status is 2 for what the user gave wrong (a
+// malformed file, a bad flag), 1 for the rest.
+int Fail(const char* command, const absl::Status& s) {
+  std::cerr << "transtick " << command << ": " << s.message() << "\n";
+  return s.code() == absl::StatusCode::kInvalidArgument ? 2 : 1;
+}
+
 int Info(int argc, char** argv) {
   int exit = 0;
   auto flags = ParseCommand(argc, argv, kInfoDoc, &exit);
   if (!flags) return exit;
-  if (absl::Status s = CheckRawFlags(*flags); !s.ok()) {
-    std::cerr << "transtick info: " << s.message() << "\n";
-    return 2;
-  }
+  if (absl::Status s = CheckRawFlags(*flags); !s.ok()) return Fail("info", s);
   auto volume = LoadVolume(*flags);
-  if (!volume.ok()) {
-    std::cerr << "transtick info: " << volume.status().message() << "\n";
-    return 1;
-  }
+  // A malformed file exits 2, as for render (README).
+  if (!volume.ok()) return Fail("info", volume.status());
   auto range = volume->Range();
   std::cout << flags->Get("volume") << ": " << volume->dims[0] << "x" << volume->dims[1] << "x"
             << volume->dims[2] << " " << ScalarTypeName(volume->source_type) << ", spacing "
@@ -452,11 +454,6 @@ absl::Status UseSecurity(const Flags& flags) {
 std::string VersionText() {
   return absl::StrCat("transtick ", TRANSTICK_VERSION, " (", TRANSTICK_GIT_COMMIT, "), gRPC ",
                       grpc::Version(), ", API transtick.v1");
-}
-
-int Fail(const char* command, const absl::Status& s) {
-  std::cerr << "transtick " << command << ": " << s.message() << "\n";
-  return s.code() == absl::StatusCode::kInvalidArgument ? 2 : 1;
 }
 
 void WriteStats(const std::string& path, const google::protobuf::Message& m) {

@@ -210,13 +210,13 @@ expect 2 "surfaces mode" -- render --volume "$dir/cube.nrrd" --preset hot --surf
 if [[ -n ${3:-} ]]; then
   "$3" "$dir/dicom" >/dev/null || { echo "FAIL: dicom_study wrote no study"; fails=$((fails + 1)); }
   s=$dir/dicom/study
-  expect 1 "2 series in one directory" -- info --volume "$s"
-  expect 1 "$s#1.2.840.99.12 (CT, series 4, 6 files)" -- info --volume "$s"
+  expect 2 "2 series in one directory" -- info --volume "$s"
+  expect 2 "$s#1.2.840.99.12 (CT, series 4, 6 files)" -- info --volume "$s"
   expect 0 "16x16x12" -- info --volume "$s#1.2.840.99.1"
   expect 0 "passed over 1 file that is not DICOM (README.txt)" -- info --volume "$s#1.2.840.99.1"
   expect 0 "16x16x6" -- info --volume "$s/#1.2.840.99.12"
   expect 1 "no series 1.2.840.99 in" -- info --volume "$s#1.2.840.99"
-  expect 1 "a missing slice" -- info --volume "$dir/dicom/gap"
+  expect 2 "a missing slice" -- info --volume "$dir/dicom/gap"
   expect 0 "read series 1.2.840.99.1 (CT, series 3 'AX BONE', 12 files) of 2" -- render \
     --volume "$s/#1.2.840.99.1" --preset ct-bone --size 32x32 --azimuth 30 --local 2 --out "$dir/d2.png"
   expect 0 "32x32 surfaces" -- render --volume "$s#1.2.840.99.1" --preset ct-bone --size 32x32 \
