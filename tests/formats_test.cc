@@ -1065,6 +1065,25 @@ TEST_F(FormatsTest, DicomDecoderFailuresAreErrorsNamingTheFile) {
   EXPECT_TRUE(ReadVolume(dir_ + "/good").ok());
 }
 
+// The decoder confines itself before it reads a request: code that a
+// hostile file takes over there cannot open a file (the root's TLS key, its
+// database) or a socket. The decoder's probe opens a file and a socket
+// before and after it confines itself.
+TEST_F(FormatsTest, DicomDecoderCannotOpenFilesOrSockets) {
+  const std::string secret = Write("secret.key", "not for the decoder");
+  const std::string command =
+      absl::StrCat(TRANSTICK_DICOM_DECODER_PATH, " --probe-sandbox=", secret, " 2>&1");
+  FILE* pipe = popen(command.c_str(), "r");
+  ASSERT_NE(pipe, nullptr);
+  std::string said;
+  char buf[256];
+  while (fgets(buf, sizeof(buf), pipe) != nullptr) said += buf;
+  EXPECT_EQ(pclose(pipe), 0) << said;
+  EXPECT_EQ(said,
+            "before: open ok, socket ok\n"
+            "after: open Operation not permitted, socket Operation not permitted\n");
+}
+
 // A real series when Debian's sample data is installed (gdcm-data ships none
 // as a series; this reads what a system has, else skips).
 TEST_F(FormatsTest, RealDicomSeriesIfInstalled) {

@@ -4,10 +4,18 @@
 // this process down. It reads requests on standard input and answers on
 // standard output (docs/formats.md, "DICOM decoder process"); not a
 // program for people to run.
+#include <fcntl.h>
+#include <linux/audit.h>
+#include <linux/filter.h>
+#include <linux/seccomp.h>
+#include <sys/prctl.h>
 #include <sys/resource.h>
+#include <sys/socket.h>
+#include <sys/syscall.h>
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstddef>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -15,6 +23,7 @@
 #include <new>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "dicom_decoder_protocol.h"
 #include "dicom_module.h"
@@ -67,6 +76,56 @@ bool WriteAll(const char* p, size_t n) {
   return true;
 }
 
+// Confines this process, for good, to the system calls a decode needs:
+// reading and writing its descriptors, memory, time, and ending (abort
+// too). Anything else (opening a file, a socket, running a program,
+// starting a process) fails with EPERM, so code that a hostile file
+// takes over can do no more than answer with wrong pixels. A seccomp
+// filter; false when the kernel refuses it.
+bool Confine() {
+#if defined(__x86_64__)
+  constexpr uint32_t kArch = AUDIT_ARCH_X86_64;
+#elif defined(__aarch64__)
+  constexpr uint32_t kArch = AUDIT_ARCH_AARCH64;
+#else
+  return false;
+#endif
+  const std::vector<uint32_t> allowed = {SYS_read,         SYS_write,          SYS_readv,
+                                         SYS_writev,       SYS_close,          SYS_lseek,
+                                         SYS_fstat,        SYS_newfstatat,     SYS_brk,
+                                         SYS_mmap,         SYS_munmap,         SYS_mremap,
+                                         SYS_madvise,      SYS_mprotect,       SYS_futex,
+                                         SYS_sched_yield,  SYS_getrandom,      SYS_clock_gettime,
+                                         SYS_gettimeofday, SYS_nanosleep,      SYS_clock_nanosleep,
+                                         SYS_getpid,       SYS_gettid,         SYS_tgkill,
+                                         SYS_rt_sigaction, SYS_rt_sigprocmask, SYS_rt_sigreturn,
+                                         SYS_exit,         SYS_exit_group};
+  std::vector<sock_filter> program = {
+      BPF_STMT(BPF_LD | BPF_W | BPF_ABS, offsetof(seccomp_data, arch)),
+      BPF_JUMP(BPF_JMP | BPF_JEQ | BPF_K, kArch, 1, 0),
+      BPF_STMT(BPF_RET | BPF_K, SECCOMP_RET_KILL_PROCESS),
+      BPF_STMT(BPF_LD | BPF_W | BPF_ABS, offsetof(seccomp_data, nr))};
+  for (uint32_t nr : allowed) {
+    program.push_back(BPF_JUMP(BPF_JMP | BPF_JEQ | BPF_K, nr, 0, 1));
+    program.push_back(BPF_STMT(BPF_RET | BPF_K, SECCOMP_RET_ALLOW));
+  }
+  program.push_back(BPF_STMT(BPF_RET | BPF_K, SECCOMP_RET_ERRNO | (EPERM & SECCOMP_RET_DATA)));
+  const sock_fprog fprog = {static_cast<unsigned short>(program.size()), program.data()};
+  return ::prctl(PR_SET_NO_NEW_PRIVS, 1, 0, 0, 0) == 0 &&
+         ::prctl(PR_SET_SECCOMP, SECCOMP_MODE_FILTER, &fprog) == 0;
+}
+
+// What opening `path` and making a socket do: "ok" or the error.
+void Probe(const char* when, const char* path) {
+  const int fd = ::open(path, O_RDONLY | O_CLOEXEC);
+  std::printf("%s: open %s, ", when, fd >= 0 ? "ok" : std::strerror(errno));
+  if (fd >= 0) ::close(fd);
+  const int sock = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  std::printf("socket %s\n", sock >= 0 ? "ok" : std::strerror(errno));
+  std::fflush(stdout);
+  if (sock >= 0) ::close(sock);
+}
+
 bool Answer(uint32_t status, std::string_view body) {
   char head[dd::kReplyBytes];
   dd::MakeReply({status, body.size()}, head);
@@ -82,13 +141,26 @@ int Fail(const char* message) {
 
 int main(int argc, char** argv) {
   uint64_t max_memory = 0;
+  const char* probe = nullptr;
   for (int i = 1; i < argc; ++i) {
     const std::string_view arg = argv[i];
     if (arg.substr(0, 13) == "--max-memory=") {
       max_memory = std::strtoull(argv[i] + 13, nullptr, 10);
+    } else if (arg.substr(0, 16) == "--probe-sandbox=") {
+      probe = argv[i] + 16;
     } else {
-      return Fail("usage: transtick-dicom-decode [--max-memory=BYTES] (run by transtick's reader)");
+      return Fail(
+          "usage: transtick-dicom-decode [--max-memory=BYTES] [--probe-sandbox=FILE] (run by "
+          "transtick's DICOM reader)");
     }
+  }
+  // --probe-sandbox: what the confinement refuses, for its test. Opens FILE
+  // and a socket before and after it, prints what each did, and exits.
+  if (probe != nullptr) {
+    Probe("before", probe);
+    if (!Confine()) return Fail("cannot confine itself (seccomp)");
+    Probe("after", probe);
+    return 0;
   }
   // A crash leaves no core file of a hostile file's pixels behind.
   const rlimit no_core = {0, 0};
@@ -97,6 +169,7 @@ int main(int argc, char** argv) {
     const rlimit memory = {max_memory, max_memory};
     if (::setrlimit(RLIMIT_AS, &memory) != 0) return Fail("cannot limit its address space");
   }
+  if (!Confine()) return Fail("cannot confine itself (seccomp)");
   char hello[dd::kHelloBytes];
   dd::MakeHello(hello);
   if (!WriteAll(hello, sizeof(hello))) return 1;
