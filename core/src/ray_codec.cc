@@ -11,7 +11,9 @@
 namespace transtick {
 namespace {
 
-void PutF32(std::string* out, float v) { PutFixed32(out, std::bit_cast<uint32_t>(v)); }
+[[maybe_unused]] void PutF32(std::string* out, float v) {
+  PutFixed32(out, std::bit_cast<uint32_t>(v));
+}
 
 bool GetF64(Decoder& in, double* v) {
   uint32_t lo, hi;

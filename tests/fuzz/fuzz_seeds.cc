@@ -143,11 +143,11 @@ bool WriteVolumes(const fs::path& dir) {
     ascii.replace(ascii.find("encoding: raw"), 13, "encoding: ascii");
     ok &= WriteVolume(dir / "ascii.nrrd", ascii, v);
     std::string bz(raw.size() + raw.size() / 100 + 600, '\0');
-    unsigned int n = static_cast<unsigned int>(bz.size());
+    unsigned int bz_size = static_cast<unsigned int>(bz.size());
     std::string samples = raw.substr(data);
-    ok &= BZ2_bzBuffToBuffCompress(bz.data(), &n, samples.data(),
+    ok &= BZ2_bzBuffToBuffCompress(bz.data(), &bz_size, samples.data(),
                                    static_cast<unsigned int>(samples.size()), 9, 0, 0) == BZ_OK;
-    bz.resize(n);
+    bz.resize(bz_size);
     std::string bzip2 = raw.substr(0, data) + bz;
     bzip2.replace(bzip2.find("encoding: raw"), 13, "encoding: bzip2");
     ok &= WriteVolume(dir / "bzip2.nrrd", bzip2, v);

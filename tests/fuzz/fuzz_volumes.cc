@@ -38,6 +38,8 @@ int NiftiDatatype(ScalarType type) {
       return 512;
     case ScalarType::kUint32:
       return 768;
+    case ScalarType::kFloat64:
+      return 64;
   }
   return 0;
 }
