@@ -24,8 +24,8 @@
 // whatever its frames, which decodes the pixels in whatever transfer syntax
 // GDCM supports: native and RLE here, codecs' (JPEG, JPEG-LS, JPEG 2000) in
 // a process of their own (dicom_decoder.h), where a crash or a hang on a
-// damaged file is an error naming it. A listing of a directory's series (ListDicomSeries) reads
-// the headers only.
+// damaged file is an error naming it. A listing of a directory's series
+// (ListDicomSeries) reads the headers only.
 //
 // Attributes used:
 //   (0020,000E) SeriesInstanceUID   all slices the same: one series
