@@ -1026,6 +1026,23 @@ TEST_F(FormatsTest, DicomDecoderFailuresAreErrorsNamingTheFile) {
   ASSERT_TRUE(good.ok()) << good.status();
   EXPECT_EQ(good->At(3, 2, 1), 100 + 11 - 1024);
 
+  // A JPEG stream of zeros: GDCM refuses it, and the decoder says so.
+  {
+    std::ifstream in(dir_ + "/good/f1", std::ios::binary);
+    const std::string bytes(std::istreambuf_iterator<char>(in), {});
+    const std::string item("\xfe\xff\x00\xe0", 4);  // (FFFE,E000): the offset table, a fragment
+    const size_t table = bytes.find(item);
+    const size_t fragment = bytes.find(item, table + 4);
+    ASSERT_NE(fragment, std::string::npos);
+    const uint32_t length = static_cast<unsigned char>(bytes[fragment + 4]) |
+                            static_cast<unsigned char>(bytes[fragment + 5]) << 8;
+    std::string zeroed = bytes;
+    zeroed.replace(fragment + 8, length, std::string(length, '\0'));
+    Write("zeroed/f1", zeroed);
+    std::filesystem::copy_file(dir_ + "/good/f0", dir_ + "/zeroed/f0");
+    ExpectError(ReadVolume(dir_ + "/zeroed"), "zeroed/f1", "GDCM cannot decode its pixel data");
+  }
+
   // A decoder that says hello and then never answers, as a hung codec: the
   // read is stopped after its time, and so is what the decoder started
   // (its process group).
