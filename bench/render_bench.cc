@@ -173,7 +173,7 @@ bool SameBits(const Image& a, const Image& b, size_t* first_diff) {
 
 bool SameCounters(const TraceCounters& a, const TraceCounters& b) {
   return a.primary == b.primary && a.shadow == b.shadow && a.segments == b.segments &&
-         a.surface_hits == b.surface_hits && a.samples == b.samples;
+         a.surface_hits == b.surface_hits && a.samples == b.samples && a.void_rays == b.void_rays;
 }
 
 int Run(const Options& o) {
@@ -256,10 +256,11 @@ int Run(const Options& o) {
   std::printf("frames     %dx%d, shadows %s, %d timed after 1 warm-up, %d cores\n\n", o.width,
               o.height, o.shadows ? "on" : "off", o.repeat, cores);
 
-  std::printf("%-9s %7s %10s %10s %14s %8s %8s %9s %10s %9s  %s%s\n", "view", "threads",
-              "median ms", "min ms", "rays/s", "Mrays/s", "speedup", "Mrays/s/c", "steps/ray",
-              "ns/step", "rays/frame (primary + shadow)",
-              dvr ? ", samples/frame" : "; smooth surfaces: cells solved, hits");
+  std::printf(
+      "%-9s %7s %10s %10s %14s %8s %8s %9s %10s %9s  %s%s\n", "view", "threads", "median ms",
+      "min ms", "rays/s", "Mrays/s", "speedup", "Mrays/s/c", "steps/ray", "ns/step",
+      "rays/frame (primary + shadow)",
+      dvr ? ", samples/frame" : "; smooth surfaces: cells solved, hits; void rays not made");
   std::fflush(stdout);
 
   Vec3 extent{volume->dims[0] * volume->spacing[0], volume->dims[1] * volume->spacing[1],
@@ -367,9 +368,10 @@ int Run(const Options& o) {
                   static_cast<unsigned long long>(counters.shadow));
       if (dvr) std::printf(", %llu", static_cast<unsigned long long>(counters.samples));
       if (counters.cells) {
-        std::printf("; %llu cells solved, %llu hits",
+        std::printf("; %llu cells solved, %llu hits; %llu void",
                     static_cast<unsigned long long>(counters.cells),
-                    static_cast<unsigned long long>(counters.surface_hits));
+                    static_cast<unsigned long long>(counters.surface_hits),
+                    static_cast<unsigned long long>(counters.void_rays));
       }
       std::printf("\n");
       std::fflush(stdout);

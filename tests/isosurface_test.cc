@@ -8,6 +8,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <iterator>
 #include <limits>
 #include <optional>
@@ -15,9 +16,11 @@
 #include <vector>
 
 #include "gtest/gtest.h"
+#include "transtick/camera.h"
 #include "transtick/classification.h"
 #include "transtick/field_grid.h"
 #include "transtick/field_summary.h"
+#include "transtick/tracer.h"
 #include "transtick/traversal.h"
 #include "transtick/volume.h"
 
@@ -569,6 +572,101 @@ TEST(IsosurfaceTest, FieldSummaryBytesAreChecked) {
   EXPECT_FALSE(FieldSummary::FromBytes({0, 4, 4}, 3, "").ok());
   // A slab keeps the whole volume's summary.
   EXPECT_EQ(scene->Slab(3, 5).summary().bytes(), bytes);
+}
+
+// The rays of a pixel the tracer knows to be void (Tracer::Void), traced
+// all the same, leave exactly the miss's deposit: no material met, no
+// shadow ray, the background bit for bit. Random blob volumes, spacings
+// and views (perspective and orthographic, near and far, several samples
+// a pixel); void pixels whose rays enter the volume must be common enough
+// to matter. A view from inside the volume, or a material in band 0, knows
+// no void pixel.
+TEST(IsosurfaceTest, AVoidPixelsRaysMeetNothing) {
+  std::mt19937_64 rng(31);
+  std::uniform_real_distribution<double> unit(0, 1);
+  size_t void_rays = 0, void_pixels = 0, other_pixels = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    Classification c;
+    const std::array<int, 3> dims = {20 + static_cast<int>(rng() % 30),
+                                     20 + static_cast<int>(rng() % 30),
+                                     12 + static_cast<int>(rng() % 20)};
+    Volume v = BlobVolume(rng, dims, &c);
+    v.spacing = {0.6 + unit(rng), 0.6 + unit(rng), 0.6 + 2 * unit(rng)};
+    auto scene = Scene::ForSurfaces(v, c);
+    ASSERT_TRUE(scene.ok()) << scene.status();
+    CameraSpec spec;
+    spec.width = 30 + static_cast<int>(rng() % 40);
+    spec.height = 30 + static_cast<int>(rng() % 40);
+    spec.azimuth_deg = 360 * unit(rng);
+    spec.elevation_deg = 170 * unit(rng) - 85;
+    spec.projection = trial % 3 == 2 ? Projection::kOrthographic : Projection::kPerspective;
+    spec.zoom = 0.5 + 3 * unit(rng);
+    auto camera = Camera::Create(
+        spec, Vec3{dims[0] * v.spacing[0], dims[1] * v.spacing[1], dims[2] * v.spacing[2]});
+    ASSERT_TRUE(camera.ok()) << camera.status();
+    RenderSettings settings;
+    settings.shadows = trial % 2 == 0;
+    settings.samples = trial % 4 == 1 ? 4 : 1;
+    const Tracer tracer(*scene, settings, *camera);
+    for (int row = 0; row < spec.height; ++row) {
+      for (int col = 0; col < spec.width; ++col) {
+        if (!tracer.Void(col, row)) {
+          ++other_pixels;
+          continue;
+        }
+        ++void_pixels;
+        const uint32_t pixel = static_cast<uint32_t>(row) * spec.width + col;
+        for (int sample = 0; sample < settings.samples; ++sample) {
+          const auto [ox, oy] = SampleOffset(sample, settings.samples);
+          RayDescriptor ray;
+          if (!tracer.MakePrimary(camera->GenerateAt(col, row, ox, oy), pixel, &ray)) continue;
+          ++void_rays;
+          std::vector<RayDescriptor> spawned;
+          Deposit deposit;
+          TraceCounters counters;
+          ASSERT_EQ(tracer.Trace(ray, spawned, deposit, counters), Tracer::Outcome::kFinished);
+          const Deposit miss = tracer.MissDeposit(pixel);
+          ASSERT_EQ(counters.surface_hits, 0u)
+              << "trial " << trial << ", pixel " << col << "," << row;
+          ASSERT_TRUE(spawned.empty());
+          ASSERT_EQ(deposit.pixel, miss.pixel);
+          ASSERT_EQ(deposit.kind, miss.kind);
+          ASSERT_EQ(deposit.spawned, miss.spawned);
+          ASSERT_EQ(std::memcmp(deposit.color.data(), miss.color.data(), sizeof(miss.color)), 0)
+              << "trial " << trial << ", pixel " << col << "," << row;
+        }
+      }
+    }
+  }
+  EXPECT_GT(void_rays, 25000u);
+  EXPECT_GT(other_pixels, 150000u);
+  EXPECT_GT(void_pixels, 50000u);
+
+  // Known answers: none from inside the volume, nor with band 0 a material.
+  std::mt19937_64 rng2(5);
+  Classification c;
+  const Volume v = BlobVolume(rng2, {30, 30, 30}, &c);
+  CameraSpec spec;
+  spec.width = spec.height = 40;
+  auto outside = Camera::Create(spec, Vec3{30, 30, 30});
+  spec.view = ExplicitView{.eye = {0, 0, 0}, .target = {1, 0, 0}};
+  auto inside = Camera::Create(spec, Vec3{30, 30, 30});
+  ASSERT_TRUE(outside.ok() && inside.ok());
+  auto count_void = [](const Tracer& tracer) {
+    int n = 0;
+    for (int row = 0; row < 40; ++row)
+      for (int col = 0; col < 40; ++col) n += tracer.Void(col, row);
+    return n;
+  };
+  auto scene = Scene::ForSurfaces(v, c);
+  ASSERT_TRUE(scene.ok());
+  EXPECT_GT(count_void(Tracer(*scene, RenderSettings{}, *outside)), 0);
+  EXPECT_EQ(count_void(Tracer(*scene, RenderSettings{}, *inside)), 0);
+  Classification low = c;
+  low.materials[0].min = -1000;  // band 0 now holds material a
+  auto low_scene = Scene::ForSurfaces(v, low);
+  ASSERT_TRUE(low_scene.ok()) << low_scene.status();
+  EXPECT_EQ(count_void(Tracer(*low_scene, RenderSettings{}, *outside)), 0);
 }
 
 // Ties on purpose: the field 100 (x - 0.5) has its roots on the cells'

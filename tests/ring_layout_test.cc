@@ -123,7 +123,7 @@ TEST(RingLayoutTest, EveryPixelIsTakenCareOfExactlyOnce) {
       {0, 90, Projection::kPerspective, 1},      {10, -89, Projection::kOrthographic, 1},
       {200, -30, Projection::kPerspective, 2.5}, {120, 60, Projection::kOrthographic, 0.6},
       {90, 0, Projection::kPerspective, 4}};
-  int traced = 0, missed = 0, off_footprint_misses = 0;
+  int traced = 0, missed = 0, off_footprint_misses = 0, void_pixels = 0;
   for (const std::array<double, 3>& spacing :
        {std::array<double, 3>{1, 1, 1}, std::array<double, 3>{0.7, 1.3, 2}}) {
     const Scene scene = SphereScene(spacing);
@@ -164,7 +164,10 @@ TEST(RingLayoutTest, EveryPixelIsTakenCareOfExactlyOnce) {
               }
             }
             ASSERT_EQ(tracers + missers, 1) << "pixel " << col << "," << row;
-            EXPECT_EQ(tracers == 1, hits) << "pixel " << col << "," << row;
+            // A ray known to meet nothing is not made: its miss is deposited.
+            const bool known_void = tracer.Void(col, row);
+            EXPECT_EQ(tracers == 1, hits && !known_void) << "pixel " << col << "," << row;
+            void_pixels += hits && known_void;
             // A ray that meets the volume meets the slab it enters, whose
             // footprint therefore holds the pixel.
             if (hits) {
@@ -183,6 +186,45 @@ TEST(RingLayoutTest, EveryPixelIsTakenCareOfExactlyOnce) {
   EXPECT_GT(missed, 10000);
   EXPECT_GT(off_footprint_misses, 1000);
   EXPECT_LT(off_footprint_misses, missed);
+  EXPECT_GT(void_pixels, 20);
+}
+
+// Camera::Bounds holds every pixel of Camera::Footprint, for random boxes
+// seen from random views, boxes behind the eye and around it included.
+TEST(RingLayoutTest, BoundsHoldTheFootprint) {
+  std::mt19937 rng(29);
+  std::uniform_real_distribution<double> unit(0, 1);
+  int pixels = 0, outside = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    const std::array<double, 3> spacing = {0.5 + unit(rng), 0.5 + unit(rng), 0.5 + 2 * unit(rng)};
+    const Camera camera = CameraFor(
+        spacing, 20 + static_cast<int>(rng() % 60), 20 + static_cast<int>(rng() % 60),
+        360 * unit(rng), 178 * unit(rng) - 89,
+        trial % 3 ? Projection::kPerspective : Projection::kOrthographic, 0.3 + 4 * unit(rng));
+    Vec3 lo, hi;
+    for (int a = 0; a < 3; ++a) {
+      const double extent = kDims[a] * spacing[a];
+      const double p = (unit(rng) - 0.5) * 1.5 * extent, size = unit(rng) * extent / 3;
+      lo[a] = p;
+      hi[a] = p + size;
+    }
+    const ImageSpans spans = camera.Footprint(lo, hi);
+    const Camera::PixelRect r = camera.Bounds(lo, hi);
+    for (int row = 0; row < camera.height(); ++row) {
+      for (int col = 0; col < camera.width(); ++col) {
+        if (!spans.Contains(col, row)) {
+          ++outside;
+          continue;
+        }
+        ++pixels;
+        ASSERT_TRUE(col >= r.x0 && col < r.x1 && row >= r.y0 && row < r.y1)
+            << "trial " << trial << ": pixel " << col << "," << row << " of the footprint outside ["
+            << r.x0 << ", " << r.x1 << ") x [" << r.y0 << ", " << r.y1 << ")";
+      }
+    }
+  }
+  EXPECT_GT(pixels, 10000);
+  EXPECT_GT(outside, 10000);
 }
 
 // A ray handed on by Route one hop at a time reaches the slab that holds

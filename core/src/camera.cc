@@ -122,28 +122,64 @@ WorldRay Camera::GenerateAt(int px, int py, double ox, double oy) const {
   return {eye_ + right_ * sx + up_ * sy, forward_};
 }
 
-ImageSpans Camera::Footprint(const Vec3& lo, const Vec3& hi) const {
-  ImageSpans spans;
-  spans.rows.assign(height_, {0, width_});  // the whole image
+bool Camera::ProjectCorners(const Vec3& lo, const Vec3& hi,
+                            std::array<std::pair<double, double>, 8>* points) const {
   const double aspect = static_cast<double>(width_) / height_;
-  // The corners in pixel coordinates: pixel (c, r) spans [c - 0.5, c + 0.5)
-  // x [r - 0.5, r + 0.5), its centre at (c, r) (Generate, inverted).
-  std::array<std::pair<double, double>, 8> points;
   for (int corner = 0; corner < 8; ++corner) {
     const Vec3 p{corner & 1 ? hi[0] : lo[0], corner & 2 ? hi[1] : lo[1], corner & 4 ? hi[2] : lo[2]};
     const Vec3 d = p - eye_;
     double sx = Dot(d, right_), sy = Dot(d, up_);
     if (projection_ == Projection::kPerspective) {
       const double depth = Dot(d, forward_);
-      if (depth <= 1e-9 * (1 + Length(d))) return spans;
+      if (depth <= 1e-9 * (1 + Length(d))) return false;
       sx /= depth;
       sy /= depth;
     }
+    // Generate, inverted: pixel (c, r) has its centre at (c, r).
     const double x = (sx / (aspect * half_height_) + 1.0) * 0.5 * width_ - 0.5;
     const double y = (1.0 - sy / half_height_) * 0.5 * height_ - 0.5;
-    if (!std::isfinite(x) || !std::isfinite(y)) return spans;
-    points[corner] = {x, y};
+    if (!std::isfinite(x) || !std::isfinite(y)) return false;
+    (*points)[corner] = {x, y};
   }
+  return true;
+}
+
+namespace {
+
+constexpr double kFootprintMargin = 2;  // pixels, against rounding
+
+// floor(v) as a pixel index clamped to [lo_limit, hi_limit] (NaN: lo_limit).
+int ClampPixel(double v, int lo_limit, int hi_limit) {
+  if (!(v > lo_limit)) return lo_limit;
+  if (v > hi_limit) return hi_limit;
+  return static_cast<int>(v);
+}
+
+}  // namespace
+
+Camera::PixelRect Camera::Bounds(const Vec3& lo, const Vec3& hi) const {
+  std::array<std::pair<double, double>, 8> points;
+  if (!ProjectCorners(lo, hi, &points)) return {0, 0, width_, height_};
+  double x_min = HUGE_VAL, x_max = -HUGE_VAL, y_min = HUGE_VAL, y_max = -HUGE_VAL;
+  for (const auto& [x, y] : points) {
+    x_min = std::min(x_min, x);
+    x_max = std::max(x_max, x);
+    y_min = std::min(y_min, y);
+    y_max = std::max(y_max, y);
+  }
+  // Row r spans [r - 0.5, r + 0.5), as column c does: Footprint's bounds.
+  const double m = kFootprintMargin;
+  return {ClampPixel(std::floor(x_min - m), 0, width_),
+          ClampPixel(std::floor(y_min - m), 0, height_),
+          ClampPixel(std::ceil(x_max + m) + 1, 0, width_),
+          ClampPixel(std::ceil(y_max + m) + 1, 0, height_)};
+}
+
+ImageSpans Camera::Footprint(const Vec3& lo, const Vec3& hi) const {
+  ImageSpans spans;
+  spans.rows.assign(height_, {0, width_});  // the whole image
+  std::array<std::pair<double, double>, 8> points;
+  if (!ProjectCorners(lo, hi, &points)) return spans;
   // The box projects onto the convex hull of its corners (Andrew's
   // monotone chain, counterclockwise in these coordinates).
   std::sort(points.begin(), points.end());
@@ -162,13 +198,8 @@ ImageSpans Camera::Footprint(const Vec3& lo, const Vec3& hi) const {
     while (n >= lower && turn(hull[n - 2], hull[n - 1], points[i]) <= 0) --n;
     hull[n++] = points[i];
   }
-  n = std::max(n - 1, 1);        // the last point repeats the first
-  constexpr double kMargin = 2;  // pixels, against rounding
-  auto clamp = [](double v, int lo_limit, int hi_limit) {
-    if (!(v > lo_limit)) return lo_limit;  // also NaN
-    if (v > hi_limit) return hi_limit;
-    return static_cast<int>(v);
-  };
+  n = std::max(n - 1, 1);  // the last point repeats the first
+  constexpr double kMargin = kFootprintMargin;
   for (int row = 0; row < height_; ++row) {
     // The hull's extent along x within the row's band, margin included:
     // the ends of its edges' parts in the band (and a lone point's).
@@ -191,8 +222,8 @@ ImageSpans Camera::Footprint(const Vec3& lo, const Vec3& hi) const {
       spans.rows[row] = {0, 0};
       continue;
     }
-    spans.rows[row] = {clamp(std::floor(x_min - kMargin), 0, width_),
-                       clamp(std::ceil(x_max + kMargin) + 1, 0, width_)};
+    spans.rows[row] = {ClampPixel(std::floor(x_min - kMargin), 0, width_),
+                       ClampPixel(std::ceil(x_max + kMargin) + 1, 0, width_)};
   }
   return spans;
 }

@@ -1,6 +1,7 @@
 #include "transtick/field_summary.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 
@@ -46,6 +47,7 @@ FieldSummary FieldSummary::Build(const std::vector<float>& values, std::array<in
   TRANSTICK_CHECK(nx > 0 && ny > 0 && nz > 0);
   TRANSTICK_CHECK_EQ(values.size(), static_cast<size_t>(nx) * ny * nz);
   FieldSummary s;
+  s.dims_ = dims;
   s.bricks_ = BricksOf(dims);
   const int bx = s.bricks_[0], by = s.bricks_[1], bz = s.bricks_[2];
   // Along x first: per voxel row, the range of each brick's span.
@@ -82,6 +84,7 @@ FieldSummary FieldSummary::Build(const std::vector<float>& values, std::array<in
       }
     }
   }
+  s.FindShell();
   return s;
 }
 
@@ -91,6 +94,7 @@ absl::StatusOr<FieldSummary> FieldSummary::FromBytes(std::array<int, 3> dims, in
   for (int a = 0; a < 3; ++a) {
     if (dims[a] <= 0) return absl::InvalidArgumentError("field summary: a volume without voxels");
   }
+  s.dims_ = dims;
   s.bricks_ = BricksOf(dims);
   size_t want = 1;
   for (int a = 0; a < 3; ++a) {
@@ -111,7 +115,101 @@ absl::StatusOr<FieldSummary> FieldSummary::FromBytes(std::array<int, 3> dims, in
                                                      int{b}, " of ", bands));
     }
   }
+  s.FindShell();
   return s;
+}
+
+void FieldSummary::FindShell() {
+  shell_.clear();
+  has_void_ = false;
+  const int bx = bricks_[0], by = bricks_[1], bz = bricks_[2];
+  for (int z = 0; z < bz; ++z) {
+    for (int y = 0; y < by; ++y) {
+      for (int x = 0; x < bx; ++x) {
+        if (At(x, y, z) == 0) {
+          has_void_ = true;
+          continue;
+        }
+        bool shell = x == 0 || y == 0 || z == 0 || x == bx - 1 || y == by - 1 || z == bz - 1;
+        for (int n = 0; n < 27 && !shell; ++n) {
+          shell = At(x + n % 3 - 1, y + n / 3 % 3 - 1, z + n / 9 - 1) == 0;
+        }
+        if (shell)
+          shell_.push_back(static_cast<uint32_t>((static_cast<size_t>(z) * by + y) * bx + x));
+      }
+    }
+  }
+}
+
+PixelMask::PixelMask(int width, int height)
+    : width_(width),
+      height_(height),
+      words_per_row_((static_cast<size_t>(width) + 63) / 64),
+      bits_(words_per_row_ * height) {
+  TRANSTICK_CHECK(width > 0 && height > 0);
+}
+
+void PixelMask::Set(const Camera::PixelRect& r) {
+  const int x0 = std::max(r.x0, 0), x1 = std::min(r.x1, width_);
+  const int y0 = std::max(r.y0, 0), y1 = std::min(r.y1, height_);
+  if (x0 >= x1) return;
+  for (int y = y0; y < y1; ++y) {
+    uint64_t* row = bits_.data() + static_cast<size_t>(y) * words_per_row_;
+    for (int x = x0; x < x1;) {
+      // The bits [x, end) of one word.
+      const int end = std::min(x1, (x | 63) + 1);
+      const int n = end - x;
+      row[x >> 6] |= (n == 64 ? ~0ull : ((1ull << n) - 1)) << (x & 63);
+      x = end;
+    }
+  }
+}
+
+size_t PixelMask::Count() const {
+  size_t n = 0;
+  for (uint64_t w : bits_) n += std::popcount(w);
+  return n;
+}
+
+PixelMask FieldSummary::PixelsMeeting(const Camera& camera,
+                                      const std::array<double, 3>& spacing) const {
+  if (labels_.empty() || !has_void_) return {};
+  // World space (the volume's frame): index point p is (p - dims / 2) *
+  // spacing, as Tracer::MakePrimary maps rays the other way.
+  Vec3 half, lo_world, hi_world;
+  for (int a = 0; a < 3; ++a) {
+    half[a] = dims_[a] * 0.5;
+    lo_world[a] = -half[a] * spacing[a];
+    hi_world[a] = half[a] * spacing[a];
+  }
+  // Every ray must enter the volume from outside: each corner of the
+  // volume's box in front of the plane through the eye across the view.
+  for (int corner = 0; corner < 8; ++corner) {
+    const Vec3 p{corner & 1 ? hi_world[0] : lo_world[0], corner & 2 ? hi_world[1] : lo_world[1],
+                 corner & 4 ? hi_world[2] : lo_world[2]};
+    const Vec3 d = p - camera.eye();
+    if (!(Dot(d, camera.forward()) > 1e-6 * (1 + Length(d)))) return {};
+  }
+  PixelMask mask(camera.width(), camera.height());
+  const size_t per_plane = static_cast<size_t>(bricks_[0]) * bricks_[1];
+  for (uint32_t k : shell_) {
+    const int b[3] = {static_cast<int>(k % bricks_[0]),
+                      static_cast<int>(k / bricks_[0] % bricks_[1]),
+                      static_cast<int>(k / per_plane)};
+    // Brick b holds cells 8b .. 8b + 7: [8b - 0.5, 8b + 7.5] in index
+    // space, clipped to the volume's box, where rays walk.
+    Vec3 lo, hi;
+    for (int a = 0; a < 3; ++a) {
+      const double from = std::max(b[a] * 8.0 - 0.5, 0.0);
+      const double to = std::min(b[a] * 8.0 + 7.5, static_cast<double>(dims_[a]));
+      lo[a] = (from - half[a]) * spacing[a];
+      hi[a] = (to - half[a]) * spacing[a];
+    }
+    const Camera::PixelRect r = camera.Bounds(lo, hi);
+    if (r.x0 == 0 && r.y0 == 0 && r.x1 == camera.width() && r.y1 == camera.height()) return {};
+    mask.Set(r);
+  }
+  return mask;
 }
 
 bool FieldSummary::Clear(const Vec3& origin, const RayAxes& axes, double t0, double t1,

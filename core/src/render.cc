@@ -33,6 +33,12 @@ namespace transtick {
   for (int py = row_begin; py < row_end; ++py) {
     for (int px = 0; px < width; ++px) {
       const uint32_t pixel = static_cast<uint32_t>(py) * width + px;
+      if (tracer.Void(px, py)) {
+        // Rays that would meet nothing are not made (Tracer::Void).
+        for (int s = 0; s < samples; ++s) add(tracer.MissDeposit(pixel));
+        counters.void_rays += samples;
+        continue;
+      }
       for (int s = 0; s < samples; ++s) {
         const auto [ox, oy] = SampleOffset(s, samples);
         RayDescriptor ray;

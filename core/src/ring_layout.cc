@@ -54,6 +54,10 @@ RingLayout::PrimaryRole RingLayout::Primary(int slab, int col, int row, int samp
     // slab 0's footprint it names the slab that does).
     return slab == 0 && MissSlab(col, row) == 0 ? PrimaryRole::kMiss : PrimaryRole::kNone;
   }
+  // Rays known to meet nothing (Tracer::Void) are not made: their miss is
+  // deposited as a miss of the volume's.
+  if (tracer.Void(col, row))
+    return MissSlab(col, row) == slab ? PrimaryRole::kMiss : PrimaryRole::kNone;
   const uint32_t pixel = static_cast<uint32_t>(row) * camera_.width() + col;
   // The footprints' margin of two pixels holds every sample of a pixel.
   const auto [ox, oy] = SampleOffset(sample, samples);

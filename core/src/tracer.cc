@@ -79,7 +79,10 @@ Tracer::Tracer(const Scene& scene, const RenderSettings& settings, const Camera&
   light_index_ = light_world_ * inv_spacing_;
   smooth_ = scene.mode() == RenderMode::kSurfaces &&
             scene.classification().surface == SurfaceModel::kSmooth;
-  if (smooth_) bands_ = Bands(scene.classification());
+  if (smooth_) {
+    bands_ = Bands(scene.classification());
+    if (bands_.material(0) == 0) meets_ = scene.summary().PixelsMeeting(camera, sp);
+  }
   work_ = smooth_ ? &kFieldWork : &kTraversalWork;
   shadow_bias_ = 1.5 / Length(light_index_);
   const double min_spacing = std::min({sp[0], sp[1], sp[2]});

@@ -678,8 +678,9 @@ bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>*
             break;
           case RingLayout::PrimaryRole::kMiss:
             misses->push_back(tracer_.MissDeposit(static_cast<uint32_t>(row) * width + c));
-            // Only the first slab deposits misses: their cost stays with
-            // its first plane wherever the cuts go.
+            // A miss costs its slab little (the first slab's misses of the
+            // volume, or the void pixels of its footprint, Tracer::Void):
+            // counted at its first plane.
             if (plane_work) plane_work[0] += tracer_.work_weights().ray;
             break;
           case RingLayout::PrimaryRole::kNone:

@@ -3,6 +3,7 @@
 #ifndef TRANSTICK_CAMERA_H_
 #define TRANSTICK_CAMERA_H_
 
+#include <array>
 #include <optional>
 #include <utility>
 #include <vector>
@@ -88,6 +89,14 @@ class Camera {
   // row, with a margin of two pixels against rounding, clipped to the
   // image. The whole image when a corner lies behind a perspective eye.
   ImageSpans Footprint(const Vec3& lo, const Vec3& hi) const;
+  // The same pixels and more: the rectangle around the box's projected
+  // corners, with the same margin, clipped to the image. Columns [x0, x1)
+  // of rows [y0, y1), empty when x0 >= x1 or y0 >= y1; the whole image when
+  // a corner lies behind a perspective eye. Cheaper than Footprint.
+  struct PixelRect {
+    int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  };
+  PixelRect Bounds(const Vec3& lo, const Vec3& hi) const;
 
   int width() const { return width_; }
   int height() const { return height_; }
@@ -97,6 +106,12 @@ class Camera {
   const Vec3& up() const { return up_; }
 
  private:
+  // The corners of the box [lo, hi] in pixel coordinates (pixel (c, r)
+  // spans [c - 0.5, c + 0.5) x [r - 0.5, r + 0.5)); false when one lies
+  // behind a perspective eye or does not project to a finite point.
+  bool ProjectCorners(const Vec3& lo, const Vec3& hi,
+                      std::array<std::pair<double, double>, 8>* points) const;
+
   Projection projection_ = Projection::kPerspective;
   int width_ = 0, height_ = 0;
   Vec3 eye_, forward_, right_, up_;

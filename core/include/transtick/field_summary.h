@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "transtick/camera.h"
 #include "transtick/classification.h"
 #include "transtick/field_grid.h"
 #include "transtick/vec.h"
@@ -31,6 +32,28 @@
 namespace transtick {
 
 struct RayAxes;  // isosurface.h
+
+// A bit per pixel of an image, row by row. A value type.
+class PixelMask {
+ public:
+  PixelMask() = default;
+  PixelMask(int width, int height);  // every bit clear
+  bool empty() const { return bits_.empty(); }
+  int width() const { return width_; }
+  int height() const { return height_; }
+  // REQUIRES: the pixel lies in the image.
+  bool Get(int col, int row) const {
+    const size_t i = static_cast<size_t>(row) * words_per_row_ + (col >> 6);
+    return (bits_[i] >> (col & 63)) & 1;
+  }
+  void Set(const Camera::PixelRect& r);  // the rectangle's pixels, clipped to the image
+  size_t Count() const;                  // bits set
+
+ private:
+  int width_ = 0, height_ = 0;
+  size_t words_per_row_ = 0;
+  std::vector<uint64_t> bits_;
+};
 
 // Immutable after construction; thread-safe for concurrent reads.
 class FieldSummary {
@@ -73,11 +96,33 @@ class FieldSummary {
   // over that span, begun in `band`, finds no crossing.
   bool Clear(const Vec3& origin, const RayAxes& axes, double t0, double t1, int band) const;
 
-  size_t MemoryBytes() const { return labels_.size(); }
+  // The pixels of `camera`'s image whose primary rays may meet a cell of
+  // another band than 0 (`camera` in the frame of the volume of `spacing`
+  // that the summary describes). A pixel left clear has rays that cross
+  // only bricks labelled 0: their walks find band 0 where they enter and
+  // nothing after (as Clear argues), so a ray of a band without a material
+  // leaves the background, as a miss does. Such a ray enters the volume
+  // in a brick on its faces or crosses into a brick of another label from
+  // one of band 0, so projecting the shell (the bricks not labelled 0 on
+  // the faces or next to one labelled 0, diagonals included) suffices,
+  // each brick by the rectangle of Camera::Bounds. Empty, meaning every
+  // pixel may, when the summary is empty, has no brick of band 0, or a ray
+  // may start inside the volume (a corner of it lies behind the eye's
+  // plane).
+  PixelMask PixelsMeeting(const Camera& camera, const std::array<double, 3>& spacing) const;
+
+  size_t MemoryBytes() const { return labels_.size() + shell_.size() * sizeof(uint32_t); }
 
  private:
+  void FindShell();  // shell_, from labels_
+
+  std::array<int, 3> dims_ = {0, 0, 0};  // the volume's
   std::array<int, 3> bricks_ = {0, 0, 0};
   std::vector<uint8_t> labels_;
+  // The bricks PixelsMeeting projects, by index into labels_; `has_void_`
+  // when some brick is labelled 0.
+  std::vector<uint32_t> shell_;
+  bool has_void_ = false;
 };
 
 }  // namespace transtick

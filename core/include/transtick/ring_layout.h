@@ -65,8 +65,9 @@ class RingLayout {
   // What slab `slab` does about the primary ray of pixel (col, row), the
   // paper's distributed policy narrowed by the footprints:
   //   kTrace  the ray enters the volume in this slab; *ray holds it.
-  //   kMiss   the ray misses the volume and this slab deposits the
-  //           background (Tracer::MissDeposit of row * width + col).
+  //   kMiss   the ray misses the volume, or meets nothing in it
+  //           (Tracer::Void), and this slab deposits the background
+  //           (Tracer::MissDeposit of row * width + col).
   //   kNone   another slab takes care of the pixel.
   // Over all slabs, every pixel gets exactly one kTrace or one kMiss. A slab
   // makes rays only for the pixels of its own footprint (a ray entering the

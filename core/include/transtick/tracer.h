@@ -41,6 +41,9 @@ struct TraceCounters {
   uint64_t surface_hits = 0;  // shaded surface points (surfaces mode)
   uint64_t cells = 0;         // smooth surfaces: cells of the field whose corners were read
   uint64_t samples = 0;       // shaded samples (dvr)
+  // Pixel samples whose rays were not made, known to meet nothing
+  // (Tracer::Void): counted where pixels are traced in process (TraceRows).
+  uint64_t void_rays = 0;
   // Smooth surfaces: rays that ended at their slab's plane, the field
   // summary showing nothing but their band up to the volume's face.
   uint64_t ended_early = 0;
@@ -60,6 +63,7 @@ struct TraceCounters {
     surface_hits += o.surface_hits;
     cells += o.cells;
     samples += o.samples;
+    void_rays += o.void_rays;
     ended_early += o.ended_early;
     truncated += o.truncated;
   }
@@ -116,6 +120,16 @@ class Tracer {
   // misses the volume; its pixel then gets `MissDeposit`.
   bool MakePrimary(const WorldRay& world, uint32_t pixel, RayDescriptor* ray) const;
   Deposit MissDeposit(uint32_t pixel) const;
+  // Whether the rays of pixel (col, row) of the camera's image are known
+  // to meet nothing before they are made: with smooth surfaces, when band 0
+  // has no material and the field summary shows that they cross only
+  // bricks of band 0 (FieldSummary::PixelsMeeting). The pixel then gets
+  // MissDeposit, bit for bit the deposit their walks would leave.
+  bool Void(int col, int row) const {
+    return !meets_.empty() && static_cast<unsigned>(col) < static_cast<unsigned>(meets_.width()) &&
+           static_cast<unsigned>(row) < static_cast<unsigned>(meets_.height()) &&
+           !meets_.Get(col, row);
+  }
 
   enum class Outcome { kFinished, kLeftSlab };
 
@@ -235,6 +249,7 @@ class Tracer {
   double diagonal_ = 0;  // world length of the volume's diagonal
   int64_t max_segments_ = 0;
   int64_t max_samples_ = 0;
+  PixelMask meets_;  // Void's pixels left clear; empty: none known
   // dvr: colour and step-corrected opacity for values across value_range.
   static constexpr int kTableSize = 4096;
   std::vector<TableEntry> table_;
