@@ -669,6 +669,56 @@ TEST(IsosurfaceTest, AVoidPixelsRaysMeetNothing) {
   EXPECT_EQ(count_void(Tracer(*low_scene, RenderSettings{}, *outside)), 0);
 }
 
+// A shell projected in coarser boxes (to bound the cost on large volumes)
+// marks every pixel the brick by brick projection marks, and fewer than
+// all of them while the boxes are small: random volumes and views, from
+// one box to a few hundred.
+TEST(IsosurfaceTest, PixelsMeetingInCoarseBoxesHoldsTheExactOnes) {
+  std::mt19937_64 rng(37);
+  std::uniform_real_distribution<double> unit(0, 1);
+  size_t exact_total = 0, coarse_total = 0, pixels = 0;
+  for (int trial = 0; trial < 60; ++trial) {
+    Classification c;
+    const std::array<int, 3> dims = {30 + static_cast<int>(rng() % 60),
+                                     30 + static_cast<int>(rng() % 60),
+                                     20 + static_cast<int>(rng() % 40)};
+    const Volume v = BlobVolume(rng, dims, &c);
+    auto scene = Scene::ForSurfaces(v, c);
+    ASSERT_TRUE(scene.ok()) << scene.status();
+    CameraSpec spec;
+    spec.width = 40 + static_cast<int>(rng() % 60);
+    spec.height = 40 + static_cast<int>(rng() % 60);
+    spec.azimuth_deg = 360 * unit(rng);
+    spec.elevation_deg = 170 * unit(rng) - 85;
+    spec.projection = trial % 3 == 2 ? Projection::kOrthographic : Projection::kPerspective;
+    spec.zoom = 0.5 + 2 * unit(rng);
+    auto camera = Camera::Create(spec, Vec3{double(dims[0]), double(dims[1]), double(dims[2])});
+    ASSERT_TRUE(camera.ok());
+    const FieldSummary& summary = scene->summary();
+    const PixelMask exact =
+        summary.PixelsMeeting(*camera, v.spacing, std::numeric_limits<size_t>::max());
+    const size_t max_boxes = size_t{1} << (rng() % 9);
+    const PixelMask coarse = summary.PixelsMeeting(*camera, v.spacing, max_boxes);
+    if (exact.empty()) {
+      EXPECT_TRUE(coarse.empty());
+      continue;
+    }
+    if (coarse.empty()) continue;  // every pixel may meet: it holds them
+    for (int row = 0; row < spec.height; ++row) {
+      for (int col = 0; col < spec.width; ++col) {
+        ASSERT_TRUE(!exact.Get(col, row) || coarse.Get(col, row))
+            << "trial " << trial << ", " << max_boxes << " boxes: pixel " << col << "," << row;
+      }
+    }
+    exact_total += exact.Count();
+    coarse_total += coarse.Count();
+    pixels += static_cast<size_t>(spec.width) * spec.height;
+  }
+  EXPECT_GT(exact_total, 10000u);
+  EXPECT_GT(coarse_total, exact_total);
+  EXPECT_LT(coarse_total, pixels);
+}
+
 // Ties on purpose: the field 100 (x - 0.5) has its roots on the cells'
 // faces (x = k + 0.5 for edges 100 k), and a ray from (a + 0.5, b, z)
 // along (1, +-1, 0) crosses each x face at the very time it crosses a y

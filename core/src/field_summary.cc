@@ -171,8 +171,8 @@ size_t PixelMask::Count() const {
   return n;
 }
 
-PixelMask FieldSummary::PixelsMeeting(const Camera& camera,
-                                      const std::array<double, 3>& spacing) const {
+PixelMask FieldSummary::PixelsMeeting(const Camera& camera, const std::array<double, 3>& spacing,
+                                      size_t max_boxes) const {
   if (labels_.empty() || !has_void_) return {};
   // World space (the volume's frame): index point p is (p - dims / 2) *
   // spacing, as Tracer::MakePrimary maps rays the other way.
@@ -190,18 +190,41 @@ PixelMask FieldSummary::PixelsMeeting(const Camera& camera,
     const Vec3 d = p - camera.eye();
     if (!(Dot(d, camera.forward()) > 1e-6 * (1 + Length(d)))) return {};
   }
+  if (max_boxes == 0) {
+    max_boxes = std::max<size_t>(4096, static_cast<size_t>(camera.width()) * camera.height() / 8);
+  }
+  // The boxes of 2^shift bricks a side that hold a brick of the shell.
+  int shift = 0;
+  std::array<int, 3> boxes = bricks_;
+  std::vector<uint32_t> coarse;
+  const std::vector<uint32_t>* held = &shell_;
+  while (held->size() > max_boxes && (boxes[0] > 1 || boxes[1] > 1 || boxes[2] > 1)) {
+    ++shift;
+    for (int a = 0; a < 3; ++a) boxes[a] = ((bricks_[a] - 1) >> shift) + 1;
+    std::vector<uint8_t> marked(static_cast<size_t>(boxes[0]) * boxes[1] * boxes[2], 0);
+    coarse.clear();
+    for (uint32_t k : shell_) {
+      const size_t x = (k % bricks_[0]) >> shift, y = (k / bricks_[0] % bricks_[1]) >> shift,
+                   z = (k / (static_cast<size_t>(bricks_[0]) * bricks_[1])) >> shift;
+      const size_t c = (z * boxes[1] + y) * boxes[0] + x;
+      if (!marked[c]) coarse.push_back(static_cast<uint32_t>(c));
+      marked[c] = 1;
+    }
+    held = &coarse;
+  }
   PixelMask mask(camera.width(), camera.height());
-  const size_t per_plane = static_cast<size_t>(bricks_[0]) * bricks_[1];
-  for (uint32_t k : shell_) {
-    const int b[3] = {static_cast<int>(k % bricks_[0]),
-                      static_cast<int>(k / bricks_[0] % bricks_[1]),
+  const double size = 8.0 * (1 << shift);  // cells a box spans
+  for (uint32_t k : *held) {
+    const size_t per_plane = static_cast<size_t>(boxes[0]) * boxes[1];
+    const int b[3] = {static_cast<int>(k % boxes[0]), static_cast<int>(k / boxes[0] % boxes[1]),
                       static_cast<int>(k / per_plane)};
-    // Brick b holds cells 8b .. 8b + 7: [8b - 0.5, 8b + 7.5] in index
-    // space, clipped to the volume's box, where rays walk.
+    // Box b holds cells size * b .. size * (b + 1) - 1: [size * b - 0.5,
+    // size * (b + 1) - 0.5] in index space, clipped to the volume's box,
+    // where rays walk.
     Vec3 lo, hi;
     for (int a = 0; a < 3; ++a) {
-      const double from = std::max(b[a] * 8.0 - 0.5, 0.0);
-      const double to = std::min(b[a] * 8.0 + 7.5, static_cast<double>(dims_[a]));
+      const double from = std::max(b[a] * size - 0.5, 0.0);
+      const double to = std::min((b[a] + 1) * size - 0.5, static_cast<double>(dims_[a]));
       lo[a] = (from - half[a]) * spacing[a];
       hi[a] = (to - half[a]) * spacing[a];
     }

@@ -108,8 +108,13 @@ class FieldSummary {
   // each brick by the rectangle of Camera::Bounds. Empty, meaning every
   // pixel may, when the summary is empty, has no brick of band 0, or a ray
   // may start inside the volume (a corner of it lies behind the eye's
-  // plane).
-  PixelMask PixelsMeeting(const Camera& camera, const std::array<double, 3>& spacing) const;
+  // plane). A shell of more than `max_boxes` bricks (by default, an
+  // eighth of the image's pixels and at least 4096: what projecting them
+  // costs stays well under what the void pixels save) is projected in
+  // boxes of 2^3, 4^3, ... bricks, as few sizes up as make it fit: a box
+  // holding a shell brick holds its rays too.
+  PixelMask PixelsMeeting(const Camera& camera, const std::array<double, 3>& spacing,
+                          size_t max_boxes = 0) const;
 
   size_t MemoryBytes() const { return labels_.size() + shell_.size() * sizeof(uint32_t); }
 
