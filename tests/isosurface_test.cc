@@ -574,6 +574,21 @@ TEST(IsosurfaceTest, FieldSummaryBytesAreChecked) {
   EXPECT_EQ(scene->Slab(3, 5).summary().bytes(), bytes);
 }
 
+// A random orbit view of an image of size + [0, range) pixels a side, from
+// any direction, zoomed by 0.5 + [0, zoom_range); orthographic one trial in
+// three.
+CameraSpec RandomView(std::mt19937_64& rng, int trial, int size, int range, double zoom_range) {
+  std::uniform_real_distribution<double> unit(0, 1);
+  CameraSpec spec;
+  spec.width = size + static_cast<int>(rng() % range);
+  spec.height = size + static_cast<int>(rng() % range);
+  spec.azimuth_deg = 360 * unit(rng);
+  spec.elevation_deg = 170 * unit(rng) - 85;
+  spec.projection = trial % 3 == 2 ? Projection::kOrthographic : Projection::kPerspective;
+  spec.zoom = 0.5 + zoom_range * unit(rng);
+  return spec;
+}
+
 // The rays of a pixel the tracer knows to be void (Tracer::Void), traced
 // all the same, leave exactly the miss's deposit: no material met, no
 // shadow ray, the background bit for bit. Random blob volumes, spacings
@@ -594,13 +609,7 @@ TEST(IsosurfaceTest, AVoidPixelsRaysMeetNothing) {
     v.spacing = {0.6 + unit(rng), 0.6 + unit(rng), 0.6 + 2 * unit(rng)};
     auto scene = Scene::ForSurfaces(v, c);
     ASSERT_TRUE(scene.ok()) << scene.status();
-    CameraSpec spec;
-    spec.width = 30 + static_cast<int>(rng() % 40);
-    spec.height = 30 + static_cast<int>(rng() % 40);
-    spec.azimuth_deg = 360 * unit(rng);
-    spec.elevation_deg = 170 * unit(rng) - 85;
-    spec.projection = trial % 3 == 2 ? Projection::kOrthographic : Projection::kPerspective;
-    spec.zoom = 0.5 + 3 * unit(rng);
+    const CameraSpec spec = RandomView(rng, trial, 30, 40, 3);
     auto camera = Camera::Create(
         spec, Vec3{dims[0] * v.spacing[0], dims[1] * v.spacing[1], dims[2] * v.spacing[2]});
     ASSERT_TRUE(camera.ok()) << camera.status();
@@ -675,7 +684,6 @@ TEST(IsosurfaceTest, AVoidPixelsRaysMeetNothing) {
 // one box to a few hundred.
 TEST(IsosurfaceTest, PixelsMeetingInCoarseBoxesHoldsTheExactOnes) {
   std::mt19937_64 rng(37);
-  std::uniform_real_distribution<double> unit(0, 1);
   size_t exact_total = 0, coarse_total = 0, pixels = 0;
   for (int trial = 0; trial < 60; ++trial) {
     Classification c;
@@ -685,13 +693,7 @@ TEST(IsosurfaceTest, PixelsMeetingInCoarseBoxesHoldsTheExactOnes) {
     const Volume v = BlobVolume(rng, dims, &c);
     auto scene = Scene::ForSurfaces(v, c);
     ASSERT_TRUE(scene.ok()) << scene.status();
-    CameraSpec spec;
-    spec.width = 40 + static_cast<int>(rng() % 60);
-    spec.height = 40 + static_cast<int>(rng() % 60);
-    spec.azimuth_deg = 360 * unit(rng);
-    spec.elevation_deg = 170 * unit(rng) - 85;
-    spec.projection = trial % 3 == 2 ? Projection::kOrthographic : Projection::kPerspective;
-    spec.zoom = 0.5 + 2 * unit(rng);
+    const CameraSpec spec = RandomView(rng, trial, 40, 60, 2);
     auto camera = Camera::Create(spec, Vec3{double(dims[0]), double(dims[1]), double(dims[2])});
     ASSERT_TRUE(camera.ok());
     const FieldSummary& summary = scene->summary();
