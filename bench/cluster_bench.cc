@@ -62,7 +62,8 @@
 //   and cut into batches of a worker's size (FrameOptions::deposit_batch).
 //   Then, `repeat` times, each batch is packed as a worker packs it
 //   (PackDeposits) and added to a framebuffer as the display adds it
-//   (AddPackedDeposits). Prints the deposits, pixel records and bytes, and
+//   (AddPackedDeposits). Prints the deposits, the records packed (pixel
+//   records and runs of misses) and their bytes, and
 //   ns per deposit of packing and of the display's ingest (the least and
 //   the median over the repeats). The framebuffer must complete every
 //   pixel and equal, bit for bit, one that took the deposits one at a
@@ -912,16 +913,8 @@ int Deposits(const Options& o) {
         std::vector<std::vector<RayDescriptor>> queues(n);
         for (int i = 0; i < n; ++i) {
           for (int py = 0; py < camera.height(); ++py) {
-            for (int px = 0; px < camera.width(); ++px) {
-              RayDescriptor ray;
-              const auto role = ring.layout.Primary(i, px, py, 0, 1, ring.tracers[i], &ray);
-              if (role == RingLayout::PrimaryRole::kTrace) queues[i].push_back(ray);
-              if (role == RingLayout::PrimaryRole::kMiss) {
-                AppendDeposit(
-                    ring.tracers[i].MissDeposit(static_cast<uint32_t>(py) * camera.width() + px),
-                    &records[i]);
-              }
-            }
+            ring.layout.Primaries(i, py, 0, camera.width(), 1, ring.tracers[i], &queues[i],
+                                  &records[i]);
           }
         }
         for (bool busy = true; busy;) {
@@ -954,14 +947,9 @@ int Deposits(const Options& o) {
           for (size_t at = 0; at < r.size(); at += step) {
             batches.push_back(std::string_view(r).substr(at, step));
           }
-          for (size_t at = 0; at < r.size(); at += kDepositRecordBytes, ++deposits) {
-            // The record's fields back (docs/formats.md, "Deposit").
-            Deposit d;
-            std::memcpy(&d.pixel, r.data() + at, 4);
-            d.kind = static_cast<RayKind>(r[at + 4]);
-            std::memcpy(&d.spawned, r.data() + at + 6, 2);
-            std::memcpy(d.color.data(), r.data() + at + 8, 12);
+          for (const Deposit& d : UnpackDepositRecords(r)) {
             one_by_one.Add(d);
+            ++deposits;
           }
         }
         // Packing and ingest, alternated `repeat` times.

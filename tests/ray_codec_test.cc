@@ -206,30 +206,44 @@ absl::StatusOr<std::vector<PixelDeposits>> ReferenceDecode(std::string_view byte
   };
   uint32_t previous = 0;
   while (at < bytes.size()) {
-    uint64_t f[7];
+    // step, primaries, spawned, shadows; a run's pixels and primaries when
+    // those three are 0; the sums.
+    uint64_t f[4], run[2] = {0, 0}, sum[3];
     bool whole = true;
-    for (int k = 0; k < 7 && whole; ++k) whole = varint(k < 4 ? 32 : 64, &f[k]);
+    for (int k = 0; k < 4 && whole; ++k) whole = varint(32, &f[k]);
+    const bool is_run = whole && (f[1] | f[2] | f[3]) == 0;
+    for (int k = 0; k < 2 && whole && is_run; ++k) whole = varint(32, &run[k]);
+    for (int k = 0; k < 3 && whole; ++k) whole = varint(64, &sum[k]);
     if (!whole) {
-      return absl::InvalidArgumentError(absl::StrCat("deposit batch: pixel record ", out.size(),
+      return absl::InvalidArgumentError(absl::StrCat("deposit batch: record ", out.size(),
                                                      " is cut short or has a varint too long"));
     }
     PixelDeposits d;
     const uint32_t z = static_cast<uint32_t>(f[0]);
     d.pixel = previous + static_cast<uint32_t>((z >> 1) ^ (0u - (z & 1)));
-    d.primaries = static_cast<uint32_t>(f[1]);
-    d.spawned = static_cast<uint32_t>(f[2]);
-    d.shadows = static_cast<uint32_t>(f[3]);
-    for (int c = 0; c < 3; ++c) {
-      d.sum[c] = static_cast<int64_t>((f[4 + c] >> 1) ^ (0ull - (f[4 + c] & 1)));
+    for (int c = 0; c < 3; ++c)
+      d.sum[c] = static_cast<int64_t>((sum[c] >> 1) ^ (0ull - (sum[c] & 1)));
+    if (is_run) {
+      d.pixels = static_cast<uint32_t>(run[0]);
+      d.primaries = static_cast<uint32_t>(run[1]);
+      if (d.pixel >= limit || d.pixels == 0 || uint64_t{d.pixel} + d.pixels > limit ||
+          d.primaries == 0) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "deposit batch: run record ", out.size(), " is invalid (pixels ", d.pixel, " + ",
+            d.pixels, " of ", limit, ", ", d.primaries, " primary deposits each)"));
+      }
+    } else {
+      d.primaries = static_cast<uint32_t>(f[1]);
+      d.spawned = static_cast<uint32_t>(f[2]);
+      d.shadows = static_cast<uint32_t>(f[3]);
+      if (d.pixel >= limit || (d.primaries == 0 && d.spawned != 0)) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("deposit batch: pixel record ", out.size(), " is invalid (pixel ", d.pixel,
+                         " of ", limit, ", ", d.primaries, " primary and ", d.shadows,
+                         " shadow deposits, ", d.spawned, " spawned)"));
+      }
     }
-    if (d.pixel >= limit || (d.primaries == 0 && d.shadows == 0) ||
-        (d.primaries == 0 && d.spawned != 0)) {
-      return absl::InvalidArgumentError(absl::StrCat("deposit batch: pixel record ", out.size(),
-                                                     " is invalid (pixel ", d.pixel, " of ", limit,
-                                                     ", ", d.primaries, " primary and ", d.shadows,
-                                                     " shadow deposits, ", d.spawned, " spawned)"));
-    }
-    previous = d.pixel;
+    previous = d.pixel + d.pixels - 1;
     out.push_back(d);
   }
   return out;
@@ -255,7 +269,7 @@ TEST(RayCodecTest, PackedDepositsDecodeAsTheFormatReadsOnAnyBytes) {
   // error naming the same record.
   std::mt19937_64 rng(11);
   const uint32_t limit = 1000;
-  int ok = 0, failed = 0;
+  int ok = 0, failed = 0, runs = 0;
   for (int batch = 0; batch < 30000; ++batch) {
     std::string bytes;
     const int records = static_cast<int>(rng() % 40);
@@ -272,6 +286,15 @@ TEST(RayCodecTest, PackedDepositsDecodeAsTheFormatReadsOnAnyBytes) {
           0,
           0,
           0};
+      // A run record now and then: three zeros, then its pixels (some
+      // past the image, some none) and primaries (some none).
+      const bool run = rng() % 6 == 0;
+      uint64_t run_fields[2] = {rng() % 16 == 0 ? 0 : 1 + rng() % (rng() % 16 == 0 ? limit : 30),
+                                rng() % 16 == 0 ? 0 : 1 + rng() % 3};
+      if (run) {
+        f[1] = f[2] = f[3] = 0;
+        if (run_fields[0] > 0) previous += static_cast<uint32_t>(run_fields[0] - 1);
+      }
       for (int c = 4; c < 7; ++c) {
         switch (rng() % 4) {
           case 0:
@@ -293,6 +316,9 @@ TEST(RayCodecTest, PackedDepositsDecodeAsTheFormatReadsOnAnyBytes) {
         // Mostly minimal; sometimes padded, within the width or past it.
         const int extra = rng() % 10 == 0 ? static_cast<int>(rng() % 6) : 0;
         PutVarintPadded(f[k], extra, &bytes);
+        if (k == 3 && run) {
+          for (uint64_t v : run_fields) PutVarintPadded(v, rng() % 20 == 0 ? 1 : 0, &bytes);
+        }
       }
     }
     for (int k = rng() % 3 == 0 ? static_cast<int>(rng() % 4) : 0; k > 0 && !bytes.empty(); --k) {
@@ -311,14 +337,16 @@ TEST(RayCodecTest, PackedDepositsDecodeAsTheFormatReadsOnAnyBytes) {
     ASSERT_EQ(got->size(), want->size()) << batch;
     for (size_t i = 0; i < want->size(); ++i) {
       const PixelDeposits &a = (*got)[i], &b = (*want)[i];
-      ASSERT_TRUE(a.pixel == b.pixel && a.primaries == b.primaries && a.spawned == b.spawned &&
-                  a.shadows == b.shadows && a.sum == b.sum)
+      ASSERT_TRUE(a.pixel == b.pixel && a.pixels == b.pixels && a.primaries == b.primaries &&
+                  a.spawned == b.spawned && a.shadows == b.shadows && a.sum == b.sum)
           << batch << " record " << i;
+      runs += a.pixels > 1;
     }
   }
-  // Both outcomes were tried many times.
+  // Both outcomes were tried many times, and runs among what decoded.
   EXPECT_GT(ok, 3000);
   EXPECT_GT(failed, 3000);
+  EXPECT_GT(runs, 1000);
 }
 
 TEST(RayCodecTest, AddPackedDepositsAddsAWholeBatchOrNothing) {
@@ -392,6 +420,108 @@ TEST(RayCodecTest, PackedDepositsKnownBytes) {
   EXPECT_EQ((*d)[1].primaries, 1u);
 }
 
+TEST(RayCodecTest, MissRunsPackAsRunRecordsThatAddAsTheirDeposits) {
+  // A node queues the misses of a row's pixels as miss runs among its other
+  // deposits (RingLayout::Primaries). Packed in batches of any size and
+  // added by the display, they must leave the framebuffer each deposit
+  // added one by one leaves, count every deposit, and take a few bytes a
+  // run however many pixels it covers.
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  uint64_t run_pixels = 0;
+  for (int frame = 0; frame < 300; ++frame) {
+    const int width = 1 + rng() % 60, height = 1 + rng() % 30, samples = 1 + rng() % 4;
+    const uint32_t pixels = static_cast<uint32_t>(width * height);
+    const std::array<float, 3> background = {u(rng), rng() % 2 ? 0.0f : u(rng), 0.25f};
+    std::string records;
+    std::vector<Deposit> all;  // the same deposits one by one
+    for (uint32_t p = 0; p < pixels;) {
+      if (rng() % 3 == 0) {
+        const uint32_t n = std::min<uint32_t>(pixels - p, 1 + rng() % 40);
+        AppendMissRun(p, n, samples, background, &records);
+        for (uint32_t k = 0; k < n; ++k) {
+          for (int s = 0; s < samples; ++s)
+            all.push_back({p + k, RayKind::kPrimary, 0, background});
+        }
+        run_pixels += n;
+        p += n;
+        continue;
+      }
+      for (int s = 0; s < samples; ++s) {
+        // Some traced misses too, with the background's very deposit.
+        Deposit primary{p, RayKind::kPrimary, static_cast<uint16_t>(rng() % 3), {}};
+        if (rng() % 4 == 0) primary = {p, RayKind::kPrimary, 0, background};
+        for (float& c : primary.color) c = primary.spawned ? u(rng) : c;
+        AppendDeposit(primary, &records);
+        all.push_back(primary);
+        for (int k = 0; k < primary.spawned; ++k) {
+          const Deposit shadow{p, RayKind::kShadow, 0, {u(rng), u(rng), u(rng)}};
+          AppendDeposit(shadow, &records);
+          all.push_back(shadow);
+        }
+      }
+      ++p;
+    }
+    Framebuffer direct(width, height, samples), packed(width, height, samples);
+    for (const Deposit& d : all) direct.Add(d);
+    uint64_t deposits = 0, added_deposits = 0;
+    for (size_t at = 0; at < records.size();) {
+      const size_t n = std::min(records.size() - at, kDepositRecordBytes * (1 + rng() % 50));
+      std::string wire;
+      const size_t count = PackDeposits(std::string_view(records).substr(at, n), &wire, &deposits);
+      at += n;
+      auto added = AddPackedDeposits(wire, packed);
+      ASSERT_TRUE(added.ok()) << added.status();
+      ASSERT_EQ(added->records, count);
+      added_deposits += added->deposits;
+    }
+    ASSERT_EQ(deposits, all.size());
+    ASSERT_EQ(added_deposits, all.size());
+    ExpectSameFramebuffers(direct, packed);
+    ASSERT_TRUE(packed.Complete());
+  }
+  EXPECT_GT(run_pixels, 20000u);
+}
+
+TEST(RayCodecTest, MissRunsKnownBytes) {
+  // Two runs that follow one another with the same deposits become one run
+  // record; the next record's step counts from its last pixel.
+  std::string records, wire;
+  AppendMissRun(3, 4, 2, {0.5f, 0, 0}, &records);
+  AppendMissRun(7, 2, 2, {0.5f, 0, 0}, &records);
+  AppendDeposit(Deposit{9, RayKind::kPrimary, 0, {0, 0, 0}}, &records);
+  AppendMissRun(10, 1, 1, {0.5f, 0, 0}, &records);
+  uint64_t deposits = 0;
+  ASSERT_EQ(PackDeposits(records, &wire, &deposits), 3u);
+  EXPECT_EQ(deposits, 12u + 1u + 1u);
+  // Pixel 3 (zigzag 6), 0, 0, 0, 6 pixels, 2 primaries each, red
+  // 2 * 0.5 * 2^32 (zigzag 2^33: 5 bytes), green, blue 0; pixel 9 (step +1
+  // from pixel 8), 1 primary; pixel 10, a run of one as a pixel record.
+  const std::string expected =
+      std::string("\x06\x00\x00\x00\x06\x02", 6) + std::string("\x80\x80\x80\x80\x20\x00\x00", 7) +
+      std::string("\x02\x01\x00\x00\x00\x00\x00", 7) + std::string("\x02\x01\x00\x00", 4) +
+      std::string("\x80\x80\x80\x80\x10\x00\x00", 7);
+  EXPECT_EQ(wire, expected);
+  auto d = DecodePackedDeposits(wire, 11);
+  ASSERT_TRUE(d.ok()) << d.status();
+  ASSERT_EQ(d->size(), 3u);
+  EXPECT_EQ((*d)[0].pixel, 3u);
+  EXPECT_EQ((*d)[0].pixels, 6u);
+  EXPECT_EQ((*d)[0].primaries, 2u);
+  EXPECT_EQ((*d)[0].sum[0], 2 * Framebuffer::ToFixed(0.5f));
+  EXPECT_EQ((*d)[1].pixel, 9u);
+  EXPECT_EQ((*d)[2].pixel, 10u);
+  EXPECT_EQ((*d)[2].pixels, 1u);
+  EXPECT_FALSE(DecodePackedDeposits(wire, 10).ok());
+  // However many pixels, a run takes a record: 65,535 pixels of a grey
+  // background in 24 bytes.
+  records.clear();
+  wire.clear();
+  AppendMissRun(1000, kMaxRunRecordPixels, 1, {0.25f, 0.25f, 0.25f}, &records);
+  ASSERT_EQ(PackDeposits(records, &wire), 1u);
+  EXPECT_EQ(wire.size(), 24u);
+}
+
 TEST(RayCodecTest, PackedDepositsRefuseBadRecordsByName) {
   std::string records, wire;
   AppendDeposit(Deposit{7, RayKind::kPrimary, 2, {0.5f, 0.25f, 1}}, &records);
@@ -404,9 +534,23 @@ TEST(RayCodecTest, PackedDepositsRefuseBadRecordsByName) {
   for (size_t n = 1; n < wire.size(); ++n) {
     EXPECT_NE(message(wire.substr(0, n), 8).find("cut short"), std::string::npos) << n;
   }
-  // No deposit; spawned without a primary; a varint of 11 bytes; a 32-bit
+  // A run of no pixel, of no deposit, past the image, or wrapping past
+  // 2^32; spawned without a primary; a varint of 11 bytes; a 32-bit
   // varint with a 33rd bit; a step below pixel 0.
-  EXPECT_NE(message(std::string("\x02\x00\x00\x00\x00\x00\x00", 7), 8).find("invalid"),
+  const std::string sums("\x00\x00\x00", 3);
+  EXPECT_NE(
+      message(std::string("\x02\x00\x00\x00\x00\x01", 6) + sums, 8).find("run record 0 is invalid"),
+      std::string::npos);
+  EXPECT_NE(
+      message(std::string("\x02\x00\x00\x00\x02\x00", 6) + sums, 8).find("run record 0 is invalid"),
+      std::string::npos);
+  EXPECT_EQ(message(std::string("\x02\x00\x00\x00\x07\x01", 6) + sums, 8), "ok");
+  EXPECT_NE(message(std::string("\x02\x00\x00\x00\x08\x01", 6) + sums, 8).find("pixels 1 + 8 of 8"),
+            std::string::npos);
+  EXPECT_NE(message(std::string("\x02\x00\x00\x00\xff\xff\xff\xff\x0f\x01", 10) + sums, 8)
+                .find("run record 0 is invalid"),
+            std::string::npos);
+  EXPECT_NE(message(std::string("\x02\x00\x00\x00\x02\x01", 6), 8).find("cut short"),
             std::string::npos);
   EXPECT_NE(message(std::string("\x02\x00\x01\x01\x00\x00\x00", 7), 8).find("invalid"),
             std::string::npos);
@@ -434,6 +578,8 @@ TEST(RayCodecTest, PackedDepositsRefuseBadRecordsByName) {
     if (!d.ok()) continue;
     for (const PixelDeposits& r : *d) {
       ASSERT_LT(r.pixel, 64u);
+      ASSERT_GE(r.pixels, 1u);
+      ASSERT_LE(uint64_t{r.pixel} + r.pixels, 64u);
       ASSERT_GT(uint64_t{r.primaries} + r.shadows, 0u);
     }
   }

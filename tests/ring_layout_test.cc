@@ -7,12 +7,16 @@
 
 #include <algorithm>
 #include <cstdlib>
+#include <cstring>
 #include <random>
+#include <string>
+#include <tuple>
 #include <vector>
 
 #include "gtest/gtest.h"
 #include "testing.h"
 #include "transtick/partition.h"
+#include "transtick/ray_codec.h"
 #include "transtick/synthetic.h"
 #include "transtick/traversal.h"
 
@@ -187,6 +191,102 @@ TEST(RingLayoutTest, EveryPixelIsTakenCareOfExactlyOnce) {
   EXPECT_GT(off_footprint_misses, 1000);
   EXPECT_LT(off_footprint_misses, missed);
   EXPECT_GT(void_pixels, 20);
+}
+
+// RingLayout::Primaries, which a worker calls for the pixels of a row, is
+// Primary for each of their samples: the same rays in the same order, and
+// the same miss deposits, those of pixels whose every sample is the slab's
+// miss as runs (what a run stands for read back one deposit at a time).
+TEST(RingLayoutTest, PrimariesOfARowAreItsPixelsPrimaries) {
+  std::mt19937 rng(23);
+  const std::array<double, 3> spacing = {1, 1.2, 0.9};
+  const Scene scene = SphereScene(spacing);
+  uint64_t run_records = 0, run_pixels = 0, single_misses = 0;
+  for (int round = 0; round < 40; ++round) {
+    const int samples = 1 + static_cast<int>(rng() % 5);
+    const int width = 31 + static_cast<int>(rng() % 20), height = 23 + static_cast<int>(rng() % 20);
+    const Camera camera =
+        CameraFor(spacing, width, height, static_cast<double>(rng() % 360),
+                  static_cast<double>(rng() % 170) - 85,
+                  rng() % 2 ? Projection::kPerspective : Projection::kOrthographic,
+                  0.5 + (rng() % 30) / 10.0);
+    RenderSettings settings;
+    settings.background = {0.1f * (rng() % 10), 0.5f, 0};
+    const Tracer tracer(scene, settings, camera);
+    const RingLayout layout(RandomCuts(rng, kDims[1]), kDims, spacing, camera);
+    for (int slab = 0; slab < layout.slabs(); ++slab) {
+      for (int row = 0; row < camera.height(); ++row) {
+        // The whole row, as a unit of a worker's usually is, or a part.
+        const bool part = rng() % 3 == 0;
+        const int from = part ? static_cast<int>(rng() % camera.width()) : 0;
+        const int to =
+            part ? from + static_cast<int>(rng() % (camera.width() - from + 1)) : camera.width();
+        std::vector<RayDescriptor> want_rays, got_rays;
+        std::vector<Deposit> want_misses;
+        for (int col = from; col < to; ++col) {
+          for (int s = 0; s < samples; ++s) {
+            RayDescriptor ray;
+            switch (layout.Primary(slab, col, row, s, samples, tracer, &ray)) {
+              case PrimaryRole::kTrace:
+                want_rays.push_back(ray);
+                break;
+              case PrimaryRole::kMiss:
+                want_misses.push_back(
+                    tracer.MissDeposit(static_cast<uint32_t>(row) * camera.width() + col));
+                break;
+              case PrimaryRole::kNone:
+                break;
+            }
+          }
+        }
+        std::string records;
+        const uint64_t misses =
+            layout.Primaries(slab, row, from, to, samples, tracer, &got_rays, &records);
+        ASSERT_EQ(misses, want_misses.size());
+        ASSERT_EQ(got_rays.size(), want_rays.size());
+        for (size_t i = 0; i < want_rays.size(); ++i) {
+          ASSERT_EQ(got_rays[i].pixel, want_rays[i].pixel);
+          ASSERT_EQ(got_rays[i].cell, want_rays[i].cell);
+          ASSERT_EQ(got_rays[i].t, want_rays[i].t);
+          ASSERT_EQ(got_rays[i].direction.x, want_rays[i].direction.x);
+        }
+        // The records read back (docs/formats.md, "Deposit"): misses of
+        // no spawned ray, and runs of the view's samples a pixel.
+        ASSERT_EQ(records.size() % kDepositRecordBytes, 0u);
+        for (size_t at = 0; at < records.size(); at += kDepositRecordBytes) {
+          const uint8_t kind = static_cast<uint8_t>(records[at + 4]);
+          uint16_t field;
+          std::memcpy(&field, records.data() + at + 6, 2);
+          ASSERT_TRUE(kind == 0 || kind == 2);
+          if (kind == 0) {
+            ASSERT_EQ(field, 0);
+            ++single_misses;
+            continue;
+          }
+          ASSERT_EQ(static_cast<uint8_t>(records[at + 5]), samples);
+          ASSERT_GE(field, 1);
+          ++run_records;
+          run_pixels += field;
+        }
+        std::vector<Deposit> got_misses = UnpackDepositRecords(records);
+        auto key = [](const Deposit& d) {
+          return std::make_tuple(d.pixel, d.color[0], d.color[1], d.color[2]);
+        };
+        auto order = [&](const Deposit& a, const Deposit& b) { return key(a) < key(b); };
+        std::sort(want_misses.begin(), want_misses.end(), order);
+        std::sort(got_misses.begin(), got_misses.end(), order);
+        ASSERT_EQ(got_misses.size(), want_misses.size());
+        for (size_t i = 0; i < want_misses.size(); ++i) {
+          ASSERT_EQ(key(got_misses[i]), key(want_misses[i]));
+          ASSERT_EQ(got_misses[i].kind, RayKind::kPrimary);
+        }
+      }
+    }
+  }
+  // Runs covered many pixels in few records.
+  EXPECT_GT(run_records, 500u);
+  EXPECT_GT(run_pixels, 4 * run_records);
+  EXPECT_GT(single_misses, 0u);
 }
 
 // Camera::Bounds holds every pixel of Camera::Footprint, for random boxes

@@ -76,10 +76,13 @@ uint64_t Framebuffer::Add(std::span<const PixelDeposits> batch) {
   // One atomic addition for the batch, not one per pixel completed.
   uint64_t completed = 0;
   for (const PixelDeposits& d : batch) {
-    TRANSTICK_DCHECK_LT(d.pixel, pixels_.size());
-    Pixel& p = pixels_[d.pixel];
-    Merge(p, d);
-    completed += Completes(p);
+    TRANSTICK_DCHECK_LE(d.pixels, pixels_.size());
+    TRANSTICK_DCHECK_LE(d.pixel, pixels_.size() - d.pixels);
+    Pixel* p = &pixels_[d.pixel];
+    for (Pixel* const end = p + d.pixels; p != end; ++p) {
+      Merge(*p, d);
+      completed += Completes(*p);
+    }
   }
   CountCompleted(completed);
   return completed;

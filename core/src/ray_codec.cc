@@ -3,6 +3,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 #include "absl/strings/str_cat.h"
 #include "coding.h"
@@ -103,25 +104,80 @@ absl::StatusOr<std::vector<RayDescriptor>> DecodeRays(std::string_view bytes,
   return rays;
 }
 
-// The widest pixel record: four varints of 32 bits and three of 64.
+// The widest pixel record: four varints of 32 bits and three of 64; a run
+// record has two more of 32 bits.
 constexpr size_t kMaxPixelRecordBytes = 4 * 5 + 3 * 10;
+constexpr size_t kMaxRecordBytes = kMaxPixelRecordBytes + 2 * 5;
+// A queued miss run's kind byte (docs/formats.md, "Deposit").
+constexpr uint8_t kMissRunKind = 2;
 
-size_t PackDeposits(std::string_view records, std::string* out) {
+void AppendMissRun(uint32_t first, uint32_t pixels, int per_pixel,
+                   const std::array<float, 3>& color, std::string* out) {
+  char b[kDepositRecordBytes];
+  char* p = EncodeFixed32(b, first);
+  *p++ = static_cast<char>(kMissRunKind);
+  *p++ = static_cast<char>(per_pixel);
+  p = EncodeFixed16(p, static_cast<uint16_t>(pixels));
+  for (int c = 0; c < 3; ++c) p = EncodeFixed32(p, std::bit_cast<uint32_t>(color[c]));
+  out->append(b, p - b);
+}
+
+std::vector<Deposit> UnpackDepositRecords(std::string_view records) {
+  std::vector<Deposit> out;
+  Decoder in(records);
+  uint32_t pixel, bits;
+  uint8_t kind, per_pixel;
+  uint16_t field;
+  while (in.GetFixed32(&pixel) && in.GetByte(&kind) && in.GetByte(&per_pixel) &&
+         in.GetFixed16(&field)) {
+    Deposit d;
+    d.pixel = pixel;
+    for (int c = 0; c < 3; ++c) {
+      if (!in.GetFixed32(&bits)) return out;
+      d.color[c] = std::bit_cast<float>(bits);
+    }
+    if (kind != kMissRunKind) {
+      d.kind = static_cast<RayKind>(kind);
+      d.spawned = field;
+      out.push_back(d);
+      continue;
+    }
+    for (uint32_t k = 0; k < field; ++k) {
+      d.pixel = pixel + k;
+      for (int e = 0; e < per_pixel; ++e) out.push_back(d);
+    }
+  }
+  return out;
+}
+
+size_t PackDeposits(std::string_view records, std::string* out, uint64_t* deposits) {
+  // The record being gathered: a pixel's deposits, or a run of pixels.
   PixelDeposits run;
   bool open = false;
-  uint32_t previous = 0;
+  uint32_t previous = 0;  // the last pixel of the record written last
   size_t count = 0;
+  uint64_t held = 0;
   auto emit = [&] {
-    // One record on the stack, appended at once: 4 varints of 32 bits and
-    // 3 of 64 take at most 50 bytes.
-    char b[kMaxPixelRecordBytes];
+    // One record on the stack, appended at once.
+    char b[kMaxRecordBytes];
     char* p = EncodeVarint64(b, ZigZag32(static_cast<int32_t>(run.pixel - previous)));
+    // A run of one pixel is that pixel's record.
+    const bool as_run = run.pixels > 1;
+    if (as_run) {
+      p = EncodeVarint64(p, 0);
+      p = EncodeVarint64(p, 0);
+      p = EncodeVarint64(p, 0);
+      p = EncodeVarint64(p, run.pixels);
+    }
     p = EncodeVarint64(p, run.primaries);
-    p = EncodeVarint64(p, run.spawned);
-    p = EncodeVarint64(p, run.shadows);
+    if (!as_run) {
+      p = EncodeVarint64(p, run.spawned);
+      p = EncodeVarint64(p, run.shadows);
+    }
     for (int64_t v : run.sum) p = EncodeVarint64(p, ZigZag64(v));
     out->append(b, p - b);
-    previous = run.pixel;
+    previous = run.pixel + run.pixels - 1;
+    held += uint64_t{run.pixels} * (uint64_t{run.primaries} + run.shadows);
     ++count;
   };
   // The record's little-endian fields (docs/formats.md, "Deposit").
@@ -133,10 +189,36 @@ size_t PackDeposits(std::string_view records, std::string* out) {
     const char* r = records.data() + at;
     const uint32_t pixel = u32(r);
     const uint8_t kind = static_cast<uint8_t>(r[4]);
-    const uint16_t spawned =
+    const uint16_t field =
         static_cast<uint16_t>(static_cast<uint8_t>(r[6]) | static_cast<uint8_t>(r[7]) << 8);
     const uint32_t bits[3] = {u32(r + 8), u32(r + 12), u32(r + 16)};
-    if (open && pixel != run.pixel) {
+    if (kind == kMissRunKind) {
+      // Each of `field` pixels takes r[5] deposits of the colour.
+      PixelDeposits each;
+      each.pixel = pixel;
+      each.pixels = field;
+      each.primaries = static_cast<uint8_t>(r[5]);
+      for (int c = 0; c < 3; ++c) {
+        each.sum[c] = static_cast<int64_t>(
+            static_cast<uint64_t>(Framebuffer::ToFixed(std::bit_cast<float>(bits[c]))) *
+            each.primaries);
+      }
+      // A run that goes on from the one before, with the same deposits,
+      // joins it; a pixel record of exactly those deposits may start it.
+      const bool joins = open && run.shadows == 0 && run.spawned == 0 &&
+                         run.primaries == each.primaries && run.sum == each.sum &&
+                         pixel == run.pixel + run.pixels &&
+                         run.pixels + each.pixels <= std::numeric_limits<uint32_t>::max() / 2;
+      if (joins) {
+        run.pixels += each.pixels;
+        continue;
+      }
+      if (open) emit();
+      run = each;
+      open = true;
+      continue;
+    }
+    if (open && (pixel != run.pixel || run.pixels > 1)) {
       emit();
       open = false;
     }
@@ -147,7 +229,7 @@ size_t PackDeposits(std::string_view records, std::string* out) {
     }
     if (kind == static_cast<uint8_t>(RayKind::kPrimary)) {
       ++run.primaries;
-      run.spawned += spawned;
+      run.spawned += field;
     } else {
       ++run.shadows;
     }
@@ -158,6 +240,7 @@ size_t PackDeposits(std::string_view records, std::string* out) {
     }
   }
   if (open) emit();
+  if (deposits != nullptr) *deposits += held;
   return count;
 }
 
@@ -187,15 +270,28 @@ inline int ShortVarint(const char* p, uint64_t* v) {
   return bytes;
 }
 
-// One pixel record at p, its fields in their varints' values (step and
-// sums still zigzagged). The fast form: every varint short (a 32-bit field
-// below 2^28, a sum below 2^56) and at least kMaxPixelRecordBytes + 8
-// bytes from p on; returns the record's end, or null when it is not of
-// that form.
-inline const char* ShortPixelRecord(const char* p, uint64_t f[7]) {
-  for (int k = 0; k < 7; ++k) {
+// One record at p, its fields in their varints' values (step and sums
+// still zigzagged): f[0..3] step, primaries, spawned, shadows; a run
+// record's pixels and primaries in f[7], f[8]; the sums in f[4..6]. The
+// fast form: every varint short (a 32-bit field below 2^28, a sum below
+// 2^56) and at least kMaxRecordBytes + 8 bytes from p on; returns the
+// record's end, or null when it is not of that form.
+inline const char* ShortRecord(const char* p, uint64_t f[9]) {
+  for (int k = 0; k < 4; ++k) {
     const int n = ShortVarint(p, &f[k]);
-    if (n == 0 || (k < 4 && n > 4)) return nullptr;
+    if (n == 0 || n > 4) return nullptr;
+    p += n;
+  }
+  if ((f[1] | f[2] | f[3]) == 0) {
+    for (int k = 7; k < 9; ++k) {
+      const int n = ShortVarint(p, &f[k]);
+      if (n == 0 || n > 4) return nullptr;
+      p += n;
+    }
+  }
+  for (int k = 4; k < 7; ++k) {
+    const int n = ShortVarint(p, &f[k]);
+    if (n == 0) return nullptr;
     p += n;
   }
   return p;
@@ -211,28 +307,35 @@ absl::Status DecodePackedInto(std::string_view bytes, uint32_t pixel_limit,
   const char* p = bytes.data();
   uint32_t previous = 0;
   while (p < end) {
-    uint32_t step, primaries, spawned, shadows;
+    uint32_t step, primaries, spawned, shadows, run_pixels = 0, run_primaries = 0;
     uint64_t sum[3];
-    uint64_t f[7];
+    uint64_t f[9];
     const char* next = nullptr;
     if constexpr (std::endian::native == std::endian::little) {
-      if (static_cast<size_t>(end - p) >= kMaxPixelRecordBytes + 8) next = ShortPixelRecord(p, f);
+      if (static_cast<size_t>(end - p) >= kMaxRecordBytes + 8) next = ShortRecord(p, f);
     }
     if (next != nullptr) {
       step = static_cast<uint32_t>(f[0]);
       primaries = static_cast<uint32_t>(f[1]);
       spawned = static_cast<uint32_t>(f[2]);
       shadows = static_cast<uint32_t>(f[3]);
+      if ((primaries | spawned | shadows) == 0) {
+        run_pixels = static_cast<uint32_t>(f[7]);
+        run_primaries = static_cast<uint32_t>(f[8]);
+      }
       for (int c = 0; c < 3; ++c) sum[c] = f[4 + c];
     } else {
       // Near the end, or a long varint: the checked decoder.
       Decoder in(std::string_view(p, static_cast<size_t>(end - p)));
-      const bool whole = in.GetVarint32(&step) && in.GetVarint32(&primaries) &&
-                         in.GetVarint32(&spawned) && in.GetVarint32(&shadows) &&
-                         in.GetVarint64(&sum[0]) && in.GetVarint64(&sum[1]) &&
-                         in.GetVarint64(&sum[2]);
+      bool whole = in.GetVarint32(&step) && in.GetVarint32(&primaries) &&
+                   in.GetVarint32(&spawned) && in.GetVarint32(&shadows);
+      if (whole && (primaries | spawned | shadows) == 0) {
+        whole = in.GetVarint32(&run_pixels) && in.GetVarint32(&run_primaries);
+      }
+      whole =
+          whole && in.GetVarint64(&sum[0]) && in.GetVarint64(&sum[1]) && in.GetVarint64(&sum[2]);
       if (!whole) {
-        return absl::InvalidArgumentError(absl::StrCat("deposit batch: pixel record ", out->size(),
+        return absl::InvalidArgumentError(absl::StrCat("deposit batch: record ", out->size(),
                                                        " is cut short or has a varint too long"));
       }
       next = end - in.remaining();
@@ -240,18 +343,30 @@ absl::Status DecodePackedInto(std::string_view bytes, uint32_t pixel_limit,
     p = next;
     PixelDeposits d;
     d.pixel = previous + static_cast<uint32_t>(UnZigZag32(step));
-    d.primaries = primaries;
-    d.spawned = spawned;
-    d.shadows = shadows;
     for (int c = 0; c < 3; ++c) d.sum[c] = UnZigZag64(sum[c]);
-    if (d.pixel >= pixel_limit || (d.primaries == 0 && d.shadows == 0) ||
-        (d.primaries == 0 && d.spawned != 0)) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("deposit batch: pixel record ", out->size(), " is invalid (pixel ", d.pixel,
-                       " of ", pixel_limit, ", ", d.primaries, " primary and ", d.shadows,
-                       " shadow deposits, ", d.spawned, " spawned)"));
+    if ((primaries | spawned | shadows) == 0) {
+      // A run record: `run_pixels` pixels from d.pixel on, each with
+      // `run_primaries` primary deposits.
+      d.pixels = run_pixels;
+      d.primaries = run_primaries;
+      if (d.pixel >= pixel_limit || run_pixels == 0 || run_pixels > pixel_limit - d.pixel ||
+          run_primaries == 0) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "deposit batch: run record ", out->size(), " is invalid (pixels ", d.pixel, " + ",
+            run_pixels, " of ", pixel_limit, ", ", run_primaries, " primary deposits each)"));
+      }
+    } else {
+      d.primaries = primaries;
+      d.spawned = spawned;
+      d.shadows = shadows;
+      if (d.pixel >= pixel_limit || (d.primaries == 0 && d.spawned != 0)) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("deposit batch: pixel record ", out->size(), " is invalid (pixel ",
+                         d.pixel, " of ", pixel_limit, ", ", d.primaries, " primary and ",
+                         d.shadows, " shadow deposits, ", d.spawned, " spawned)"));
+      }
     }
-    previous = d.pixel;
+    previous = d.pixel + (d.pixels - 1);
     out->push_back(d);
   }
   return absl::OkStatus();
@@ -273,7 +388,9 @@ absl::StatusOr<PackedDepositsAdded> AddPackedDeposits(std::string_view bytes, Fr
   const uint32_t limit = static_cast<uint32_t>(fb.width()) * static_cast<uint32_t>(fb.height());
   if (auto s = DecodePackedInto(bytes, limit, &records); !s.ok()) return s;
   PackedDepositsAdded added;
-  for (const PixelDeposits& d : records) added.deposits += uint64_t{d.primaries} + d.shadows;
+  for (const PixelDeposits& d : records) {
+    added.deposits += uint64_t{d.pixels} * (uint64_t{d.primaries} + d.shadows);
+  }
   fb.Add(std::span<const PixelDeposits>(records));
   added.records = records.size();
   // A worker's batch (FrameOptions::deposit_batch) fits in what is kept;

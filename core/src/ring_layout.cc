@@ -4,6 +4,7 @@
 #include <utility>
 
 #include "transtick/partition.h"
+#include "transtick/ray_codec.h"
 #include "transtick/traversal.h"
 
 namespace transtick {
@@ -66,6 +67,48 @@ RingLayout::PrimaryRole RingLayout::Primary(int slab, int col, int row, int samp
   }
   // MakePrimary clamps the entry cell into the volume.
   return SlabOf(ray->cell[1]) == slab ? PrimaryRole::kTrace : PrimaryRole::kNone;
+}
+
+uint64_t RingLayout::Primaries(int slab, int row, int from, int to, int samples,
+                               const Tracer& tracer, std::vector<RayDescriptor>* out,
+                               std::string* deposits) const {
+  TRANSTICK_DCHECK(samples >= 1 && samples <= kMaxDepositsPerRunPixel);
+  const uint32_t width = static_cast<uint32_t>(camera_.width());
+  uint64_t misses = 0;
+  // The pixels whose every sample is this slab's miss, [first, first + run).
+  uint32_t first = 0, run = 0;
+  auto close = [&] {
+    if (run == 0) return;
+    AppendMissRun(first, run, samples, tracer.MissDeposit(first).color, deposits);
+    run = 0;
+  };
+  RayDescriptor ray;  // one record for all: Primary fills it whole when it is this slab's
+  for (int col = from; col < to; ++col) {
+    const uint32_t pixel = static_cast<uint32_t>(row) * width + static_cast<uint32_t>(col);
+    int missed = 0;
+    for (int s = 0; s < samples; ++s) {
+      switch (Primary(slab, col, row, s, samples, tracer, &ray)) {
+        case PrimaryRole::kTrace:
+          out->push_back(ray);
+          break;
+        case PrimaryRole::kMiss:
+          ++missed;
+          break;
+        case PrimaryRole::kNone:
+          break;
+      }
+    }
+    misses += static_cast<uint64_t>(missed);
+    if (missed == samples) {
+      if (run == 0) first = pixel;
+      if (++run == kMaxRunRecordPixels) close();
+      continue;
+    }
+    close();
+    for (int k = 0; k < missed; ++k) AppendDeposit(tracer.MissDeposit(pixel), deposits);
+  }
+  close();
+  return misses;
 }
 
 }  // namespace transtick

@@ -352,8 +352,9 @@ class Frame::DisplayStream : public grpc::ClientWriteReactor<v1::DepositBatch>,
           // deposits"); the records' buffer goes back to the outbox.
           std::string* packed = out_.mutable_packed();
           packed->clear();
-          PackDeposits(batch, packed);
-          frame_->deposits_sent_ += batch.size() / kDepositRecordBytes;
+          uint64_t deposits = 0;
+          PackDeposits(batch, packed, &deposits);
+          frame_->deposits_sent_ += deposits;
           frame_->deposit_bytes_sent_ += packed->size();
           records_ = std::move(batch);
           StartWrite(&out_);
@@ -643,17 +644,13 @@ void Frame::Reject(uint64_t count, const char* side, const std::string& why) {
   });
 }
 
-bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>* misses,
+bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::string* deposits,
                           uint64_t* plane_work) {
   const int64_t k0 = next_pixel_.fetch_add(static_cast<int64_t>(kWorkUnit));
   if (k0 >= pixels_in_rows_) return false;
   const int64_t k1 = std::min<int64_t>(k0 + kWorkUnit, pixels_in_rows_);
   const int width = camera_.width();
   const int me = spec_.index();
-  // One record for all: Primary fills it whole when it is this slab's (a
-  // record made per pixel cost a tenth of this loop, mostly for pixels outside
-  // the slab's footprint).
-  RayDescriptor ray;
   for (int64_t k = k0; k < k1;) {
     // The unit's pixels in one row at a time: columns [col, end).
     const int row = spec_.row_begin() + static_cast<int>(k / width) * spec_.row_step();
@@ -670,24 +667,12 @@ bool Frame::NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>*
       from = std::max(from, first);
       to = std::min(to, last);
     }
-    for (int c = from; c < to; ++c) {
-      for (int s = 0; s < samples_; ++s) {
-        switch (layout_.Primary(me, c, row, s, samples_, tracer_, &ray)) {
-          case RingLayout::PrimaryRole::kTrace:
-            out->push_back(ray);
-            break;
-          case RingLayout::PrimaryRole::kMiss:
-            misses->push_back(tracer_.MissDeposit(static_cast<uint32_t>(row) * width + c));
-            // A miss costs its slab little (the first slab's misses of the
-            // volume, or the void pixels of its footprint, Tracer::Void):
-            // counted at its first plane.
-            if (plane_work) plane_work[0] += tracer_.work_weights().ray;
-            break;
-          case RingLayout::PrimaryRole::kNone:
-            break;
-        }
-      }
-    }
+    if (from >= to) continue;
+    const uint64_t misses = layout_.Primaries(me, row, from, to, samples_, tracer_, out, deposits);
+    // A miss costs its slab little (the first slab's misses of the
+    // volume, or the void pixels of its footprint, Tracer::Void): counted
+    // at its first plane.
+    if (plane_work) plane_work[0] += misses * tracer_.work_weights().ray;
   }
   return true;
 }
@@ -702,7 +687,6 @@ void Frame::TraceLoop(int thread_index) {
     st.counters.plane_work = st.plane_work.data();
   }
   std::vector<RayDescriptor> work;
-  std::vector<Deposit> misses;
   std::string to_left, to_right, deposits;
   const int me = spec_.index();
   auto flush = [&] {
@@ -732,9 +716,7 @@ void Frame::TraceLoop(int thread_index) {
     work.clear();
     // Rays from neighbours first: they free the nodes waiting on them.
     bool got =
-        inbox_.TryPop(kWorkUnit, &work) || NextPrimaries(&work, &misses, st.counters.plane_work);
-    for (const Deposit& d : misses) AppendDeposit(d, &deposits);
-    misses.clear();
+        inbox_.TryPop(kWorkUnit, &work) || NextPrimaries(&work, &deposits, st.counters.plane_work);
     if (!got) {
       rest();
       // Nothing to trace: what this thread produced goes out now rather

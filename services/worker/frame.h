@@ -220,12 +220,11 @@ class Frame : public std::enable_shared_from_this<Frame> {
   void TracerStopped();
   // Closes the streams and gathers the statistics. REQUIRES: no tracer runs.
   v1::WorkerFrameStats Finish(bool cancel);
-  // Fills `out` with the next primary rays entering this slab, and
-  // `misses` with the deposits of rays that miss the volume (counted in
-  // the work profile `plane_work` when it is not null); false when every
-  // pixel has been generated.
-  bool NextPrimaries(std::vector<RayDescriptor>* out, std::vector<Deposit>* misses,
-                     uint64_t* plane_work);
+  // Fills `out` with the next primary rays entering this slab, and queues
+  // onto `deposits` the misses this slab deposits (RingLayout::Primaries;
+  // counted in the work profile `plane_work` when it is not null); false
+  // when every pixel has been generated.
+  bool NextPrimaries(std::vector<RayDescriptor>* out, std::string* deposits, uint64_t* plane_work);
   void ReceiveBatch(const v1::RayBatch& batch, Link& from);
   // Counts `count` invalid records from the `side` neighbour; the first
   // time, logs why and aborts the frame at the display.

@@ -17,6 +17,7 @@
 // Usage: fuzz_seeds DIR
 #include <bzlib.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -232,6 +233,11 @@ bool WriteBatches(const fs::path& dir) {
                          static_cast<char>(camera.height() - 1)};
     std::string records;
     for (const Deposit& d : deposits) AppendDeposit(d, &records);
+    // And misses past them as a worker queues its background: miss runs.
+    const uint32_t image = static_cast<uint32_t>(camera.width() * camera.height());
+    const uint32_t first =
+        std::min<uint32_t>(image - 1, 3u * static_cast<uint32_t>(camera.width()));
+    AppendMissRun(first, std::min<uint32_t>(image - first, 50), 1, {0.1f, 0.2f, 0.3f}, &records);
     PackDeposits(records, &batch);
     ok &= Write(dir / (name + "-deposits"), batch);
   }

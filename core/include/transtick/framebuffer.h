@@ -59,13 +59,14 @@ class Framebuffer {
   void CountCompleted(uint64_t pixels) {
     if (pixels > 0) complete_.fetch_add(pixels, std::memory_order_relaxed);
   }
-  // Adds deposits of one pixel merged (PixelDeposits, ray.h): the same
-  // state as adding each of them. Returns true when they completed it.
-  // REQUIRES: deposits.pixel < width * height.
+  // Adds deposits of one pixel merged (PixelDeposits, ray.h), or of each
+  // pixel of a run: the same state as adding each of them. Returns true
+  // when they completed a pixel.
+  // REQUIRES: deposits.pixel + deposits.pixels <= width * height.
   bool Add(const PixelDeposits& deposits);
   // Adds a batch of them, as one by one; returns how many pixels they
   // completed.
-  // REQUIRES: every pixel < width * height.
+  // REQUIRES: every pixel + pixels <= width * height.
   uint64_t Add(std::span<const PixelDeposits> batch);
 
   // A colour in the sums' fixed point: round(c * kScale), halves away from

@@ -58,8 +58,11 @@ struct Deposit {
 // display (docs/formats.md, "Packed deposits"): the counts, and the colours
 // summed in the framebuffer's fixed point (Framebuffer::ToFixed) modulo
 // 2^64, which adds in any order to the same bits.
+// A run record covers `pixels` consecutive pixels from `pixel` on, each
+// taking these deposits (a worker's misses: formats.md, "Packed deposits").
 struct PixelDeposits {
   uint32_t pixel = 0;
+  uint32_t pixels = 1;
   uint32_t primaries = 0;
   uint32_t spawned = 0;  // by those primaries, summed
   uint32_t shadows = 0;

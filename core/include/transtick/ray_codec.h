@@ -5,6 +5,7 @@
 #ifndef TRANSTICK_RAY_CODEC_H_
 #define TRANSTICK_RAY_CODEC_H_
 
+#include <array>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -19,6 +20,18 @@ inline constexpr size_t kDepositRecordBytes = 20;
 
 void AppendRay(const RayDescriptor& ray, std::string* out);
 void AppendDeposit(const Deposit& deposit, std::string* out);
+// A miss run as one queued record (docs/formats.md, "Deposit"): `pixels`
+// consecutive pixels from `first` on, each with `per_pixel` primary
+// deposits of `color` that spawned nothing.
+// REQUIRES: 1 <= pixels <= 65535, 1 <= per_pixel <= kMaxDepositsPerRunPixel.
+void AppendMissRun(uint32_t first, uint32_t pixels, int per_pixel,
+                   const std::array<float, 3>& color, std::string* out);
+inline constexpr int kMaxDepositsPerRunPixel = 64;
+// The deposits queued records stand for, one by one: a miss run as the
+// deposits of each of its pixels. For checks and benches (the display
+// receives them packed). REQUIRES: whole records, as the two above write.
+std::vector<Deposit> UnpackDepositRecords(std::string_view records);
+inline constexpr uint32_t kMaxRunRecordPixels = 65535;
 
 // Decodes a batch of ray records. Fails when the size is not a whole number
 // of records or a record is invalid (unknown kind, non-finite geometry,
@@ -26,15 +39,18 @@ void AppendDeposit(const Deposit& deposit, std::string* out);
 // stay on their node: the display receives them packed, below.)
 absl::StatusOr<std::vector<RayDescriptor>> DecodeRays(std::string_view bytes, uint32_t pixel_limit);
 
-// Packs a batch of deposit records (AppendDeposit's) for the display:
-// consecutive deposits of one pixel merged into one pixel record, colours
-// summed in the framebuffer's fixed point (docs/formats.md, "Packed
-// deposits"), appended to `out`. Returns the number of pixel records.
-// REQUIRES: `records` is whole records of valid deposits.
-size_t PackDeposits(std::string_view records, std::string* out);
-// Decodes packed deposits. Fails, naming the record, when one is cut short
-// or invalid (a varint too long, a pixel at or beyond `pixel_limit`, no
-// deposit, spawned rays without a primary).
+// Packs a batch of deposit records (AppendDeposit's and AppendMissRun's)
+// for the display: consecutive deposits of one pixel merged into one pixel
+// record, colours summed in the framebuffer's fixed point, and miss runs
+// as run records, consecutive ones merged (docs/formats.md, "Packed
+// deposits"), appended to `out`. Returns the number of records written;
+// adds the deposits they hold to `*deposits` when it is given.
+// REQUIRES: `records` is whole records of valid deposits and miss runs.
+size_t PackDeposits(std::string_view records, std::string* out, uint64_t* deposits = nullptr);
+// Decodes packed deposits (a run record as one PixelDeposits of its
+// `pixels`). Fails, naming the record, when one is cut short or invalid (a
+// varint too long, a pixel at or beyond `pixel_limit`, no deposit, spawned
+// rays without a primary, a run of no pixel or past the limit).
 absl::StatusOr<std::vector<PixelDeposits>> DecodePackedDeposits(std::string_view bytes,
                                                                  uint32_t pixel_limit);
 

@@ -10,6 +10,7 @@
 
 #include <array>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "transtick/camera.h"
@@ -79,6 +80,16 @@ class RingLayout {
   // Of primary ray `sample` of `samples` (SampleOffset) of the pixel.
   PrimaryRole Primary(int slab, int col, int row, int sample, int samples, const Tracer& tracer,
                       RayDescriptor* ray) const;
+
+  // Primary for every sample of the pixels [from, to) of `row`: the rays
+  // this slab traces go onto `out`, and the misses it deposits onto
+  // `deposits` as queued records (ray_codec.h), a pixel whose every sample
+  // is this slab's miss in a miss run with its neighbours of the same
+  // kind. Returns the miss deposits queued.
+  // REQUIRES: as Primary's, for each pixel; 0 <= from <= to <= width;
+  // 1 <= samples <= kMaxDepositsPerRunPixel.
+  uint64_t Primaries(int slab, int row, int from, int to, int samples, const Tracer& tracer,
+                     std::vector<RayDescriptor>* out, std::string* deposits) const;
 
   // The slab that deposits the miss of pixel (col, row): the first slab
   // whose footprint holds the pixel, which makes its ray and finds the
