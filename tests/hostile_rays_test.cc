@@ -134,14 +134,27 @@ TEST_F(HostileRaysTest, HostileDepositsAreRefusedByNameAndTheDisplayGoesOn) {
   batch.set_packed(packed.substr(0, 3));
   s = SendDeposits(*display_stub_, kFrame, batch);
   EXPECT_NE(s.error_message().find("cut short"), std::string::npos) << s.error_message();
-  // The frame is still the display's to complete: every pixel, packed.
+  // A run of misses past the image's last pixel: refused, and none of its
+  // pixels is taken (else the frame below would complete too soon).
   records.clear();
-  for (uint32_t p = 0; p < 8; ++p) {
+  packed.clear();
+  AppendMissRun(5, 4, 1, {0, 0, 0}, &records);
+  PackDeposits(records, &packed);
+  batch.set_packed(packed);
+  s = SendDeposits(*display_stub_, kFrame, batch);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(s.error_message().find("run record 0 is invalid (pixels 5 + 4 of 8"), std::string::npos)
+      << s.error_message();
+  // The frame is still the display's to complete: every pixel, packed, the
+  // last three a run of misses.
+  records.clear();
+  for (uint32_t p = 0; p < 5; ++p) {
     AppendDeposit(Deposit{p, RayKind::kPrimary, 1, {0.5f, 0, 0}}, &records);
     AppendDeposit(Deposit{p, RayKind::kShadow, 0, {0.25f, 0, 0}}, &records);
   }
+  AppendMissRun(5, 3, 1, {0, 0, 0}, &records);
   packed.clear();
-  EXPECT_EQ(PackDeposits(records, &packed), 8u);
+  EXPECT_EQ(PackDeposits(records, &packed), 6u);
   batch.set_packed(packed);
   EXPECT_TRUE(SendDeposits(*display_stub_, kFrame, batch).ok());
   int rows = 0;

@@ -97,6 +97,7 @@ void Deposits(std::string_view bytes) {
   Framebuffer fb(width, height);
   for (const PixelDeposits& d : *records) {
     TRANSTICK_CHECK_LT(d.pixel, pixels);
+    TRANSTICK_CHECK(d.pixels >= 1 && d.pixels <= pixels - d.pixel);  // a run stays in the image
     TRANSTICK_CHECK(d.primaries > 0 || (d.shadows > 0 && d.spawned == 0));
     (void)fb.Add(d);
   }
