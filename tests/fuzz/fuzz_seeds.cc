@@ -235,9 +235,10 @@ bool WriteBatches(const fs::path& dir) {
     for (const Deposit& d : deposits) AppendDeposit(d, &records);
     // And misses past them as a worker queues its background: miss runs.
     const uint32_t image = static_cast<uint32_t>(camera.width() * camera.height());
-    const uint32_t first =
+    const uint32_t run_from =
         std::min<uint32_t>(image - 1, 3u * static_cast<uint32_t>(camera.width()));
-    AppendMissRun(first, std::min<uint32_t>(image - first, 50), 1, {0.1f, 0.2f, 0.3f}, &records);
+    AppendMissRun(run_from, std::min<uint32_t>(image - run_from, 50), 1, {0.1f, 0.2f, 0.3f},
+                  &records);
     PackDeposits(records, &batch);
     ok &= Write(dir / (name + "-deposits"), batch);
   }
