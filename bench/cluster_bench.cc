@@ -12,6 +12,8 @@
 //                         [--workers 2,4] [--repeat N]
 //   cluster_bench deposits [--volume FILE] [--materials FILE] [--size WxH]
 //                          [--azimuth DEG] [--workers 1,2,4] [--repeat N]
+//   cluster_bench rays    [--volume FILE] [--materials FILE] [--size WxH]
+//                         [--workers 2,4,8] [--repeat N]
 //   cluster_bench converge [--volume FILE] [--materials FILE] [--size WxH]
 //                          [--workers 4,8]
 //   cluster_bench refine  [--volume FILE] [--materials FILE] [--size WxH]
@@ -127,6 +129,17 @@ namespace transtick {
 namespace {
 
 using bench::Median;
+// rays: what packing saves the rays handed between neighbours. For N equal
+//   slabs, frontal and at 45 degrees, every ray of a frame is traced in
+//   this process as the ring routes it, and the rays each slab hands to
+//   each neighbour are queued as its worker queues them, in the order
+//   made. They are cut into batches of a worker's size
+//   (FrameOptions::batch_rays) and of smaller ones (a lingering stream
+//   sends what it has), and packed (PackRays): rays, primary and shadow,
+//   bytes per ray packed against the 106 of a record, and ns per ray of
+//   packing and of decoding (DecodePackedRays; the least of `repeat`).
+//   Every decoded batch must give its records back bit for bit, else the
+//   exit status is 1.
 using bench::MsSince;
 using bench::ParseInt;
 using bench::ParseSize;
@@ -135,7 +148,7 @@ namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
 constexpr char kUsage[] =
-    "usage: cluster_bench scaling|forward|tables|hops|weights|deposits|converge|refine\n"
+    "usage: cluster_bench scaling|forward|tables|hops|weights|deposits|rays|converge|refine\n"
     "                     [--volume FILE] [--materials FILE]\n"
     "                     [--size WxH] [--azimuth DEG] [--repeat N] [--workers 1,2,4]\n"
     "                     [--rays N] [--grid N] [--threads N] [--balance MODE]\n";
@@ -169,7 +182,7 @@ std::string Parse(int argc, char** argv, Options* o) {
   o->mode = argv[1];
   if (o->mode == "--help" || o->mode == "-h") return "help";
   if (o->mode != "scaling" && o->mode != "forward" && o->mode != "tables" && o->mode != "hops" &&
-      o->mode != "weights" && o->mode != "deposits" && o->mode != "converge" &&
+      o->mode != "weights" && o->mode != "deposits" && o->mode != "rays" && o->mode != "converge" &&
       o->mode != "refine") {
     return "unknown mode '" + o->mode + "'";
   }
@@ -479,6 +492,8 @@ int Forward(const Options& o) {
     }
     std::string records;
     for (int i = 0; i < batch; ++i) AppendRay(rays[i % rays.size()], &records);
+    std::string packed;
+    PackRays(records, &packed);
     auto t0 = Clock::now();
     grpc::ClientContext ctx;
     auto stream = stub->Rays(&ctx);
@@ -486,7 +501,7 @@ int Forward(const Options& o) {
     msg.set_frame_id(frame_id);
     stream->Write(msg);  // the hello
     for (int b = 0; b < n_batches; ++b) {
-      msg.set_rays(records);
+      msg.set_packed(packed);
       if (!stream->Write(msg)) return Fail(absl::UnavailableError("the worker closed the stream"));
     }
     stream->WritesDone();
@@ -890,6 +905,91 @@ int Weights(const Options& o) {
               static_cast<int>(kFieldWork.cell), static_cast<int>(kFieldWork.hit),
               static_cast<int>(kFieldWork.ray), 100 * mean_in_use, 100 * worst_in_use);
   return 0;
+}
+
+// ---------------------------------------------------------------- rays
+
+int PackedRays(const Options& o) {
+  auto setup = Prepare(o);
+  if (!setup.ok()) return Fail(setup.status());
+  const size_t worker_batch = FrameOptions{}.batch_rays;
+  std::printf("volume %s, %dx%d, shadows on, equal slabs; rays handed on in a frame; %d repeats\n",
+              o.volume.c_str(), o.width, o.height, o.repeat);
+  std::printf("%-8s %6s %8s %8s %8s %7s %12s %12s %12s %13s %13s\n", "view", "slabs", "rays",
+              "primary", "shadow", "batch", "record B", "packed B/ray", "packed/rec", "pack ns/ray",
+              "decode ns/ray");
+  bool ok = true;
+  const absl::Status status = ForEachEqualRing(
+      o, *setup, {0.0, 45.0}, [&](double azimuth, const Camera& camera, const SlabRing& ring) {
+        const int n = static_cast<int>(ring.tracers.size());
+        if (n < 2) return;
+        // Each link's rays (slab i to its left or right neighbour), as queued.
+        std::vector<std::string> links(2 * n);
+        uint64_t rays = 0, shadows = 0;
+        TraceRing(
+            ring.layout, ring.tracers, camera, [](int, auto&& share) { share(); },
+            [&](int i, const RayDescriptor&, const RayDescriptor& ray,
+                const std::vector<RayDescriptor>&, const TraceCounters&, Tracer::Outcome outcome) {
+              if (outcome != Tracer::Outcome::kLeftSlab) return;
+              const RingLayout::Hop hop = ring.layout.Route(i, ray.cell);
+              if (hop == RingLayout::Hop::kFinished) return;
+              AppendRay(ray, &links[2 * i + (hop == RingLayout::Hop::kRight)]);
+              ++rays;
+              shadows += ray.kind == RayKind::kShadow;
+            });
+        const uint32_t pixels = static_cast<uint32_t>(camera.width() * camera.height());
+        for (size_t batch_rays : {worker_batch, size_t{256}, size_t{32}}) {
+          std::vector<std::string_view> batches;
+          for (const std::string& l : links) {
+            const size_t step = batch_rays * kRayRecordBytes;
+            for (size_t at = 0; at < l.size(); at += step)
+              batches.push_back(std::string_view(l).substr(at, step));
+          }
+          std::vector<std::string> packed(batches.size());
+          std::vector<double> pack_ms, decode_ms;
+          uint64_t bytes = 0;
+          for (int rep = 0; rep < o.repeat; ++rep) {
+            auto t0 = Clock::now();
+            for (size_t b = 0; b < batches.size(); ++b) {
+              packed[b].clear();
+              PackRays(batches[b], &packed[b]);
+            }
+            pack_ms.push_back(MsSince(t0));
+            t0 = Clock::now();
+            std::vector<DecodedRays> decoded(batches.size());
+            for (size_t b = 0; b < batches.size(); ++b)
+              decoded[b] = DecodePackedRays(packed[b], pixels);
+            decode_ms.push_back(MsSince(t0));
+            bytes = 0;
+            for (size_t b = 0; b < batches.size(); ++b) {
+              std::string again;
+              for (const RayDescriptor& r : decoded[b].rays) AppendRay(r, &again);
+              if (!decoded[b].error.ok() || again != batches[b]) {
+                std::fprintf(
+                    stderr,
+                    "cluster_bench: %d slabs: a packed batch does not decode to its rays: %s\n", n,
+                    decoded[b].error.ToString().c_str());
+                ok = false;
+                return;
+              }
+              bytes += packed[b].size();
+            }
+          }
+          const double per = 1e6 / static_cast<double>(std::max<uint64_t>(1, rays));
+          const double per_ray = static_cast<double>(bytes) / std::max<uint64_t>(1, rays);
+          std::printf("%-8s %6d %8llu %8llu %8llu %7zu %12zu %12.1f %12.2f %13.1f %13.1f\n",
+                      azimuth == 0 ? "frontal" : "45 deg", n, static_cast<unsigned long long>(rays),
+                      static_cast<unsigned long long>(rays - shadows),
+                      static_cast<unsigned long long>(shadows), batch_rays, kRayRecordBytes,
+                      per_ray, per_ray / kRayRecordBytes,
+                      *std::min_element(pack_ms.begin(), pack_ms.end()) * per,
+                      *std::min_element(decode_ms.begin(), decode_ms.end()) * per);
+        }
+      });
+  if (!status.ok()) return Fail(status);
+  std::printf("\n%s\n",
+              ok ? "OK: every packed batch decodes to its rays bit for bit" : "FAIL: see stderr");
+  return ok ? 0 : 1;
 }
 
 // ---------------------------------------------------------------- deposits
@@ -1304,6 +1404,7 @@ int main(int argc, char** argv) {
   if (options.mode == "hops") return transtick::Hops(options);
   if (options.mode == "weights") return transtick::Weights(options);
   if (options.mode == "deposits") return transtick::Deposits(options);
+  if (options.mode == "rays") return transtick::PackedRays(options);
   if (options.mode == "scaling") return transtick::Scaling(options);
   if (options.mode == "converge") return transtick::Converge(options);
   if (options.mode == "refine") return transtick::Refine(options);

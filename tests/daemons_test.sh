@@ -20,7 +20,7 @@ trap cleanup EXIT
 fails=0
 fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
 T=$build/cli/transtick
-port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])' 2>/dev/null || echo $((20000 + RANDOM % 20000)); }
+source "$(dirname "${BASH_SOURCE[0]}")/free_port.sh"
 
 # A 24x20x16 float volume with a bright block in the middle.
 mkdir -p "$dir/data"

@@ -139,7 +139,7 @@ class EarlyStreamsTest : public testing::NodesTest {
     s->stream = worker_stub_->Rays(&s->ctx);
     v1::RayBatch first;
     first.set_frame_id(frame);
-    first.set_rays(rays);
+    PackRays(rays, first.mutable_packed());
     EXPECT_TRUE(s->stream->Write(first));
     return s;
   }
@@ -192,7 +192,7 @@ TEST_F(EarlyStreamsTest, RaysBeforeTheFrameWaitForItAndAreTaken) {
   more.set_frame_id(kFrame);
   std::string one;
   AppendRay(CentreRay(), &one);
-  more.set_rays(one);
+  PackRays(one, more.mutable_packed());
   ASSERT_TRUE(rays->stream->Write(more));
   ASSERT_TRUE(Eventually([&] { return worker_service_->RaysReceivedLeft(kFrame) == 3; }, Ms(5000)));
   rays->stream->WritesDone();

@@ -50,6 +50,7 @@ import json, sys
 p = json.loads(open(sys.argv[1]).read().splitlines()[0])
 lat = float(sys.argv[2])
 RAY = 106
+PACKED_MAX = 113
 bad = []
 def check(ok, what):
     if not ok:
@@ -61,11 +62,15 @@ link = p["links"][0] if p["links"] else {"rays": 0, "rays_received": -1, "wire_b
 check(link["rays"] > 0, "no ray crossed the link")
 check(link["rays"] == link["rays_received"], f"{link['rays']} rays sent, {link['rays_received']} received")
 check(link["rays"] == p["rays_forwarded"], "the one link does not carry every forwarded ray")
-# The workers' batch bytes: the records, plus a few bytes of protobuf
-# framing per batch (frame id, length) and each stream's first message.
-check(p["ray_bytes_sent"] >= RAY * p["rays_sent"], "fewer batch bytes than ray records")
-check(p["ray_bytes_sent"] <= RAY * p["rays_sent"] * 1.01 + 64 * p["frames"] * 2,
+# The workers' batch bytes: packed rays (docs/formats.md), each at least
+# its 2-byte mask and at most 113 bytes, plus a few bytes of protobuf
+# framing per batch (frame id, length) and each stream's first message;
+# and fewer than the rays' records, since neighbouring rays share fields.
+check(p["ray_bytes_sent"] >= 2 * p["rays_sent"], "fewer batch bytes than a mask per ray")
+check(p["ray_bytes_sent"] <= PACKED_MAX * p["rays_sent"] * 1.01 + 64 * p["frames"] * 2,
       f"batch bytes {p['ray_bytes_sent']} for {p['rays_sent']} rays")
+check(p["ray_bytes_sent"] < RAY * p["rays_sent"],
+      f"packed rays took {p['ray_bytes_sent']} bytes, no fewer than their records")
 # On the wire, HTTP/2 and gRPC add their headers, frames and pings: more
 # than the batches, and not by much.
 check(link["wire_bytes"] >= p["ray_bytes_sent"],

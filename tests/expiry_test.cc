@@ -124,7 +124,9 @@ TEST_F(ExpiryTest, ARunningFrameThatReceivesRaysIsKept) {
   ASSERT_TRUE(Run(7).ok());
   v1::RayBatch batch;
   batch.set_frame_id(7);
-  AppendRay(CentreRay(), batch.mutable_rays());
+  std::string records;
+  AppendRay(CentreRay(), &records);
+  PackRays(records, batch.mutable_packed());
 
   // A left neighbour that sends a ray every 100 ms, for 2.5 running limits.
   grpc::ClientContext ctx;

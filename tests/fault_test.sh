@@ -23,7 +23,7 @@ cleanup() {
 trap cleanup EXIT
 fails=0
 fail() { echo "FAIL: $*"; fails=$((fails + 1)); }
-port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])' 2>/dev/null || echo $((20000 + RANDOM % 20000)); }
+source "$(dirname "${BASH_SOURCE[0]}")/free_port.sh"
 
 "$2/deploy/make-certs.sh" "$dir/certs" 2>/dev/null || { echo "FAIL: make-certs"; exit 1; }
 tls() { echo --tls-ca "$dir/certs/ca.crt" --tls-cert "$dir/certs/$1.crt" --tls-key "$dir/certs/$1.key"; }

@@ -47,7 +47,7 @@ TEST_F(HostileRaysTest, DamagedRecordsAreDroppedCountedAndAbortTheFrame) {
   ASSERT_TRUE(stream->Write(first));
   v1::RayBatch batch;
   batch.set_frame_id(kFrame);
-  batch.set_rays(records);
+  PackRays(records, batch.mutable_packed());
   ASSERT_TRUE(stream->Write(batch));
 
   // The display hears of it from the worker at once, well before any
@@ -86,6 +86,57 @@ TEST_F(HostileRaysTest, DamagedRecordsAreDroppedCountedAndAbortTheFrame) {
   EXPECT_TRUE(Await(kNext, &rows).ok());
   EXPECT_EQ(rows, kSize);
   auto stats = End(kNext);
+  ASSERT_TRUE(stats.ok()) << stats.status();
+  EXPECT_EQ(stats->rays_rejected(), 0u);
+}
+
+// A batch whose packing is broken, or that carries the unpacked records of
+// a worker older than packing, is refused whole, by name; the frame is
+// aborted and the worker goes on.
+TEST_F(HostileRaysTest, BrokenRayBatchesAreRefusedWholeByName) {
+  std::string records;
+  AppendRay(CentreRay(), &records);
+  AppendRay(CentreRay(), &records);
+  std::string packed;
+  PackRays(records, &packed);
+  struct Case {
+    std::string packed, unpacked, why;
+    uint64_t rejected;
+  };
+  const Case cases[] = {
+      {packed.substr(0, packed.size() - 1), "", "record 1 is cut short", 2},
+      {packed + std::string("\x00\x80", 2), "", "record 2 has an unknown field", 3},
+      {"", records, "unpacked ray records (field 2)", 3},
+  };
+  uint64_t frame = 40;
+  for (const Case& c : cases) {
+    ++frame;
+    ASSERT_TRUE(Prepare(frame).ok());
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(10));
+    auto stream = worker_stub_->Rays(&ctx);
+    v1::RayBatch batch;
+    batch.set_frame_id(frame);
+    ASSERT_TRUE(stream->Write(batch));
+    batch.set_packed(c.packed);
+    batch.set_rays(c.unpacked);
+    ASSERT_TRUE(stream->Write(batch));
+    grpc::Status s = Await(frame);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::ABORTED) << s.error_message();
+    EXPECT_NE(s.error_message().find(c.why), std::string::npos) << s.error_message();
+    stream->WritesDone();
+    EXPECT_TRUE(Run(frame).ok());
+    auto stats = End(frame, /*cancel=*/true);
+    ASSERT_TRUE(stats.ok()) << stats.status();
+    EXPECT_EQ(stats->rays_rejected(), c.rejected) << c.why;
+    EXPECT_EQ(stats->received_left(), 0u) << c.why;  // nothing of it kept
+    stream->Finish();
+  }
+  // The worker goes on serving: a whole frame of its own completes.
+  ASSERT_TRUE(Prepare(++frame).ok());
+  ASSERT_TRUE(Run(frame).ok());
+  EXPECT_TRUE(Await(frame).ok());
+  auto stats = End(frame);
   ASSERT_TRUE(stats.ok()) << stats.status();
   EXPECT_EQ(stats->rays_rejected(), 0u);
 }

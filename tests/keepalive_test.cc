@@ -172,7 +172,9 @@ TEST_F(KeepaliveTest, AnIdleStreamIsNotCutOff) {
   ASSERT_TRUE(stream->Write(batch));
   std::this_thread::sleep_for(50 * kShort.time);
   EXPECT_EQ(channel->GetState(false), GRPC_CHANNEL_READY);
-  AppendRay(CentreRay(), batch.mutable_rays());
+  std::string records;
+  AppendRay(CentreRay(), &records);
+  PackRays(records, batch.mutable_packed());
   EXPECT_TRUE(stream->Write(batch));
   // Write returns once the batch is buffered: the worker must have read it
   // before the frame ends, or it is not counted.

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "gtest/gtest.h"
 #include "transtick/framebuffer.h"
 
@@ -125,6 +126,296 @@ TEST(RayCodecTest, RejectsBadBatches) {
   AppendRay(nan, &w2);
   EXPECT_NE(DecodeRays(w2, 10).status().message().find("non-finite"), std::string::npos);
   EXPECT_TRUE(DecodeRays("", 10).ok());
+}
+
+// ---------------------------------------------------------------- packed rays
+
+// Packed rays read byte by byte as docs/formats.md ("Packed rays") describes
+// them, independent of the codec: the 106-byte records rebuilt, or why the
+// batch is broken. Records are not checked here (the fixed decoder does it).
+struct ReferenceRays {
+  std::vector<std::string> records;
+  bool broken = false;
+};
+ReferenceRays ReferencePackedRays(std::string_view bytes) {
+  ReferenceRays out;
+  std::string record(kRayRecordBytes, '\0');
+  size_t at = 0;
+  auto varint32 = [&](uint32_t* v) {
+    uint64_t x = 0;
+    for (int shift = 0; at < bytes.size(); shift += 7) {
+      const uint64_t b = static_cast<uint8_t>(bytes[at++]);
+      if (shift >= 32 || (shift == 28 && (b & 0x7f) >> 4 != 0)) return false;
+      x |= (b & 0x7f) << shift;
+      if (b < 0x80) {
+        *v = static_cast<uint32_t>(x);
+        return true;
+      }
+    }
+    return false;
+  };
+  auto u32 = [&](size_t o) {
+    uint32_t v = 0;
+    for (int i = 0; i < 4; ++i) v |= uint32_t{static_cast<uint8_t>(record[o + i])} << (8 * i);
+    return v;
+  };
+  auto put32 = [&](size_t o, uint32_t v) {
+    for (int i = 0; i < 4; ++i) record[o + i] = static_cast<char>(v >> (8 * i));
+  };
+  auto unzigzag = [](uint32_t z) { return (z >> 1) ^ (0u - (z & 1)); };
+  // bit -> (offset, size); cell, pixel and sample are varints.
+  const int offset[15] = {0, 8, 16, 24, 32, 40, 48, 56, 64, 76, 80, 84, 88, 100, 104};
+  const int size[15] = {8, 8, 8, 8, 8, 8, 8, 8, 12, 4, 4, 4, 12, 4, 2};
+  while (at < bytes.size()) {
+    if (bytes.size() - at < 2) return {out.records, true};
+    const uint32_t mask = static_cast<uint8_t>(bytes[at]) | static_cast<uint8_t>(bytes[at + 1])
+                                                                << 8;
+    at += 2;
+    if (mask & 0x8000) return {out.records, true};
+    for (int bit = 0; bit < 15; ++bit) {
+      if (!(mask >> bit & 1)) continue;
+      uint32_t v;
+      if (bit == 8) {
+        for (int a = 0; a < 3; ++a) {
+          if (!varint32(&v)) return {out.records, true};
+          put32(64 + 4 * a, u32(64 + 4 * a) + unzigzag(v));
+        }
+      } else if (bit == 9) {
+        if (!varint32(&v)) return {out.records, true};
+        put32(76, u32(76) + unzigzag(v));
+      } else if (bit == 10) {
+        if (!varint32(&v)) return {out.records, true};
+        put32(80, v);
+      } else {
+        if (bytes.size() - at < static_cast<size_t>(size[bit])) return {out.records, true};
+        record.replace(offset[bit], size[bit], bytes.substr(at, size[bit]));
+        at += size[bit];
+      }
+    }
+    out.records.push_back(record);
+  }
+  return out;
+}
+
+// A valid record with random bits in every field that allows them.
+RayDescriptor RandomRay(std::mt19937_64& rng, uint32_t pixels) {
+  auto f64 = [&] {
+    for (;;) {
+      const double d = std::bit_cast<double>(rng());
+      if (std::isfinite(d)) return d;
+    }
+  };
+  auto f32 = [&] { return std::bit_cast<float>(static_cast<uint32_t>(rng())); };
+  RayDescriptor r;
+  for (int a = 0; a < 3; ++a) {
+    r.origin[a] = f64();
+    r.direction[a] = f64();
+    r.cell[a] = static_cast<int32_t>(rng());
+  }
+  if (r.direction.x == 0) r.direction.x = 1;
+  r.t = f64();
+  r.t_start = f64();
+  r.pixel = static_cast<uint32_t>(rng() % pixels);
+  r.sample = static_cast<uint32_t>(rng() >> (rng() % 64));
+  r.kind = static_cast<RayKind>(rng() & 1);
+  r.material = static_cast<uint8_t>(rng());
+  r.spawned = static_cast<uint16_t>(rng());
+  r.color = {f32(), f32(), f32()};
+  r.transmittance = f32();
+  r.band = static_cast<uint16_t>(rng());
+  return r;
+}
+
+// Batches as a worker's neighbours see them: rays that share some fields
+// with the ray before (the eye, the light, the plane) and change others, by
+// a little or at random.
+std::string RandomRayRecords(std::mt19937_64& rng, uint32_t pixels, int count) {
+  std::string records;
+  RayDescriptor r = RandomRay(rng, pixels);
+  for (int i = 0; i < count; ++i) {
+    const RayDescriptor fresh = RandomRay(rng, pixels);
+    const uint64_t change = rng();
+    for (int a = 0; a < 3; ++a) {
+      if (change >> a & 1) r.origin[a] = fresh.origin[a];
+      if (change >> (3 + a) & 1) r.direction[a] = fresh.direction[a];
+      if (change >> (6 + a) & 1) r.cell[a] += static_cast<int32_t>(rng() % 5) - 2;
+    }
+    if (change >> 9 & 1) r.cell = fresh.cell;
+    if (change >> 10 & 1) r.t = fresh.t;
+    if (change >> 11 & 1) r.t_start = fresh.t_start;
+    if (change >> 12 & 1) r.pixel = (r.pixel + 1 + rng() % 3) % pixels;
+    if (change >> 13 & 1) r.pixel = fresh.pixel;
+    if (change >> 14 & 1) r.sample = fresh.sample;
+    if (change >> 15 & 1) r.kind = fresh.kind;
+    if (change >> 16 & 1) r.material = fresh.material;
+    if (change >> 17 & 1) r.spawned = fresh.spawned;
+    if (change >> 18 & 1) r.color = fresh.color;
+    if (change >> 19 & 1) r.transmittance = fresh.transmittance;
+    if (change >> 20 & 1) r.band = fresh.band;
+    AppendRay(r, &records);
+  }
+  return records;
+}
+
+std::string Records(const std::vector<RayDescriptor>& rays) {
+  std::string out;
+  for (const RayDescriptor& r : rays) AppendRay(r, &out);
+  return out;
+}
+
+TEST(RayCodecTest, PackedRaysRebuildEveryRecordBitForBit) {
+  std::mt19937_64 rng(20261206);
+  size_t records = 0, packed_bytes = 0, batches_with_omissions = 0;
+  for (int batch = 0; batch < 3000; ++batch) {
+    const uint32_t pixels = 1 + static_cast<uint32_t>(rng() % 100000);
+    const int count = static_cast<int>(rng() % 40);
+    const std::string in = RandomRayRecords(rng, pixels, count);
+    std::string wire = "kept";  // packing appends
+    ASSERT_EQ(PackRays(in, &wire), static_cast<size_t>(count));
+    ASSERT_EQ(wire.substr(0, 4), "kept");
+    wire.erase(0, 4);
+    const DecodedRays got = DecodePackedRays(wire, pixels);
+    ASSERT_FALSE(got.broken) << got.error;
+    ASSERT_EQ(got.invalid, 0u) << got.error;
+    ASSERT_EQ(got.records, static_cast<size_t>(count));
+    ASSERT_EQ(Records(got.rays), in) << "batch " << batch;
+    // The reference reads the same records from the same bytes.
+    const ReferenceRays want = ReferencePackedRays(wire);
+    ASSERT_FALSE(want.broken);
+    ASSERT_EQ(want.records.size(), static_cast<size_t>(count));
+    for (int i = 0; i < count; ++i) {
+      ASSERT_EQ(want.records[i], in.substr(i * kRayRecordBytes, kRayRecordBytes));
+    }
+    records += count;
+    packed_bytes += wire.size();
+    batches_with_omissions += wire.size() < in.size();
+  }
+  // Shared fields were left out: well under the fixed records' size.
+  EXPECT_GT(records, 50000u);
+  EXPECT_LT(packed_bytes, records * kRayRecordBytes * 3 / 4);
+  EXPECT_GT(batches_with_omissions, 2500u);
+}
+
+TEST(RayCodecTest, PackedRaysKnownBytes) {
+  RayDescriptor a;  // zero but for its direction and pixel
+  a.origin = {0, 0, 0};
+  a.direction = {1, 0, 0};
+  a.t = 0;
+  a.pixel = 3;
+  a.kind = RayKind::kPrimary;
+  a.transmittance = 0;
+  a.band = 0;
+  RayDescriptor b = a;
+  b.pixel = 2;
+  b.cell = {0, 5, -1};
+  std::string wire;
+  ASSERT_EQ(PackRays(Records({a, b, b}), &wire), 3u);
+  const std::string want = std::string("\x08\x02", 2) +                       // direction x, pixel
+                           std::string("\0\0\0\0\0\0\xf0\x3f", 8) + "\x06" +  // 1.0; +3
+                           std::string("\x00\x03", 2) + std::string("\x00\x0a\x01", 3) +
+                           "\x01" +                 // cell +0 +5 -1, pixel -1
+                           std::string("\0\0", 2);  // the same record again
+  EXPECT_EQ(wire, want);
+  const DecodedRays got = DecodePackedRays(wire, 4);
+  ASSERT_TRUE(got.error.ok()) << got.error;
+  EXPECT_EQ(Records(got.rays), Records({a, b, b}));
+}
+
+TEST(RayCodecTest, BrokenPackedRayBatchesAreRefusedByName) {
+  RayDescriptor a = Sample(1);
+  std::string wire;
+  PackRays(Records({a, a}), &wire);  // a whole record, then a mask of 0
+  ASSERT_EQ(wire.substr(wire.size() - 2), std::string("\0\0", 2));
+  auto refused = [](std::string_view bytes, const std::string& why) {
+    const DecodedRays got = DecodePackedRays(bytes, 10);
+    EXPECT_TRUE(got.broken) << why;
+    EXPECT_TRUE(got.rays.empty());
+    EXPECT_NE(got.error.message().find(why), std::string::npos) << got.error;
+  };
+  refused(wire.substr(0, wire.size() - 1), "record 1 is cut short in its mask");
+  refused(wire.substr(0, 30), "record 0 is cut short or has a bad varint in field 3");
+  refused(wire + std::string("\x00\x80", 2), "record 2 has an unknown field (mask 32768)");
+  // Cell deltas whose varint runs past 32 bits, or past the end.
+  refused(std::string("\x00\x01\xff\xff\xff\xff\x7f\x00\x00", 9), "bad varint in field 8");
+  refused(std::string("\x00\x02\x80", 3), "record 0 is cut short or has a bad varint in field 9");
+  // A record that breaks the rules is dropped alone: the one after it is
+  // read against its bytes and kept.
+  std::string records = Records({a});
+  records[84] = 7;  // kind
+  RayDescriptor c = a;
+  c.pixel = 2;
+  records += Records({c});
+  std::string mixed;
+  PackRays(records, &mixed);
+  const DecodedRays got = DecodePackedRays(mixed, 10);
+  EXPECT_FALSE(got.broken);
+  EXPECT_EQ(got.records, 2u);
+  EXPECT_EQ(got.invalid, 1u);
+  EXPECT_NE(got.error.message().find("record 0 is invalid (kind 7"), std::string::npos)
+      << got.error;
+  ASSERT_EQ(got.rays.size(), 1u);
+  EXPECT_EQ(Records(got.rays), Records({c}));
+  EXPECT_TRUE(DecodePackedRays("", 10).error.ok());
+}
+
+// Hostile bytes: random batches cut, flipped and padded. The codec reads
+// what the reference reads, refuses what it refuses, and keeps only valid
+// records in the image.
+TEST(RayCodecTest, PackedRaysDecodeAsTheFormatReadsOnAnyBytes) {
+  std::mt19937_64 rng(7);
+  int broken = 0, whole = 0, with_invalid = 0;
+  for (int batch = 0; batch < 20000; ++batch) {
+    const uint32_t pixels = 1 + static_cast<uint32_t>(rng() % 5000);
+    std::string wire;
+    PackRays(RandomRayRecords(rng, pixels + pixels / 8 * static_cast<uint32_t>(rng() % 2),
+                              1 + static_cast<int>(rng() % 12)),
+             &wire);
+    switch (rng() % 4) {
+      case 0:
+        wire.resize(rng() % (wire.size() + 1));
+        break;
+      case 1:
+        for (int k = 0; k < 3; ++k)
+          wire[rng() % wire.size()] ^= static_cast<char>(1 << (rng() % 8));
+        break;
+      case 2:
+        wire.insert(rng() % (wire.size() + 1), 1, static_cast<char>(rng()));
+        break;
+      default:
+        break;
+    }
+    const ReferenceRays want = ReferencePackedRays(wire);
+    const DecodedRays got = DecodePackedRays(wire, pixels);
+    ASSERT_EQ(got.broken, want.broken) << batch << ": " << got.error;
+    if (got.broken) {
+      ASSERT_EQ(got.records, want.records.size()) << batch;
+      ASSERT_NE(got.error.message().find(absl::StrCat("record ", got.records, " ")),
+                std::string::npos)
+          << got.error;
+      ++broken;
+      continue;
+    }
+    ++whole;
+    ASSERT_EQ(got.records, want.records.size());
+    // The kept records are exactly the reference's records that the fixed
+    // decoder accepts.
+    std::string kept;
+    size_t invalid = 0;
+    for (const std::string& r : want.records) {
+      if (DecodeRays(r, pixels).ok()) {
+        kept += r;
+      } else {
+        ++invalid;
+      }
+    }
+    ASSERT_EQ(got.invalid, invalid) << batch;
+    ASSERT_EQ(Records(got.rays), kept) << batch;
+    for (const RayDescriptor& r : got.rays) ASSERT_LT(r.pixel, pixels);
+    with_invalid += invalid > 0;
+  }
+  EXPECT_GT(broken, 3000);
+  EXPECT_GT(whole, 8000);
+  EXPECT_GT(with_invalid, 1000);
 }
 
 // Two framebuffers hold the same sums, counts and completions.

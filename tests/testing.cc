@@ -93,6 +93,8 @@ Image RenderSlabs(const Scene& whole, const std::vector<int>& cuts, const Camera
     // Round-robin over slabs, a few rays each, so rays interleave as they
     // would on a ring.
     for (size_t i = 0; i < slabs.size(); ++i) {
+      // The rays slab i hands on in this turn, per neighbour, as queued records.
+      std::vector<std::string> outgoing(slabs.size());
       for (int n = 0; n < 7 && !queues[i].empty(); ++n) {
         busy = true;
         RayDescriptor ray = queues[i].front();
@@ -113,15 +115,22 @@ Image RenderSlabs(const Scene& whole, const std::vector<int>& cuts, const Camera
           EXPECT_LT(o, layout.slabs());
           EXPECT_NE(o, static_cast<int>(i));
           ++moved;
-          // Through the wire form, as between workers.
-          std::string wire;
-          AppendRay(ray, &wire);
-          auto decoded = DecodeRays(wire, camera.width() * camera.height());
-          EXPECT_TRUE(decoded.ok() && decoded->size() == 1);
+          AppendRay(ray, &outgoing[o]);
+        }
+      }
+      // Through the wire form, packed in a batch as between workers.
+      for (size_t o = 0; o < slabs.size(); ++o) {
+        if (outgoing[o].empty()) continue;
+        std::string wire;
+        const size_t count = PackRays(outgoing[o], &wire);
+        EXPECT_EQ(count, outgoing[o].size() / kRayRecordBytes);
+        const DecodedRays decoded = DecodePackedRays(wire, camera.width() * camera.height());
+        EXPECT_TRUE(!decoded.broken && decoded.invalid == 0 && decoded.rays.size() == count)
+            << decoded.error;
+        for (const RayDescriptor& r : decoded.rays) {
           // Every ray a tracer hands on is one its neighbour accepts.
-          EXPECT_TRUE(tracers[o].Validate(decoded->at(0)).ok())
-              << tracers[o].Validate(decoded->at(0));
-          queues[o].push_back(decoded->at(0));
+          EXPECT_TRUE(tracers[o].Validate(r).ok()) << tracers[o].Validate(r);
+          queues[o].push_back(r);
         }
       }
     }

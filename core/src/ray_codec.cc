@@ -4,9 +4,11 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "coding.h"
+#include "transtick/check.h"
 #include "transtick/framebuffer.h"
 
 namespace transtick {
@@ -70,38 +72,210 @@ void AppendDeposit(const Deposit& d, std::string* out) {
   out->append(b, p - b);
 }
 
+namespace {
+
+// Reads one whole record (kRayRecordBytes at `b`) into `r`; false, with why
+// in `*why`, when it breaks the rules of docs/formats.md, "Ray descriptor".
+bool ReadRayRecord(const char* b, uint32_t pixel_limit, RayDescriptor* r, std::string* why) {
+  Decoder in(std::string_view(b, kRayRecordBytes));
+  uint32_t cell[3];
+  uint8_t kind;
+  bool ok = true;
+  for (int a = 0; a < 3; ++a) ok = ok && GetF64(in, &r->origin[a]);
+  for (int a = 0; a < 3; ++a) ok = ok && GetF64(in, &r->direction[a]);
+  ok = ok && GetF64(in, &r->t) && GetF64(in, &r->t_start);
+  for (int a = 0; a < 3; ++a) ok = ok && in.GetFixed32(&cell[a]);
+  ok = ok && in.GetFixed32(&r->pixel) && in.GetFixed32(&r->sample) && in.GetByte(&kind) &&
+       in.GetByte(&r->material) && in.GetFixed16(&r->spawned);
+  for (int c = 0; c < 3; ++c) ok = ok && GetF32(in, &r->color[c]);
+  ok = ok && GetF32(in, &r->transmittance) && in.GetFixed16(&r->band);
+  TRANSTICK_CHECK(ok);  // a whole record
+  for (int a = 0; a < 3; ++a) r->cell[a] = static_cast<int32_t>(cell[a]);
+  bool finite = std::isfinite(r->t) && std::isfinite(r->t_start);
+  for (int a = 0; a < 3; ++a)
+    finite = finite && std::isfinite(r->origin[a]) && std::isfinite(r->direction[a]);
+  if (kind > 1 || !finite || r->pixel >= pixel_limit ||
+      (r->direction.x == 0 && r->direction.y == 0 && r->direction.z == 0)) {
+    *why = absl::StrCat("kind ", int{kind}, ", pixel ", r->pixel, " of ", pixel_limit,
+                        finite ? "" : ", non-finite geometry");
+    return false;
+  }
+  r->kind = static_cast<RayKind>(kind);
+  return true;
+}
+
+// The fields of a packed ray record (docs/formats.md, "Packed rays"): the
+// bytes of the fixed record each covers, and how it is written.
+enum class FieldCoding : uint8_t { kRaw, kCellDeltas, kPixelDelta, kVarint };
+struct PackedField {
+  uint8_t offset, size;
+  FieldCoding coding;
+};
+constexpr PackedField kPackedFields[] = {
+    {0, 8, FieldCoding::kRaw},          {8, 8, FieldCoding::kRaw},          // origin x, y
+    {16, 8, FieldCoding::kRaw},         {24, 8, FieldCoding::kRaw},         // origin z, direction x
+    {32, 8, FieldCoding::kRaw},         {40, 8, FieldCoding::kRaw},         // direction y, z
+    {48, 8, FieldCoding::kRaw},         {56, 8, FieldCoding::kRaw},         // t, t_start
+    {64, 12, FieldCoding::kCellDeltas}, {76, 4, FieldCoding::kPixelDelta},  // cell, pixel
+    {80, 4, FieldCoding::kVarint},                                          // sample
+    {84, 4, FieldCoding::kRaw},                                       // kind, material, spawned
+    {88, 12, FieldCoding::kRaw},        {100, 4, FieldCoding::kRaw},  // color, transmittance
+    {104, 2, FieldCoding::kRaw},                                      // band
+};
+constexpr int kPackedFieldCount = sizeof(kPackedFields) / sizeof(kPackedFields[0]);
+static_assert(kPackedFieldCount == 15 && kPackedFields[14].offset + 2 == kRayRecordBytes);
+// The mask, every raw field and the widest varints: a record's most bytes.
+constexpr size_t kMaxPackedRayBytes = 2 + kRayRecordBytes + 3 * 1 + 1 + 1;
+
+uint32_t LoadU32(const char* p) {
+  return uint32_t{static_cast<uint8_t>(p[0])} | uint32_t{static_cast<uint8_t>(p[1])} << 8 |
+         uint32_t{static_cast<uint8_t>(p[2])} << 16 | uint32_t{static_cast<uint8_t>(p[3])} << 24;
+}
+void StoreU32(char* p, uint32_t v) { EncodeFixed32(p, v); }
+
+}  // namespace
+
 absl::StatusOr<std::vector<RayDescriptor>> DecodeRays(std::string_view bytes,
                                                       uint32_t pixel_limit) {
   if (auto s = CheckSize(bytes, kRayRecordBytes, "ray"); !s.ok()) return s;
   std::vector<RayDescriptor> rays(bytes.size() / kRayRecordBytes);
-  Decoder in(bytes);
+  std::string why;
   for (size_t i = 0; i < rays.size(); ++i) {
-    RayDescriptor& r = rays[i];
-    uint32_t cell[3];
-    uint8_t kind;
-    bool ok = true;
-    for (int a = 0; a < 3; ++a) ok = ok && GetF64(in, &r.origin[a]);
-    for (int a = 0; a < 3; ++a) ok = ok && GetF64(in, &r.direction[a]);
-    ok = ok && GetF64(in, &r.t) && GetF64(in, &r.t_start);
-    for (int a = 0; a < 3; ++a) ok = ok && in.GetFixed32(&cell[a]);
-    ok = ok && in.GetFixed32(&r.pixel) && in.GetFixed32(&r.sample) && in.GetByte(&kind) &&
-         in.GetByte(&r.material) && in.GetFixed16(&r.spawned);
-    for (int c = 0; c < 3; ++c) ok = ok && GetF32(in, &r.color[c]);
-    ok = ok && GetF32(in, &r.transmittance) && in.GetFixed16(&r.band);
-    if (!ok) return absl::InternalError("ray batch: decoder ran short");  // sizes were checked
-    for (int a = 0; a < 3; ++a) r.cell[a] = static_cast<int32_t>(cell[a]);
-    bool finite = std::isfinite(r.t) && std::isfinite(r.t_start);
-    for (int a = 0; a < 3; ++a)
-      finite = finite && std::isfinite(r.origin[a]) && std::isfinite(r.direction[a]);
-    if (kind > 1 || !finite || r.pixel >= pixel_limit ||
-        (r.direction.x == 0 && r.direction.y == 0 && r.direction.z == 0)) {
+    if (!ReadRayRecord(bytes.data() + i * kRayRecordBytes, pixel_limit, &rays[i], &why)) {
       return absl::InvalidArgumentError(
-          absl::StrCat("ray batch: record ", i, " is invalid (kind ", int{kind}, ", pixel ",
-                       r.pixel, " of ", pixel_limit, finite ? "" : ", non-finite geometry", ")"));
+          absl::StrCat("ray batch: record ", i, " is invalid (", why, ")"));
     }
-    r.kind = static_cast<RayKind>(kind);
   }
   return rays;
+}
+
+namespace {
+
+// One field of a packed ray record, the field number a constant so that
+// each compare and copy is of a known size.
+template <size_t F>
+inline void PackField(const char* record, const char* previous, uint16_t* mask, char** out) {
+  constexpr PackedField field = kPackedFields[F];
+  const char* now = record + field.offset;
+  const char* was = previous + field.offset;
+  if (std::memcmp(now, was, field.size) == 0) return;
+  *mask |= static_cast<uint16_t>(1u << F);
+  char* p = *out;
+  if constexpr (field.coding == FieldCoding::kRaw) {
+    std::memcpy(p, now, field.size);
+    p += field.size;
+  } else if constexpr (field.coding == FieldCoding::kCellDeltas) {
+    for (int a = 0; a < 3; ++a) {
+      p = EncodeVarint64(
+          p, ZigZag32(static_cast<int32_t>(LoadU32(now + 4 * a) - LoadU32(was + 4 * a))));
+    }
+  } else if constexpr (field.coding == FieldCoding::kPixelDelta) {
+    p = EncodeVarint64(p, ZigZag32(static_cast<int32_t>(LoadU32(now) - LoadU32(was))));
+  } else {
+    p = EncodeVarint64(p, LoadU32(now));
+  }
+  *out = p;
+}
+template <size_t... F>
+inline char* PackFields(const char* record, const char* previous, uint16_t* mask, char* out,
+                        std::index_sequence<F...>) {
+  (PackField<F>(record, previous, mask, &out), ...);
+  return out;
+}
+
+// One field of a packed ray record read into `record` when the mask has
+// it; false when it is cut short or a varint is too long.
+template <size_t F>
+inline bool UnpackField(uint16_t mask, Decoder& in, char* record) {
+  if (!(mask >> F & 1)) return true;
+  constexpr PackedField field = kPackedFields[F];
+  char* at = record + field.offset;
+  uint32_t v;
+  if constexpr (field.coding == FieldCoding::kRaw) {
+    return in.GetBytes(at, field.size);
+  } else if constexpr (field.coding == FieldCoding::kCellDeltas) {
+    for (int a = 0; a < 3; ++a) {
+      if (!in.GetVarint32(&v)) return false;
+      StoreU32(at + 4 * a, LoadU32(at + 4 * a) + static_cast<uint32_t>(UnZigZag32(v)));
+    }
+    return true;
+  } else if constexpr (field.coding == FieldCoding::kPixelDelta) {
+    if (!in.GetVarint32(&v)) return false;
+    StoreU32(at, LoadU32(at) + static_cast<uint32_t>(UnZigZag32(v)));
+    return true;
+  } else {
+    if (!in.GetVarint32(&v)) return false;
+    StoreU32(at, v);
+    return true;
+  }
+}
+// Reads the fields the mask names; -1, or the number of the field that is
+// cut short or has a varint too long.
+template <size_t... F>
+inline int UnpackFields(uint16_t mask, Decoder& in, char* record, std::index_sequence<F...>) {
+  int failed = -1;
+  (void)((UnpackField<F>(mask, in, record) || (failed = static_cast<int>(F), false)) && ...);
+  return failed;
+}
+
+}  // namespace
+
+size_t PackRays(std::string_view records, std::string* out) {
+  static constexpr char kZero[kRayRecordBytes] = {};
+  const size_t count = records.size() / kRayRecordBytes;
+  // Written in place, then cut to what was written.
+  const size_t start = out->size();
+  out->resize(start + count * kMaxPackedRayBytes);
+  char* p = out->data() + start;
+  const char* previous = kZero;
+  for (size_t i = 0; i < count; ++i) {
+    const char* r = records.data() + i * kRayRecordBytes;
+    uint16_t mask = 0;
+    char* end =
+        PackFields(r, previous, &mask, p + 2, std::make_index_sequence<kPackedFieldCount>());
+    EncodeFixed16(p, mask);
+    p = end;
+    previous = r;
+  }
+  out->resize(static_cast<size_t>(p - out->data()));
+  return count;
+}
+
+DecodedRays DecodePackedRays(std::string_view bytes, uint32_t pixel_limit) {
+  DecodedRays result;
+  char record[kRayRecordBytes] = {};
+  Decoder in(bytes);
+  // Rays take about 50 bytes each (at most 2: a mask alone).
+  result.rays.reserve(bytes.size() / 48);
+  std::string why;
+  auto broken = [&](const std::string& what) {
+    result.rays.clear();
+    result.broken = true;
+    result.error = absl::InvalidArgumentError(
+        absl::StrCat("packed ray batch: record ", result.records, " ", what));
+    return result;
+  };
+  while (in.remaining() > 0) {
+    uint16_t mask;
+    if (!in.GetFixed16(&mask)) return broken("is cut short in its mask");
+    if (mask >> kPackedFieldCount) {
+      return broken(absl::StrCat("has an unknown field (mask ", mask, ")"));
+    }
+    const int failed =
+        UnpackFields(mask, in, record, std::make_index_sequence<kPackedFieldCount>());
+    if (failed >= 0) {
+      return broken(absl::StrCat("is cut short or has a bad varint in field ", failed));
+    }
+    RayDescriptor ray;
+    if (ReadRayRecord(record, pixel_limit, &ray, &why)) {
+      result.rays.push_back(ray);
+    } else if (result.invalid++ == 0) {
+      result.error = absl::InvalidArgumentError(
+          absl::StrCat("packed ray batch: record ", result.records, " is invalid (", why, ")"));
+    }
+    ++result.records;
+  }
+  return result;
 }
 
 // The widest pixel record: four varints of 32 bits and three of 64; a run
@@ -181,10 +355,7 @@ size_t PackDeposits(std::string_view records, std::string* out, uint64_t* deposi
     ++count;
   };
   // The record's little-endian fields (docs/formats.md, "Deposit").
-  auto u32 = [](const char* p) {
-    return uint32_t{static_cast<uint8_t>(p[0])} | uint32_t{static_cast<uint8_t>(p[1])} << 8 |
-           uint32_t{static_cast<uint8_t>(p[2])} << 16 | uint32_t{static_cast<uint8_t>(p[3])} << 24;
-  };
+  constexpr auto u32 = LoadU32;
   for (size_t at = 0; at + kDepositRecordBytes <= records.size(); at += kDepositRecordBytes) {
     const char* r = records.data() + at;
     const uint32_t pixel = u32(r);

@@ -29,7 +29,7 @@ struct FrameCosts {
   double tracer_cpu_ms = 0;      // the tracers' CPU for the whole image, summed
   double rays = 0;               // rays traced, all kinds
   double crossings_per_cut = 0;  // rays crossing one slab plane, both ways, whole image
-  double bytes_per_ray = 106;    // on the wire: the record and its framing
+  double bytes_per_ray = 52;     // on the wire: a packed ray and its share of the framing
   double forward_cpu_us = 0.25;  // CPU to send and to receive one ray, both ends summed
   double imbalance = 1.1;        // a ring's slowest worker's tracing over its mean
   double fixed_ms = 28;          // a frame's start, end and image at no latency

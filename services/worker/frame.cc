@@ -220,11 +220,21 @@ struct Frame::Link {
   Outbox outbox;
   std::atomic<uint64_t> rays_sent{0}, bytes_sent{0}, rays_received{0}, bytes_received{0};
 
-  // The write of one batch on this link's stream, for Outbox::Attach.
-  void Count(const v1::RayBatch& b) {
-    rays_sent += b.rays().size() / kRayRecordBytes;
-    bytes_sent += b.ByteSizeLong();
+  // The write of one batch on this link's stream, for Outbox::Attach: the
+  // outbox's records packed into `out` (docs/formats.md, "Packed rays"),
+  // their buffer kept until the write is done (Written).
+  void Pack(std::string records, v1::RayBatch* out) {
+    std::string* packed = out->mutable_packed();
+    packed->clear();
+    rays_sent += PackRays(records, packed);
+    bytes_sent += out->ByteSizeLong();
+    records_ = std::move(records);
   }
+  // The write is done: the records' buffer goes back to the outbox.
+  void Written(bool ok) { outbox.WriteDone(ok, std::move(records_)); }
+
+ private:
+  std::string records_;  // the batch being written (one at a time), as the outbox made it
 };
 
 // What the frame's client streams share: each keeps its frame, and itself,
@@ -289,8 +299,7 @@ class Frame::RightStream : public grpc::ClientBidiReactor<v1::RayBatch, v1::RayB
     Link& link = *frame_->right_;
     link.outbox.Attach(
         [this, &link](std::string batch) {
-          out_.set_rays(std::move(batch));
-          link.Count(out_);
+          link.Pack(std::move(batch), &out_);
           StartWrite(&out_);
         },
         [this] {
@@ -303,7 +312,7 @@ class Frame::RightStream : public grpc::ClientBidiReactor<v1::RayBatch, v1::RayB
 
   void OnWriteDone(bool ok) override {
     if (opened_) Opened(ok);  // the first write is the only one before opened_ is cleared
-    frame_->right_->outbox.WriteDone(ok, std::move(*out_.mutable_rays()));
+    frame_->right_->Written(ok);
   }
   void OnReadDone(bool ok) override {
     if (!ok) return;  // the neighbour closed its side
@@ -426,9 +435,7 @@ class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBa
     frame_->ReceiveBatch(in_, *frame_->left_);
     StartRead(&in_);
   }
-  void OnWriteDone(bool ok) override {
-    frame_->left_->outbox.WriteDone(ok, std::move(*out_.mutable_rays()));
-  }
+  void OnWriteDone(bool ok) override { frame_->left_->Written(ok); }
   // The parked first batch's frame came (or the wait ended without it).
   void Resumed(bool came) {
     if (!Bind(came ? find_(in_.frame_id()) : nullptr, /*waited=*/true)) return;
@@ -462,8 +469,7 @@ class Frame::LeftStream : public grpc::ServerBidiReactor<v1::RayBatch, v1::RayBa
     Link& link = *frame_->left_;
     link.outbox.Attach(
         [this, &link](std::string batch) {
-          out_.set_rays(std::move(batch));
-          link.Count(out_);
+          link.Pack(std::move(batch), &out_);
           StartWrite(&out_);
         },
         [this] { Release(); }, /*busy=*/false);
@@ -578,42 +584,36 @@ void Frame::ReceiveBatch(const v1::RayBatch& batch, Link& from) {
   }
   Touch(Clock::now());
   const char* side = &from == left_.get() ? "left" : "right";
-  auto rays = DecodeRays(batch.rays(), pixel_limit_);
-  size_t rejected = 0;
-  std::string first_error;
-  if (!rays.ok()) {
-    if (batch.rays().size() % kRayRecordBytes != 0) {
-      Reject(batch.rays().size() / kRayRecordBytes + 1, side, std::string(rays.status().message()));
-      return;
-    }
-    // Some record is damaged: the others are kept, record by record.
-    rays = std::vector<RayDescriptor>();
-    for (size_t at = 0; at < batch.rays().size(); at += kRayRecordBytes) {
-      auto one =
-          DecodeRays(std::string_view(batch.rays()).substr(at, kRayRecordBytes), pixel_limit_);
-      if (one.ok()) {
-        rays->push_back(one->front());
-      } else if (rejected++ == 0) {
-        first_error = absl::StrCat("record ", at / kRayRecordBytes, ": ", one.status().message());
-      }
-    }
+  if (!batch.rays().empty()) {
+    Reject(batch.rays().size() / kRayRecordBytes + 1, side,
+           "the batch has unpacked ray records (field 2): the neighbour is older than packed rays");
+    return;
   }
+  DecodedRays decoded = DecodePackedRays(batch.packed(), pixel_limit_);
+  if (decoded.broken) {
+    // Nothing of it is kept: what was read, and the broken record.
+    Reject(decoded.records + 1, side, std::string(decoded.error.message()));
+    return;
+  }
+  std::vector<RayDescriptor>& rays = decoded.rays;
+  size_t rejected = decoded.invalid;
+  std::string first_error(decoded.error.message());
   // Every ray must be one this frame's tracer could have made: a record
   // that is not (a neighbour's defect, or a hostile peer) is dropped here,
   // before a tracer sees it.
   size_t kept = 0;
-  for (size_t i = 0; i < rays->size(); ++i) {
-    if (absl::Status s = tracer_.Validate((*rays)[i]); !s.ok()) {
+  for (size_t i = 0; i < rays.size(); ++i) {
+    if (absl::Status s = tracer_.Validate(rays[i]); !s.ok()) {
       if (rejected++ == 0) first_error = absl::StrCat("record ", i, ": ", s.message());
       continue;
     }
-    (*rays)[kept++] = (*rays)[i];
+    rays[kept++] = rays[i];
   }
-  rays->resize(kept);
+  rays.resize(kept);
   if (rejected > 0) Reject(rejected, side, first_error);
-  from.rays_received += rays->size();
+  from.rays_received += rays.size();
   from.bytes_received += batch.ByteSizeLong();
-  inbox_.Push(*std::move(rays));
+  inbox_.Push(std::move(rays));
 }
 
 void Frame::Reject(uint64_t count, const char* side, const std::string& why) {

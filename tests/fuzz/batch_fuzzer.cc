@@ -10,7 +10,9 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "batch_setup.h"
@@ -40,26 +42,32 @@ void PrintTally() {
                static_cast<unsigned long long>(tally.deposits));
 }
 
-// As Frame::ReceiveBatch: the batch whole, else record by record, keeping
-// the records that decode. The two must agree.
+// As Frame::ReceiveBatch: a broken batch keeps nothing; otherwise the
+// records that decode are kept and the others counted. What is kept must
+// pack again into the same records, in no more bytes than the input (the
+// packer writes only what changed, in the shortest varints).
 std::vector<RayDescriptor> DecodeAsWorker(std::string_view bytes, uint32_t pixel_limit) {
-  auto whole = DecodeRays(bytes, pixel_limit);
-  if (bytes.size() % kRayRecordBytes != 0) {
-    TRANSTICK_CHECK(!whole.ok());
+  DecodedRays decoded = DecodePackedRays(bytes, pixel_limit);
+  if (decoded.broken) {
+    TRANSTICK_CHECK(decoded.rays.empty());
+    TRANSTICK_CHECK(!decoded.error.ok() && !decoded.error.message().empty());
     return {};
   }
-  std::vector<RayDescriptor> kept;
-  for (size_t at = 0; at < bytes.size(); at += kRayRecordBytes) {
-    auto one = DecodeRays(bytes.substr(at, kRayRecordBytes), pixel_limit);
-    if (one.ok()) {
-      TRANSTICK_CHECK_EQ(one->size(), size_t{1});
-      kept.push_back(one->front());
-    } else {
-      TRANSTICK_CHECK(!one.status().message().empty());
-    }
+  TRANSTICK_CHECK_EQ(decoded.rays.size() + decoded.invalid, decoded.records);
+  TRANSTICK_CHECK_EQ(decoded.invalid == 0, decoded.error.ok());
+  TRANSTICK_CHECK_LE(decoded.records * 2, bytes.size());  // a mask at least
+  if (decoded.invalid == 0) {
+    std::string records, packed;
+    for (const RayDescriptor& r : decoded.rays) AppendRay(r, &records);
+    TRANSTICK_CHECK_EQ(PackRays(records, &packed), decoded.records);
+    TRANSTICK_CHECK_LE(packed.size(), bytes.size());
+    DecodedRays again = DecodePackedRays(packed, pixel_limit);
+    TRANSTICK_CHECK(!again.broken && again.invalid == 0);
+    std::string records_again;
+    for (const RayDescriptor& r : again.rays) AppendRay(r, &records_again);
+    TRANSTICK_CHECK(records_again == records);
   }
-  TRANSTICK_CHECK_EQ(whole.ok(), kept.size() == bytes.size() / kRayRecordBytes);
-  return kept;
+  return std::move(decoded.rays);
 }
 
 void Rays(uint8_t header, std::string_view bytes) {

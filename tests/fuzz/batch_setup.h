@@ -3,8 +3,8 @@
 // camera, settings and a ring of slabs.
 //
 // An input of the batch fuzzer is one header byte and a batch:
-//   bit 0      0: the rest is a ray batch (104-byte records) that arrives at
-//                 a worker from a neighbour;
+//   bit 0      0: the rest is a ray batch (packed rays, docs/formats.md)
+//                 that arrives at a worker from a neighbour;
 //              1: the rest is two bytes, the image's width - 1 and height - 1
 //                 (each taken mod 64), then a deposit batch (packed pixel records)
 //                 that arrives at the display.

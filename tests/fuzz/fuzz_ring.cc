@@ -20,12 +20,13 @@ namespace {
 
 // Through the wire form, as a ray goes to a neighbour.
 RayDescriptor OverWire(const RayDescriptor& ray, uint32_t pixel_limit) {
-  std::string wire;
-  AppendRay(ray, &wire);
-  auto decoded = DecodeRays(wire, pixel_limit);
-  if (!decoded.ok()) Fail("a ray handed on does not decode", decoded.status());
-  TRANSTICK_CHECK_EQ(decoded->size(), size_t{1});
-  return decoded->front();
+  std::string record, wire;
+  AppendRay(ray, &record);
+  PackRays(record, &wire);
+  DecodedRays decoded = DecodePackedRays(wire, pixel_limit);
+  if (!decoded.error.ok()) Fail("a ray handed on does not decode", decoded.error);
+  TRANSTICK_CHECK_EQ(decoded.rays.size(), size_t{1});
+  return decoded.rays.front();
 }
 
 // Through the wire form, as a deposit goes to the display: queued as a

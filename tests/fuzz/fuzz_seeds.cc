@@ -171,8 +171,9 @@ bool WriteVolumes(const fs::path& dir) {
 }
 
 std::string Batch(uint8_t header, const std::vector<RayDescriptor>& rays) {
-  std::string out(1, static_cast<char>(header));
-  for (const RayDescriptor& r : rays) AppendRay(r, &out);
+  std::string out(1, static_cast<char>(header)), records;
+  for (const RayDescriptor& r : rays) AppendRay(r, &records);
+  PackRays(records, &out);  // as a worker sends them
   return out;
 }
 

@@ -39,6 +39,25 @@ inline constexpr uint32_t kMaxRunRecordPixels = 65535;
 // stay on their node: the display receives them packed, below.)
 absl::StatusOr<std::vector<RayDescriptor>> DecodeRays(std::string_view bytes, uint32_t pixel_limit);
 
+// Packs queued ray records (AppendRay's) for a neighbour: each record as the
+// fields that differ from the record before it (docs/formats.md, "Packed
+// rays"), appended to `out`. Returns the number of records.
+// REQUIRES: `records` is whole records.
+size_t PackRays(std::string_view records, std::string* out);
+// A batch of packed rays, decoded.
+struct DecodedRays {
+  std::vector<RayDescriptor> rays;  // the valid records, in order
+  size_t records = 0;               // records read, valid or not
+  size_t invalid = 0;               // records that break the rules, dropped
+  // The batch's structure is broken (a record cut short, an unknown field,
+  // a varint too long): nothing of it is kept, and `records` is the number
+  // read before the broken one.
+  bool broken = false;
+  absl::Status error;  // the broken record, or the first invalid one, by number
+};
+// Rebuilds each record bit for bit and checks it as DecodeRays does.
+DecodedRays DecodePackedRays(std::string_view bytes, uint32_t pixel_limit);
+
 // Packs a batch of deposit records (AppendDeposit's and AppendMissRun's)
 // for the display: consecutive deposits of one pixel merged into one pixel
 // record, colours summed in the framebuffer's fixed point, and miss runs
