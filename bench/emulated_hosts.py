@@ -20,7 +20,6 @@ import json
 import statistics
 import sys
 
-RAY_BYTES = 106  # a ray record (docs/formats.md, "Ray descriptor")
 HEADER = (f"{'W':>2} {'R':>2} {'lat_ms':>6} {'Gbit':>5} {'frame_ms':>9} {'fps':>6} {'idle%':>5} "
           f"{'rays/link/frame':>22} {'wire KB/link/frm':>18} {'hops':>6} {'assem_ms':>9} "
           f"{'tail_ms':>7}")

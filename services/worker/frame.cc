@@ -585,7 +585,7 @@ void Frame::ReceiveBatch(const v1::RayBatch& batch, Link& from) {
   Touch(Clock::now());
   const char* side = &from == left_.get() ? "left" : "right";
   if (!batch.rays().empty()) {
-    Reject(batch.rays().size() / kRayRecordBytes + 1, side,
+    Reject((batch.rays().size() + kRayRecordBytes - 1) / kRayRecordBytes, side,
            "the batch has unpacked ray records (field 2): the neighbour is older than packed rays");
     return;
   }
