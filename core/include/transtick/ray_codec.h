@@ -1,7 +1,9 @@
 // The wire form of ray descriptors and deposits: fixed-size little-endian
-// records, every field bit for bit (docs/formats.md, "Ray descriptor"), so a
-// ray resumed on another node continues exactly as it would have here; and
-// deposits packed per pixel for the display.
+// records, every field bit for bit (docs/formats.md, "Ray descriptor"), which
+// a node queues and packs for its neighbour as the fields that differ from
+// the record before, so that a ray resumed on another node continues
+// exactly as it would have here; and deposits packed per pixel for the
+// display.
 #ifndef TRANSTICK_RAY_CODEC_H_
 #define TRANSTICK_RAY_CODEC_H_
 
@@ -35,8 +37,9 @@ inline constexpr uint32_t kMaxRunRecordPixels = 65535;
 
 // Decodes a batch of ray records. Fails when the size is not a whole number
 // of records or a record is invalid (unknown kind, non-finite geometry,
-// pixel at or beyond `pixel_limit`), naming the record. (Deposit records
-// stay on their node: the display receives them packed, below.)
+// pixel at or beyond `pixel_limit`), naming the record. (Ray and deposit
+// records stay on their node: neighbours and the display receive them
+// packed, below.)
 absl::StatusOr<std::vector<RayDescriptor>> DecodeRays(std::string_view bytes, uint32_t pixel_limit);
 
 // Packs queued ray records (AppendRay's) for a neighbour: each record as the
