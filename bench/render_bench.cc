@@ -42,6 +42,7 @@
 #include "bench_util.h"
 #include "convert.h"
 #include "transtick/camera.h"
+#include "transtick/parallel.h"
 #include "transtick/render.h"
 #include "transtick/scene.h"
 #include "transtick/volume_io.h"
@@ -219,6 +220,23 @@ int Run(const Options& o) {
     return 1;
   }
   const double build_ms = MsSince(t_build);
+  // The build again on one thread and on every core, alternated (the
+  // first build above warmed the caches): the least time of each, and
+  // whether both give the same scene.
+  std::vector<double> build_ms_by[2];
+  bool same_scene = true;
+  if (!dvr) {
+    for (int round = 0; round < 3; ++round) {
+      for (int all_cores = 0; all_cores < 2; ++all_cores) {
+        SetBuildThreads(all_cores ? 0 : 1);
+        const auto t = std::chrono::steady_clock::now();
+        auto again = Scene::ForSurfaces(*volume, *materials);
+        build_ms_by[all_cores].push_back(MsSince(t));
+        same_scene = same_scene && again.ok() && scene->SameParts(*again);
+      }
+    }
+    SetBuildThreads(0);
+  }
 
   const Sticks& sticks = scene->sticks();
   uint64_t encoded = 0;
@@ -240,6 +258,13 @@ int Run(const Options& o) {
   std::printf("load       %.1f ms\n", load_ms);
   std::printf("scene      built in %.1f ms (%s: labels, sticks, occupancy, scalars)\n", build_ms,
               dvr ? "dvr" : "surfaces");
+  if (!dvr) {
+    const double one = *std::min_element(build_ms_by[0].begin(), build_ms_by[0].end());
+    const double all = *std::min_element(build_ms_by[1].begin(), build_ms_by[1].end());
+    std::printf("build      %.1f ms on 1 thread, %.1f ms on %d (%.2fx; least of 3, alternated)%s\n",
+                one, all, BuildThreads(), one / all,
+                same_scene ? "; the same scene" : "; THE SCENES DIFFER");
+  }
   std::printf(
       "sticks     %zu sticks; encoded %.3f MB = %.2f%% of raw %.3f MB; "
       "in memory %.3f MB = %.2f%% of raw\n",

@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "absl/strings/str_cat.h"
+#include "transtick/parallel.h"
 
 namespace transtick {
 
@@ -24,22 +25,27 @@ BrickMap BrickMap::Build(std::span<const uint8_t> labels, std::array<int, 3> dim
   // without uniform materials every voxel that is not void does. A cell with
   // no voxel inside the volume stays void.
   std::vector<uint8_t> seen(b.cells_.size(), 0);
-  size_t i = 0;
-  for (int z = 0; z < dims[2]; ++z) {
-    for (int y = 0; y < dims[1]; ++y) {
-      const size_t row = b.CellIndex(0, y, z);
-      for (int x = 0; x < dims[0]; ++x, ++i) {
-        const size_t k = row + (x >> 1);
-        const uint8_t m = uniform_materials || labels[i] == 0 ? labels[i] : kMixed;
-        if (!seen[k]) {
-          seen[k] = 1;
-          b.cells_[k] = m;
-        } else if (b.cells_[k] != m) {
-          b.cells_[k] = kMixed;
+  // Pairs of planes, which share their cells, on as many threads.
+  const size_t plane = static_cast<size_t>(dims[0]) * dims[1];
+  ParallelFor((dims[2] + 1) / 2, 2, [&](size_t pair_begin, size_t pair_end) {
+    size_t i = 2 * pair_begin * plane;
+    const int z_end = std::min(dims[2], static_cast<int>(2 * pair_end));
+    for (int z = static_cast<int>(2 * pair_begin); z < z_end; ++z) {
+      for (int y = 0; y < dims[1]; ++y) {
+        const size_t row = b.CellIndex(0, y, z);
+        for (int x = 0; x < dims[0]; ++x, ++i) {
+          const size_t k = row + (x >> 1);
+          const uint8_t m = uniform_materials || labels[i] == 0 ? labels[i] : kMixed;
+          if (!seen[k]) {
+            seen[k] = 1;
+            b.cells_[k] = m;
+          } else if (b.cells_[k] != m) {
+            b.cells_[k] = kMixed;
+          }
         }
       }
     }
-  }
+  });
   // A brick has the material its cells with voxels share, else it is mixed.
   std::vector<uint8_t> brick_seen(b.bricks_.size(), 0);
   b.ForEachBrickCell([&](size_t brick, size_t cell) {
@@ -115,63 +121,68 @@ void BrickMap::ComputeReach(int y_begin, int y_end) {
         if (x <= cinside_[0] && y <= cinside_[1] && z <= cinside_[2]) m[index(x, y, z)] = cells_[k];
       }
   reach_.assign(8 * reach_cells_, 0);
-  // 16 bits like the materials, so that the loops over rows vectorise.
-  std::vector<uint16_t> r(n);
-  std::vector<uint16_t> rows(nx);  // the bound from the neighbours off the row
-  for (int octant = 0; octant < 8; ++octant) {
-    const int sx = octant & 1 ? -1 : 1, sy = octant & 2 ? -1 : 1, sz = octant & 4 ? -1 : 1;
-    std::fill(r.begin(), r.end(), static_cast<uint16_t>(kMaxReach));
-    // Toward the octant's far corner first: each cell after its neighbours.
-    // Rows (padded, as y below) behind the kept ones toward the octant are
-    // not needed.
-    const int first_row = row_begin_ + 1, last_row = row_begin_ + rows_;
-    for (int zi = 1; zi + 1 < nz; ++zi) {
-      const int z = sz > 0 ? nz - 1 - zi : zi;
-      for (int yi = 1; yi + 1 < ny; ++yi) {
-        const int y = sy > 0 ? ny - 1 - yi : yi;
-        if (sy > 0 ? y < first_row : y > last_row) break;
-        const size_t row = index(0, y, z);
-        // The six neighbours in the rows ahead along y and z, at x and at
-        // x + sx: simple loops over rows, which the compiler vectorises.
-        const uint16_t* __restrict mrow = &m[row];
-        uint16_t* __restrict bounds = rows.data();
-        for (int x = 1; x + 1 < nx; ++x) bounds[x] = mrow[x] == kMixed ? 0 : kMaxReach;
-        const size_t ahead[3] = {index(0, y + sy, z), index(0, y, z + sz), index(0, y + sy, z + sz)};
-        for (size_t a : ahead) {
-          for (int dx : {0, sx}) {
-            // Offsets from the row's start, never before the array's.
-            const uint16_t* __restrict mq = m.data() + a;
-            const uint16_t* __restrict rq = r.data() + a;
-            for (int x = 1; x + 1 < nx; ++x) {
-              // rq + 1 for a neighbour of the same material, kMaxReach for
-              // one past the faces, else 0, without branches (a cell past
-              // the faces itself gets a meaningless bound, never used).
-              const uint16_t same = static_cast<uint16_t>(-(mq[x + dx] == mrow[x]));
-              const uint16_t any = static_cast<uint16_t>(-(mq[x + dx] == kAny));
-              const uint16_t bound =
-                  static_cast<uint16_t>(((rq[x + dx] + 1) & same) | (kMaxReach & any));
-              bounds[x] = bounds[x] < bound ? bounds[x] : bound;
+  // The octants on as many threads (each writes its own eighth of reach_).
+  ParallelFor(8, 1, [&](size_t octant_begin, size_t octant_end) {
+    // 16 bits like the materials, so that the loops over rows vectorise.
+    std::vector<uint16_t> r(n);
+    std::vector<uint16_t> rows(nx);  // the bound from the neighbours off the row
+    for (int octant = static_cast<int>(octant_begin); octant < static_cast<int>(octant_end);
+         ++octant) {
+      const int sx = octant & 1 ? -1 : 1, sy = octant & 2 ? -1 : 1, sz = octant & 4 ? -1 : 1;
+      std::fill(r.begin(), r.end(), static_cast<uint16_t>(kMaxReach));
+      // Toward the octant's far corner first: each cell after its neighbours.
+      // Rows (padded, as y below) behind the kept ones toward the octant are
+      // not needed.
+      const int first_row = row_begin_ + 1, last_row = row_begin_ + rows_;
+      for (int zi = 1; zi + 1 < nz; ++zi) {
+        const int z = sz > 0 ? nz - 1 - zi : zi;
+        for (int yi = 1; yi + 1 < ny; ++yi) {
+          const int y = sy > 0 ? ny - 1 - yi : yi;
+          if (sy > 0 ? y < first_row : y > last_row) break;
+          const size_t row = index(0, y, z);
+          // The six neighbours in the rows ahead along y and z, at x and at
+          // x + sx: simple loops over rows, which the compiler vectorises.
+          const uint16_t* __restrict mrow = &m[row];
+          uint16_t* __restrict bounds = rows.data();
+          for (int x = 1; x + 1 < nx; ++x) bounds[x] = mrow[x] == kMixed ? 0 : kMaxReach;
+          const size_t ahead[3] = {index(0, y + sy, z), index(0, y, z + sz),
+                                   index(0, y + sy, z + sz)};
+          for (size_t a : ahead) {
+            for (int dx : {0, sx}) {
+              // Offsets from the row's start, never before the array's.
+              const uint16_t* __restrict mq = m.data() + a;
+              const uint16_t* __restrict rq = r.data() + a;
+              for (int x = 1; x + 1 < nx; ++x) {
+                // rq + 1 for a neighbour of the same material, kMaxReach for
+                // one past the faces, else 0, without branches (a cell past
+                // the faces itself gets a meaningless bound, never used).
+                const uint16_t same = static_cast<uint16_t>(-(mq[x + dx] == mrow[x]));
+                const uint16_t any = static_cast<uint16_t>(-(mq[x + dx] == kAny));
+                const uint16_t bound =
+                    static_cast<uint16_t>(((rq[x + dx] + 1) & same) | (kMaxReach & any));
+                bounds[x] = bounds[x] < bound ? bounds[x] : bound;
+              }
             }
           }
-        }
-        // The neighbour along the row, in order from the far end.
-        for (int xi = 1; xi + 1 < nx; ++xi) {
-          const int x = sx > 0 ? nx - 1 - xi : xi;
-          const size_t here = row + x, q = here + sx;
-          const uint16_t mine = m[here];
-          if (mine == kAny) continue;
-          const int bound = m[q] == kAny ? kMaxReach : (m[q] == mine ? r[q] + 1 : 0);
-          r[here] = static_cast<uint16_t>(std::min<int>(rows[x], bound));
+          // The neighbour along the row, in order from the far end.
+          for (int xi = 1; xi + 1 < nx; ++xi) {
+            const int x = sx > 0 ? nx - 1 - xi : xi;
+            const size_t here = row + x, q = here + sx;
+            const uint16_t mine = m[here];
+            if (mine == kAny) continue;
+            const int bound = m[q] == kAny ? kMaxReach : (m[q] == mine ? r[q] + 1 : 0);
+            r[here] = static_cast<uint16_t>(std::min<int>(rows[x], bound));
+          }
         }
       }
+      uint8_t* out = reach_.data() + octant * reach_cells_;
+      size_t at = 0;
+      for (int z = 1; z + 1 < nz; ++z)
+        for (int y = first_row; y <= last_row; ++y)
+          for (int x = 1; x + 1 < nx; ++x, ++at)
+            out[at] = m[index(x, y, z)] == kAny ? 0 : static_cast<uint8_t>(r[index(x, y, z)]);
     }
-    uint8_t* out = reach_.data() + octant * reach_cells_;
-    k = 0;
-    for (int z = 1; z + 1 < nz; ++z)
-      for (int y = first_row; y <= last_row; ++y)
-        for (int x = 1; x + 1 < nx; ++x, ++k)
-          out[k] = m[index(x, y, z)] == kAny ? 0 : static_cast<uint8_t>(r[index(x, y, z)]);
-  }
+  });
 }
 
 absl::StatusOr<BrickMap> BrickMap::FromBytes(std::array<int, 3> dims, std::vector<uint8_t> bytes,

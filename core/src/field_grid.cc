@@ -4,6 +4,7 @@
 
 #include "transtick/brick_map.h"
 #include "transtick/check.h"
+#include "transtick/parallel.h"
 
 namespace transtick {
 
@@ -34,53 +35,61 @@ FieldGrid FieldGrid::Build(const std::vector<float>& scalars, std::array<int, 3>
     return scalars.data() + z * plane + (y - scalar_y_begin) * row;
   };
   // Per row of cells: the least and greatest of the four voxel rows its
-  // corners read, then of each pair along x (clamped at the faces).
-  std::vector<float> lo(nx), hi(nx);
-  std::vector<uint8_t> nan(nx);
-  uint8_t* out = labels.data();
-  for (int cz = 0; cz <= nz; ++cz) {
-    for (int cy = row_begin; cy < row_end; ++cy) {
-      const float* r[4] = {voxel_row(cy - 1, cz - 1), voxel_row(cy, cz - 1),
-                           voxel_row(cy - 1, cz), voxel_row(cy, cz)};
-      for (int x = 0; x < nx; ++x) {
-        const float a = r[0][x], b = r[1][x], c = r[2][x], d = r[3][x];
-        lo[x] = std::min(std::min(a, b), std::min(c, d));
-        hi[x] = std::max(std::max(a, b), std::max(c, d));
-        // A NaN corner makes the cell mixed: its cubic finds no root there,
-        // as it would without the label.
-        nan[x] = (a != a) | (b != b) | (c != c) | (d != d);
-      }
-      for (int cx = 0; cx <= nx; ++cx) {
-        const int x0 = std::max(cx - 1, 0), x1 = std::min(cx, nx - 1);
-        const float l = std::min(lo[x0], lo[x1]), h = std::max(hi[x0], hi[x1]);
-        const int bl = band(l), bh = band(h);
-        *out++ = nan[x0] | nan[x1] || bl != bh || bl >= kMixed ? kMixed : static_cast<uint8_t>(bl);
+  // corners read, then of each pair along x (clamped at the faces). Planes
+  // of cells on as many threads.
+  const size_t plane_cells = static_cast<size_t>(g.cells_[0]) * g.cells_[1];
+  ParallelFor(nz + 1, 4, [&](size_t z_begin, size_t z_end) {
+    std::vector<float> lo(nx), hi(nx);
+    std::vector<uint8_t> nan(nx);
+    uint8_t* out = labels.data() + z_begin * plane_cells;
+    for (int cz = static_cast<int>(z_begin); cz < static_cast<int>(z_end); ++cz) {
+      for (int cy = row_begin; cy < row_end; ++cy) {
+        const float* r[4] = {voxel_row(cy - 1, cz - 1), voxel_row(cy, cz - 1),
+                             voxel_row(cy - 1, cz), voxel_row(cy, cz)};
+        for (int x = 0; x < nx; ++x) {
+          const float a = r[0][x], b = r[1][x], c = r[2][x], d = r[3][x];
+          lo[x] = std::min(std::min(a, b), std::min(c, d));
+          hi[x] = std::max(std::max(a, b), std::max(c, d));
+          // A NaN corner makes the cell mixed: its cubic finds no root there,
+          // as it would without the label.
+          nan[x] = (a != a) | (b != b) | (c != c) | (d != d);
+        }
+        for (int cx = 0; cx <= nx; ++cx) {
+          const int x0 = std::max(cx - 1, 0), x1 = std::min(cx, nx - 1);
+          const float l = std::min(lo[x0], lo[x1]), h = std::max(hi[x0], hi[x1]);
+          const int bl = band(l), bh = band(h);
+          *out++ =
+              nan[x0] | nan[x1] || bl != bh || bl >= kMixed ? kMixed : static_cast<uint8_t>(bl);
+        }
       }
     }
-  }
+  });
   // The groups and their reach, as a brick map over the labels finds them.
   const BrickMap map = BrickMap::Build(labels, g.cells_, /*uniform_materials=*/true);
   for (int a = 0; a < 3; ++a) g.group_dims_[a] = (g.cells_[a] + 1) / 2;
   g.groups_.resize(static_cast<size_t>(g.group_dims_[0]) * g.group_dims_[1] * g.group_dims_[2]);
   const auto& n = g.cells_;
-  size_t k = 0;
-  for (int z = 0; z < g.group_dims_[2]; ++z) {
-    for (int y = 0; y < g.group_dims_[1]; ++y) {
-      for (int x = 0; x < g.group_dims_[0]; ++x, ++k) {
-        Group& group = g.groups_[k];
-        for (int s = 0; s < 8; ++s) {
-          // Past the faces: the cell inside nearest to it.
-          const int cx = std::min(2 * x + (s & 1), n[0] - 1);
-          const int cy = std::min(2 * y + (s >> 1 & 1), n[1] - 1);
-          const int cz = std::min(2 * z + (s >> 2), n[2] - 1);
-          group.label[s] = labels[(static_cast<size_t>(cz) * n[1] + cy) * n[0] + cx];
-        }
-        for (int octant = 0; octant < 8; ++octant) {
-          group.reach[octant] = static_cast<uint8_t>(map.Reach(2 * x, 2 * y, 2 * z, octant));
+  const size_t plane_groups = static_cast<size_t>(g.group_dims_[0]) * g.group_dims_[1];
+  ParallelFor(g.group_dims_[2], 2, [&](size_t z_begin, size_t z_end) {
+    size_t k = z_begin * plane_groups;
+    for (int z = static_cast<int>(z_begin); z < static_cast<int>(z_end); ++z) {
+      for (int y = 0; y < g.group_dims_[1]; ++y) {
+        for (int x = 0; x < g.group_dims_[0]; ++x, ++k) {
+          Group& group = g.groups_[k];
+          for (int s = 0; s < 8; ++s) {
+            // Past the faces: the cell inside nearest to it.
+            const int cx = std::min(2 * x + (s & 1), n[0] - 1);
+            const int cy = std::min(2 * y + (s >> 1 & 1), n[1] - 1);
+            const int cz = std::min(2 * z + (s >> 2), n[2] - 1);
+            group.label[s] = labels[(static_cast<size_t>(cz) * n[1] + cy) * n[0] + cx];
+          }
+          for (int octant = 0; octant < 8; ++octant) {
+            group.reach[octant] = static_cast<uint8_t>(map.Reach(2 * x, 2 * y, 2 * z, octant));
+          }
         }
       }
     }
-  }
+  });
   return g;
 }
 

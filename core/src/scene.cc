@@ -2,10 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #include "absl/strings/str_cat.h"
 #include "transtick/check.h"
+#include "transtick/parallel.h"
 
 namespace transtick {
 namespace {
@@ -180,7 +182,9 @@ absl::StatusOr<Scene> Scene::ForSurfaces(const Volume& volume,
   // The paper's sticks, for either surface model: smooth surfaces walk the
   // field's cells instead (field(), built below), but slabs are cut, sent
   // and moved as sticks and scalars alike.
-  for (size_t i = 0; i < labels.size(); ++i) labels[i] = classification.Classify(volume.values[i]);
+  ParallelFor(labels.size(), size_t{1} << 16, [&](size_t begin, size_t end) {
+    for (size_t i = begin; i < end; ++i) labels[i] = classification.Classify(volume.values[i]);
+  });
   Scene scene;
   scene.mode_ = RenderMode::kSurfaces;
   scene.dims_ = volume.dims;
@@ -347,6 +351,19 @@ void Scene::BuildField() {
   // every point of the slab's planes.
   field_ = FieldGrid::Build(scalars_, dims_, scalar_y_begin_, scalar_planes_, y_begin(),
                             y_end() + 1, Bands(classification_));
+}
+
+bool Scene::SameParts(const Scene& o) const {
+  auto same_bytes = [](const auto& a, const auto& b) {
+    return a.size() == b.size() &&
+           (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(a[0])) == 0);
+  };
+  return mode_ == o.mode_ && dims_ == o.dims_ &&
+         std::memcmp(spacing_.data(), o.spacing_.data(), sizeof(spacing_)) == 0 &&
+         std::memcmp(value_range_.data(), o.value_range_.data(), sizeof(value_range_)) == 0 &&
+         sticks_ == o.sticks_ && bricks_ == o.bricks_ && scalar_y_begin_ == o.scalar_y_begin_ &&
+         scalar_planes_ == o.scalar_planes_ && same_bytes(scalars_, o.scalars_) &&
+         field_ == o.field_ && summary_ == o.summary_;
 }
 
 size_t Scene::MemoryBytes() const {

@@ -1,9 +1,12 @@
 #include "transtick/sticks.h"
 
 #include <cstring>
+#include <map>
+#include <mutex>
 
 #include "absl/strings/str_cat.h"
 #include "coding.h"
+#include "transtick/parallel.h"
 
 namespace transtick {
 namespace {
@@ -19,24 +22,47 @@ Sticks Sticks::Encode(std::span<const uint8_t> labels, std::array<int, 3> dims, 
   s.y_begin_ = y_begin;
   s.y_end_ = y_end;
   const size_t nx = dims[0], ny = dims[1];
-  s.offsets_.reserve(static_cast<size_t>(y_end - y_begin) * nx + 1);
-  for (int y = y_begin; y < y_end; ++y) {
-    for (int x = 0; x < dims[0]; ++x) {
-      s.offsets_.push_back(static_cast<uint32_t>(s.sticks_.size()));
-      const uint8_t* track = labels.data() + static_cast<size_t>(y) * nx + x;
-      const size_t stride = nx * ny;
-      int z = 0;
-      while (z < dims[2]) {
-        uint8_t m = track[z * stride];
-        int begin = z;
-        while (z < dims[2] && track[z * stride] == m) ++z;
-        if (m != 0) {
-          s.sticks_.push_back(Stick{static_cast<uint16_t>(begin), static_cast<uint16_t>(z), m});
+  const size_t rows = y_end > y_begin ? static_cast<size_t>(y_end - y_begin) : 0;
+  // Ranges of rows on as many threads, each into sticks of its own, joined
+  // in order: the same sticks and offsets as one pass.
+  std::mutex mu;
+  std::map<size_t, std::vector<Stick>> parts;  // by the range's first row
+  s.offsets_.resize(rows * nx + 1);
+  ParallelFor(rows, 8, [&](size_t row_begin, size_t row_end) {
+    std::vector<Stick> sticks;
+    for (size_t r = row_begin; r < row_end; ++r) {
+      const int y = y_begin + static_cast<int>(r);
+      for (int x = 0; x < dims[0]; ++x) {
+        // Counted from the range's first stick until the ranges are joined.
+        s.offsets_[r * nx + x] = static_cast<uint32_t>(sticks.size());
+        const uint8_t* track = labels.data() + static_cast<size_t>(y) * nx + x;
+        const size_t stride = nx * ny;
+        int z = 0;
+        while (z < dims[2]) {
+          uint8_t m = track[z * stride];
+          int begin = z;
+          while (z < dims[2] && track[z * stride] == m) ++z;
+          if (m != 0) {
+            sticks.push_back(Stick{static_cast<uint16_t>(begin), static_cast<uint16_t>(z), m});
+          }
         }
       }
     }
+    std::lock_guard<std::mutex> lock(mu);
+    parts[row_begin] = std::move(sticks);
+  });
+  size_t total = 0;
+  for (const auto& [first, sticks] : parts) total += sticks.size();
+  s.sticks_.reserve(total);
+  auto next = parts.begin();
+  for (const auto& [first, sticks] : parts) {
+    ++next;
+    const size_t last = next == parts.end() ? rows : next->first;
+    const auto base = static_cast<uint32_t>(s.sticks_.size());
+    for (size_t i = first * nx; i < last * nx; ++i) s.offsets_[i] += base;
+    s.sticks_.insert(s.sticks_.end(), sticks.begin(), sticks.end());
   }
-  s.offsets_.push_back(static_cast<uint32_t>(s.sticks_.size()));
+  s.offsets_[rows * nx] = static_cast<uint32_t>(s.sticks_.size());
   return s;
 }
 

@@ -1,6 +1,10 @@
 #include "transtick/volume.h"
 
 #include <limits>
+#include <map>
+#include <mutex>
+
+#include "transtick/parallel.h"
 
 namespace transtick {
 
@@ -50,11 +54,26 @@ std::array<float, 2> Volume::Range() const {
   // from -inf or to +inf was NaN throughout). A volume with no finite
   // sample reports {0, 0} like an empty one.
   constexpr float kInf = std::numeric_limits<float>::infinity();
+  // In ranges on as many threads, joined in order by the same rule, so
+  // that of equal extremes (-0 and +0) the first is kept, as in one pass.
+  std::mutex mu;
+  std::map<size_t, std::array<float, 2>> parts;  // by the range's start
+  ParallelFor(values.size(), size_t{1} << 18, [&](size_t begin, size_t end) {
+    float lo = kInf;
+    float hi = -kInf;
+    for (size_t i = begin; i < end; ++i) {
+      const float v = values[i];
+      if (v < lo && v != -kInf) lo = v;
+      if (v > hi && v != kInf) hi = v;
+    }
+    std::lock_guard<std::mutex> lock(mu);
+    parts[begin] = {lo, hi};
+  });
   float lo = kInf;
   float hi = -kInf;
-  for (float v : values) {
-    if (v < lo && v != -kInf) lo = v;
-    if (v > hi && v != kInf) hi = v;
+  for (const auto& [begin, part] : parts) {
+    if (part[0] < lo) lo = part[0];
+    if (part[1] > hi) hi = part[1];
   }
   if (lo > hi) return {0.0f, 0.0f};
   return {lo, hi};

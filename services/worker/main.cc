@@ -6,6 +6,7 @@
 
 #include "daemon.h"
 #include "heap.h"
+#include "transtick/parallel.h"
 #include "worker_node.h"
 
 int main(int argc, char** argv) {
@@ -68,6 +69,8 @@ int main(int argc, char** argv) {
     }
   }
   o.threads = static_cast<int>(std::min<int64_t>(*threads, 4096));
+  // A worker told to trace on N threads builds its slabs on N too.
+  SetBuildThreads(o.threads);
   if (*batch_rays > 65536 || *linger_us > 1'000'000) {
     std::cerr << "transtick-worker: --batch-rays is at most 65536 and --linger-us at most "
                  "1000000\n";

@@ -91,6 +91,8 @@ class BrickMap {
   std::vector<uint8_t> bytes() const;
   const std::array<int, 3>& brick_dims() const { return bdims_; }
   size_t MemoryBytes() const { return bricks_.size() + cells_.size() + reach_.size(); }
+  // Every member equal, the reach included.
+  bool operator==(const BrickMap&) const = default;
 
  private:
   size_t Index(int x, int y, int z) const {

@@ -68,6 +68,7 @@ class FieldGrid {
   struct Group {
     uint8_t label[8];
     uint8_t reach[8];
+    bool operator==(const Group&) const = default;
   };
   const std::array<int, 3>& groups() const { return group_dims_; }
   // REQUIRES: Holds(x, y, z).
@@ -81,6 +82,7 @@ class FieldGrid {
   uint8_t Label(int x, int y, int z) const { return groups_[GroupIndex(x, y, z)].label[Sub(x, y, z)]; }
 
   size_t MemoryBytes() const { return groups_.size() * sizeof(Group); }
+  bool operator==(const FieldGrid&) const = default;  // every member equal
 
  private:
   std::array<int, 3> cells_ = {0, 0, 0};

@@ -117,6 +117,7 @@ class FieldSummary {
                           size_t max_boxes = 0) const;
 
   size_t MemoryBytes() const { return labels_.size() + shell_.size() * sizeof(uint32_t); }
+  bool operator==(const FieldSummary&) const = default;  // every member equal
 
  private:
   void FindShell();  // shell_, from labels_

@@ -138,6 +138,14 @@ class Scene {
   // summary.
   size_t MemoryBytes() const;
 
+  // Whether `other` holds the same volume's parts bit for bit: mode, size,
+  // spacing, value range, sticks, brick map and reach, scalars (compared
+  // as bytes: NaN and -0 as themselves), field grid and summary. The
+  // classification or transfer function they were built from is not
+  // compared. For checks: a build on any number of threads
+  // (BuildThreads) gives the same parts.
+  bool SameParts(const Scene& other) const;
+
  private:
   // Labels the field's cells for smooth surfaces (field()).
   void BuildField();

@@ -23,6 +23,7 @@ struct Stick {
   uint16_t begin;
   uint16_t end;
   uint8_t material;
+  bool operator==(const Stick&) const = default;
 };
 
 // The run or void gap of a track that contains a given z.
@@ -39,6 +40,9 @@ class Sticks {
  public:
   static constexpr int kBlockSize = 32;
   static constexpr int kMaxExtent = 65535;
+
+  // Every member equal: the same tracks of the same rows.
+  bool operator==(const Sticks&) const = default;
 
   Sticks() = default;
 

@@ -1,0 +1,211 @@
+// A scene built on any number of threads is the scene built on one, part
+// for part and bit for bit (parallel.h), and ParallelFor hands out each
+// item exactly once.
+#include "transtick/parallel.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <mutex>
+#include <random>
+#include <thread>
+#include <vector>
+
+#include "gtest/gtest.h"
+#include "transtick/classification.h"
+#include "transtick/scene.h"
+#include "transtick/volume.h"
+
+namespace transtick {
+namespace {
+
+// Restores the default thread count when a test ends, however it ends.
+class BuildThreadsTest : public ::testing::Test {
+ protected:
+  void TearDown() override { SetBuildThreads(0); }
+};
+
+// Ranges cover [0, n) once, in order, at most BuildThreads() of them, none
+// below the grain unless alone, the first on the calling thread: over
+// random sizes, grains and thread counts.
+TEST_F(BuildThreadsTest, ParallelForHandsOutEveryItemOnce) {
+  std::mt19937_64 rng(3);
+  int split = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    const int threads = 1 + static_cast<int>(rng() % 9);
+    SetBuildThreads(threads);
+    ASSERT_EQ(BuildThreads(), threads);
+    const size_t n = trial % 10 == 0 ? rng() % 3 : rng() % 5000;
+    const size_t grain = rng() % 4 == 0 ? 0 : 1 + rng() % 200;
+    std::vector<std::atomic<int>> hits(n);
+    std::mutex mu;
+    std::vector<std::pair<size_t, size_t>> ranges;
+    bool first_here = n == 0;
+    const auto caller = std::this_thread::get_id();
+    ParallelFor(n, grain, [&](size_t begin, size_t end) {
+      for (size_t i = begin; i < end; ++i) hits[i].fetch_add(1);
+      std::lock_guard<std::mutex> lock(mu);
+      ranges.push_back({begin, end});
+      if (begin == 0) first_here = std::this_thread::get_id() == caller;
+    });
+    for (size_t i = 0; i < n; ++i)
+      ASSERT_EQ(hits[i].load(), 1) << "trial " << trial << ", item " << i;
+    EXPECT_TRUE(first_here);
+    if (n == 0) {
+      EXPECT_TRUE(ranges.empty());
+      continue;
+    }
+    std::sort(ranges.begin(), ranges.end());
+    ASSERT_LE(ranges.size(), static_cast<size_t>(threads));
+    split += ranges.size() > 1;
+    for (size_t k = 0; k < ranges.size(); ++k) {
+      EXPECT_EQ(ranges[k].first, k == 0 ? 0 : ranges[k - 1].second);
+      EXPECT_LT(ranges[k].first, ranges[k].second);
+      if (ranges.size() > 1)
+        EXPECT_GE(ranges[k].second - ranges[k].first, std::max<size_t>(grain, 1));
+    }
+    EXPECT_EQ(ranges.back().second, n);
+  }
+  EXPECT_GT(split, 200);
+  SetBuildThreads(0);
+  EXPECT_EQ(BuildThreads(), static_cast<int>(std::max(1u, std::thread::hardware_concurrency())));
+}
+
+// A volume of blobs, plateaus and noise, and now and then the values a
+// file may hold that compare oddly: NaN, -0 and +0, the infinities, the
+// largest floats.
+Volume RandomVolume(std::mt19937_64& rng, std::array<int, 3> dims) {
+  std::uniform_real_distribution<double> unit(0, 1);
+  Volume v;
+  v.dims = dims;
+  v.spacing = {0.5 + unit(rng), 0.5 + unit(rng), 0.5 + 2 * unit(rng)};
+  v.values.resize(v.VoxelCount());
+  double centre[3][3], radius[3];
+  for (int b = 0; b < 3; ++b) {
+    for (int a = 0; a < 3; ++a) centre[b][a] = unit(rng) * dims[a];
+    radius[b] = 1 + unit(rng) * std::max({dims[0], dims[1], dims[2]}) / 2.0;
+  }
+  const bool odd_values = rng() % 3 == 0;
+  const float odd[] = {std::numeric_limits<float>::quiet_NaN(),
+                       -0.0f,
+                       0.0f,
+                       std::numeric_limits<float>::infinity(),
+                       -std::numeric_limits<float>::infinity(),
+                       std::numeric_limits<float>::max(),
+                       std::numeric_limits<float>::lowest()};
+  for (int z = 0; z < dims[2]; ++z)
+    for (int y = 0; y < dims[1]; ++y)
+      for (int x = 0; x < dims[0]; ++x) {
+        double f = 40 * unit(rng);
+        for (int b = 0; b < 3; ++b) {
+          const double r = std::hypot(x - centre[b][0], y - centre[b][1], z - centre[b][2]);
+          f += 1000 * std::max(0.0, 1 - r / radius[b]);
+        }
+        float value = static_cast<float>(rng() % 2 ? 25 * std::round(f / 25) : f);
+        if (odd_values && rng() % 50 == 0) value = odd[rng() % std::size(odd)];
+        v.values[v.Index(x, y, z)] = value;
+      }
+  return v;
+}
+
+Classification RandomMaterials(std::mt19937_64& rng) {
+  Classification c;
+  c.surface = rng() % 2 ? SurfaceModel::kSmooth : SurfaceModel::kVoxel;
+  float at = 100 + static_cast<float>(rng() % 300);
+  const int n = 1 + static_cast<int>(rng() % 4);
+  for (int m = 0; m < n; ++m) {
+    const float width = 50 + static_cast<float>(rng() % 400);
+    c.materials.push_back(Material{.name = "m" + std::to_string(m), .min = at, .max = at + width});
+    at += width + (rng() % 2 ? 0 : static_cast<float>(rng() % 200));
+  }
+  return c;
+}
+
+// Every part of a scene, and of its slabs, is the same whether built on 1
+// thread or on 2 to 8: random sizes (1 voxel to 70 on an axis, odd and
+// even), values, smooth and voxel surfaces, and dvr.
+TEST_F(BuildThreadsTest, ScenesAreTheSameOnAnyNumberOfThreads) {
+  std::mt19937_64 rng(5);
+  int smooth = 0, voxel = 0, dvr = 0;
+  for (int trial = 0; trial < 60; ++trial) {
+    std::array<int, 3> dims;
+    for (int a = 0; a < 3; ++a)
+      dims[a] =
+          trial % 10 == 0 ? 1 + static_cast<int>(rng() % 3) : 2 + static_cast<int>(rng() % 69);
+    const Volume v = RandomVolume(rng, dims);
+    const Classification c = RandomMaterials(rng);
+    TransferFunction t;
+    t.points = {{150, {1, 0, 0, 0}}, {400, {1, 1, 0, 0.4f}}, {900, {1, 1, 1, 0.9f}}};
+    const bool use_dvr = trial % 4 == 3;
+    auto build = [&](int threads) {
+      SetBuildThreads(threads);
+      return use_dvr ? Scene::ForDvr(v, t) : Scene::ForSurfaces(v, c);
+    };
+    auto one = build(1);
+    ASSERT_TRUE(one.ok()) << one.status();
+    (use_dvr ? dvr : c.surface == SurfaceModel::kSmooth ? smooth : voxel) += 1;
+    const int y0 = static_cast<int>(rng() % dims[1]);
+    const int y1 = y0 + 1 + static_cast<int>(rng() % (dims[1] - y0));
+    SetBuildThreads(1);
+    const Scene one_slab = one->Slab(y0, y1);
+    for (int threads : {2, 3, 5, 8}) {
+      auto many = build(threads);
+      ASSERT_TRUE(many.ok()) << many.status();
+      ASSERT_TRUE(one->SameParts(*many)) << "trial " << trial << ", " << threads << " threads";
+      ASSERT_TRUE(one_slab.SameParts(many->Slab(y0, y1)))
+          << "trial " << trial << ", " << threads << " threads, slab [" << y0 << ", " << y1 << ")";
+    }
+  }
+  EXPECT_GT(smooth, 10);
+  EXPECT_GT(voxel, 10);
+  EXPECT_GT(dvr, 10);
+}
+
+// The comparison sees a single changed voxel (so the test above can fail).
+TEST_F(BuildThreadsTest, SamePartsSeesOneVoxel) {
+  std::mt19937_64 rng(7);
+  const Volume v = RandomVolume(rng, {30, 20, 10});
+  Classification c = RandomMaterials(rng);
+  for (SurfaceModel model : {SurfaceModel::kSmooth, SurfaceModel::kVoxel}) {
+    c.surface = model;
+    auto a = Scene::ForSurfaces(v, c);
+    ASSERT_TRUE(a.ok());
+    for (float value : {c.materials[0].min + 1, -0.0f, 12345.0f}) {
+      Volume w = v;
+      w.values[w.Index(17, 9, 4)] = value;
+      if (std::memcmp(&w.values[w.Index(17, 9, 4)], &v.values[v.Index(17, 9, 4)], 4) == 0) continue;
+      auto b = Scene::ForSurfaces(w, c);
+      ASSERT_TRUE(b.ok());
+      EXPECT_FALSE(a->SameParts(*b)) << value;
+    }
+  }
+}
+
+// The value range in parallel ranges keeps, of equal extremes, the first,
+// as one pass does: -0 or +0, whichever comes first, on any thread count.
+TEST_F(BuildThreadsTest, RangeKeepsTheFirstOfEqualExtremes) {
+  Volume v;
+  v.dims = {1000, 1000, 1};
+  v.values.assign(1000000, 7.0f);
+  for (int threads : {1, 2, 3, 4, 8}) {
+    SetBuildThreads(threads);
+    for (bool negative_first : {false, true}) {
+      v.values[10] = negative_first ? -0.0f : 0.0f;
+      v.values[900000] = negative_first ? 0.0f : -0.0f;
+      const auto range = v.Range();
+      EXPECT_EQ(std::signbit(range[0]), negative_first) << threads << " threads";
+      EXPECT_EQ(range[1], 7.0f);
+    }
+    v.values[10] = v.values[900000] = 7.0f;
+    v.values[999999] = std::numeric_limits<float>::quiet_NaN();
+    v.values[500000] = -std::numeric_limits<float>::infinity();
+    v.values[3] = 9.5f;
+    EXPECT_EQ(v.Range(), (std::array<float, 2>{7.0f, 9.5f})) << threads << " threads";
+    v.values[999999] = v.values[500000] = v.values[3] = 7.0f;
+  }
+}
+
+}  // namespace
+}  // namespace transtick
