@@ -63,8 +63,9 @@ TEST_F(BuildThreadsTest, ParallelForHandsOutEveryItemOnce) {
     for (size_t k = 0; k < ranges.size(); ++k) {
       EXPECT_EQ(ranges[k].first, k == 0 ? 0 : ranges[k - 1].second);
       EXPECT_LT(ranges[k].first, ranges[k].second);
-      if (ranges.size() > 1)
+      if (ranges.size() > 1) {
         EXPECT_GE(ranges[k].second - ranges[k].first, std::max<size_t>(grain, 1));
+      }
     }
     EXPECT_EQ(ranges.back().second, n);
   }
