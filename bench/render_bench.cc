@@ -270,14 +270,17 @@ int Run(const Options& o) {
       "in memory %.3f MB = %.2f%% of raw\n",
       sticks.StickCount(), encoded / 1e6, raw ? 100.0 * encoded / raw : 0.0, raw / 1e6,
       sticks.MemoryBytes() / 1e6, raw ? 100.0 * sticks.MemoryBytes() / raw : 0.0);
-  std::printf("scene mem  %.3f MB (sticks + float scalars + occupancy)\n",
+  std::printf("scene mem  %.3f MB (sticks, float scalars, brick map, field grid and summary)\n",
               scene->MemoryBytes() / 1e6);
-  std::printf("brick map  %zu bytes serialised (%zu bricks and the 2^3 cells of the mixed ones), "
-              "%.3f MB in memory with its reach\n",
-              scene->bricks().bytes().size(),
-              static_cast<size_t>(scene->bricks().brick_dims()[0]) *
-                  scene->bricks().brick_dims()[1] * scene->bricks().brick_dims()[2],
-              scene->bricks().MemoryBytes() / 1e6);
+  std::printf(
+      "brick map  %zu bytes serialised (%zu bricks and the 2^3 cells of the mixed ones), "
+      "%.3f MB in memory%s\n",
+      scene->bricks().bytes().size(),
+      static_cast<size_t>(scene->bricks().brick_dims()[0]) * scene->bricks().brick_dims()[1] *
+          scene->bricks().brick_dims()[2],
+      scene->bricks().MemoryBytes() / 1e6,
+      scene->bricks().HoldsReach() ? " with its reach"
+                                   : ", no reach (smooth surfaces walk the field's grid)");
   std::printf("frames     %dx%d, shadows %s, %d timed after 1 warm-up, %d cores\n\n", o.width,
               o.height, o.shadows ? "on" : "off", o.repeat, cores);
 

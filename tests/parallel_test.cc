@@ -1,6 +1,7 @@
 // A scene built on any number of threads is the scene built on one, part
 // for part and bit for bit (parallel.h), and ParallelFor hands out each
-// item exactly once.
+// item exactly once. A scene built to cut into slabs (SceneUse::kCut) gives
+// the slabs a scene to trace gives, and knows what those will hold.
 #include "transtick/parallel.h"
 
 #include <algorithm>
@@ -14,7 +15,9 @@
 #include <vector>
 
 #include "gtest/gtest.h"
+#include "transtick/brick_map.h"
 #include "transtick/classification.h"
+#include "transtick/field_grid.h"
 #include "transtick/scene.h"
 #include "transtick/volume.h"
 
@@ -124,6 +127,31 @@ Classification RandomMaterials(std::mt19937_64& rng) {
   return c;
 }
 
+// A volume, its materials and a transfer function, and which of them a
+// trial builds: random sizes (1 voxel to 70 on an axis, odd and even; 1 to
+// 3 every tenth trial), smooth and voxel surfaces, and dvr every fourth.
+struct Case {
+  Volume v;
+  Classification c;
+  TransferFunction t;
+  bool dvr = false;
+  absl::StatusOr<Scene> Build(SceneUse use) const {
+    return dvr ? Scene::ForDvr(v, t, use) : Scene::ForSurfaces(v, c, use);
+  }
+};
+
+Case RandomCase(std::mt19937_64& rng, int trial) {
+  std::array<int, 3> dims;
+  for (int a = 0; a < 3; ++a)
+    dims[a] = trial % 10 == 0 ? 1 + static_cast<int>(rng() % 3) : 2 + static_cast<int>(rng() % 69);
+  Case k;
+  k.v = RandomVolume(rng, dims);
+  k.c = RandomMaterials(rng);
+  k.t.points = {{150, {1, 0, 0, 0}}, {400, {1, 1, 0, 0.4f}}, {900, {1, 1, 1, 0.9f}}};
+  k.dvr = trial % 4 == 3;
+  return k;
+}
+
 // Every part of a scene, and of its slabs, is the same whether built on 1
 // thread or on 2 to 8: random sizes (1 voxel to 70 on an axis, odd and
 // even), values, smooth and voxel surfaces, and dvr.
@@ -131,22 +159,15 @@ TEST_F(BuildThreadsTest, ScenesAreTheSameOnAnyNumberOfThreads) {
   std::mt19937_64 rng(5);
   int smooth = 0, voxel = 0, dvr = 0;
   for (int trial = 0; trial < 60; ++trial) {
-    std::array<int, 3> dims;
-    for (int a = 0; a < 3; ++a)
-      dims[a] =
-          trial % 10 == 0 ? 1 + static_cast<int>(rng() % 3) : 2 + static_cast<int>(rng() % 69);
-    const Volume v = RandomVolume(rng, dims);
-    const Classification c = RandomMaterials(rng);
-    TransferFunction t;
-    t.points = {{150, {1, 0, 0, 0}}, {400, {1, 1, 0, 0.4f}}, {900, {1, 1, 1, 0.9f}}};
-    const bool use_dvr = trial % 4 == 3;
+    const Case k = RandomCase(rng, trial);
+    const auto& dims = k.v.dims;
     auto build = [&](int threads) {
       SetBuildThreads(threads);
-      return use_dvr ? Scene::ForDvr(v, t) : Scene::ForSurfaces(v, c);
+      return k.Build(SceneUse::kTrace);
     };
     auto one = build(1);
     ASSERT_TRUE(one.ok()) << one.status();
-    (use_dvr ? dvr : c.surface == SurfaceModel::kSmooth ? smooth : voxel) += 1;
+    (k.dvr ? dvr : k.c.surface == SurfaceModel::kSmooth ? smooth : voxel) += 1;
     const int y0 = static_cast<int>(rng() % dims[1]);
     const int y1 = y0 + 1 + static_cast<int>(rng() % (dims[1] - y0));
     SetBuildThreads(1);
@@ -162,6 +183,95 @@ TEST_F(BuildThreadsTest, ScenesAreTheSameOnAnyNumberOfThreads) {
   EXPECT_GT(smooth, 10);
   EXPECT_GT(voxel, 10);
   EXPECT_GT(dvr, 10);
+}
+
+// The root's scene (SceneUse::kCut) leaves out what only walks look up:
+// the field's grid and the brick map's reach. It sends the same parts (the
+// brick map's bytes, sticks, summary, scalars), a slab cut from it is the
+// slab cut from a scene to trace, bit for bit, and TracingBytes counts
+// exactly what a scene to trace holds. Smooth surfaces hold no reach at
+// all; voxel surfaces and dvr hold their slab's. Random volumes as above.
+TEST_F(BuildThreadsTest, CutScenesGiveTheSameSlabs) {
+  std::mt19937_64 rng(11);
+  int smooth = 0, voxel = 0, dvr = 0;
+  for (int trial = 0; trial < 60; ++trial) {
+    const Case k = RandomCase(rng, trial);
+    const auto& dims = k.v.dims;
+    auto traced = k.Build(SceneUse::kTrace);
+    auto cut = k.Build(SceneUse::kCut);
+    ASSERT_TRUE(traced.ok()) << traced.status();
+    ASSERT_TRUE(cut.ok()) << cut.status();
+    const bool walks = k.dvr || k.c.surface == SurfaceModel::kVoxel;
+    (k.dvr ? dvr : walks ? voxel : smooth) += 1;
+    EXPECT_EQ(walks, Scene::WalksBricks(traced->mode(), traced->classification()));
+    EXPECT_EQ(traced->bricks().HoldsReach(), walks) << "trial " << trial;
+    EXPECT_EQ(traced->field().empty(), walks) << "trial " << trial;
+    EXPECT_FALSE(cut->bricks().HoldsReach()) << "trial " << trial;
+    EXPECT_TRUE(cut->field().empty()) << "trial " << trial;
+    // What the root sends.
+    EXPECT_EQ(cut->bricks().bytes(), traced->bricks().bytes()) << "trial " << trial;
+    EXPECT_EQ(cut->sticks(), traced->sticks()) << "trial " << trial;
+    EXPECT_EQ(cut->summary(), traced->summary()) << "trial " << trial;
+    EXPECT_EQ(cut->scalars().size(), traced->scalars().size());
+    EXPECT_EQ(0, std::memcmp(cut->scalars().data(), traced->scalars().data(),
+                             traced->scalars().size() * sizeof(float)));
+    // What the workers hold.
+    EXPECT_EQ(traced->TracingBytes(), traced->MemoryBytes()) << "trial " << trial;
+    EXPECT_EQ(cut->TracingBytes(), traced->MemoryBytes()) << "trial " << trial;
+    if (walks) {
+      EXPECT_LT(cut->MemoryBytes(), traced->MemoryBytes()) << "trial " << trial;
+    }
+    for (int slab = 0; slab < 3; ++slab) {
+      const int y0 = static_cast<int>(rng() % dims[1]);
+      const int y1 = y0 + 1 + static_cast<int>(rng() % (dims[1] - y0));
+      const Scene a = traced->Slab(y0, y1), b = cut->Slab(y0, y1);
+      ASSERT_TRUE(a.SameParts(b)) << "trial " << trial << ", slab [" << y0 << ", " << y1 << ")";
+      EXPECT_EQ(a.bricks().HoldsReach(), walks);
+      EXPECT_EQ(a.bricks().ReachCovers(y0, y1), walks);
+      EXPECT_EQ(a.TracingBytes(), a.MemoryBytes()) << "trial " << trial;
+      // A worker's assembly from the parts the root sends, with the whole
+      // map's reach or none: the reach its walks look up, no more.
+      for (bool with_reach : {false, true}) {
+        auto map = BrickMap::FromBytes(dims, traced->bricks().bytes(), 0, with_reach ? dims[1] : 0);
+        ASSERT_TRUE(map.ok());
+        std::vector<float> scalars(a.scalars());
+        auto parts = Scene::FromParts(a.mode(), dims, a.spacing(), a.value_range(), a.sticks(),
+                                      std::move(scalars), *std::move(map), a.classification(),
+                                      a.transfer(), a.summary());
+        ASSERT_TRUE(parts.ok()) << parts.status();
+        EXPECT_EQ(parts->bricks().HoldsReach(), walks);
+        if (!with_reach || !walks) {
+          EXPECT_TRUE(a.SameParts(*parts)) << "trial " << trial;
+        }
+      }
+    }
+  }
+  EXPECT_GT(smooth, 10);
+  EXPECT_GT(voxel, 10);
+  EXPECT_GT(dvr, 10);
+}
+
+// The reach of any planes takes ReachBytes, and none is built (nor any
+// time spent on it) for an empty range.
+TEST_F(BuildThreadsTest, ReachBytesCountsTheReach) {
+  std::mt19937_64 rng(13);
+  for (int trial = 0; trial < 40; ++trial) {
+    std::array<int, 3> dims;
+    for (int a = 0; a < 3; ++a) dims[a] = 1 + static_cast<int>(rng() % 40);
+    std::vector<uint8_t> labels(static_cast<size_t>(dims[0]) * dims[1] * dims[2]);
+    for (auto& l : labels) l = rng() % 5 == 0 ? static_cast<uint8_t>(rng() % 3) : 0;
+    const BrickMap none = BrickMap::Build(labels, dims, true, 0, 0);
+    EXPECT_FALSE(none.HoldsReach());
+    EXPECT_EQ(none, BrickMap::Build(labels, dims, true, dims[1] / 2, dims[1] / 2));
+    const int y0 = static_cast<int>(rng() % dims[1]);
+    const int y1 = y0 + 1 + static_cast<int>(rng() % (dims[1] - y0));
+    const BrickMap some = BrickMap::Build(labels, dims, true, y0, y1);
+    EXPECT_TRUE(some.HoldsReach());
+    EXPECT_TRUE(some.ReachCovers(y0, y1));
+    EXPECT_EQ(some.MemoryBytes() - none.MemoryBytes(), BrickMap::ReachBytes(dims, y0, y1));
+    EXPECT_EQ(some, none.ForSlab(y0, y1));
+    EXPECT_EQ(some.bytes(), none.bytes());
+  }
 }
 
 // The comparison sees a single changed voxel (so the test above can fail).

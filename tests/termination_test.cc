@@ -29,8 +29,9 @@ Volume BlobVolume(std::array<int, 3> dims, uint32_t seed) {
   return v;
 }
 
-Classification TwoMaterials() {
+Classification TwoMaterials(SurfaceModel surface = SurfaceModel::kSmooth) {
   Classification c;
+  c.surface = surface;
   c.materials = {{.name = "a", .min = 0.5f, .max = 1.5f, .opacity = 0.4f},
                  {.name = "b", .min = 1.5f, .max = 2.5f, .opacity = 0.7f}};
   return c;
@@ -75,7 +76,8 @@ std::vector<Segment> Segments(const Scene& scene, const Vec3& origin, const Vec3
 // walk is the walk of the ray parallel to that axis, to the end of the box.
 TEST(TerminationTest, DenormalComponentsWalkAsParallel) {
   const std::array<int, 3> dims = {40, 37, 45};
-  auto scene = Scene::ForSurfaces(BlobVolume(dims, 11), TwoMaterials());
+  // Voxel surfaces, whose tracer takes this walk (with the brick map's reach).
+  auto scene = Scene::ForSurfaces(BlobVolume(dims, 11), TwoMaterials(SurfaceModel::kVoxel));
   ASSERT_TRUE(scene.ok());
   std::mt19937_64 rng(9);
   std::uniform_real_distribution<double> u(0, 1);
@@ -147,7 +149,9 @@ TEST(TerminationTest, EveryTraversalEndsWithinTheBound) {
   const std::array<int, 3> dims = {40, 37, 45};
   for (bool dvr : {false, true}) {
     Volume v = BlobVolume(dims, 11);
-    auto scene = dvr ? Scene::ForDvr(v, Ramp()) : Scene::ForSurfaces(v, TwoMaterials());
+    // The scenes whose tracer takes this walk, with the brick map's reach.
+    auto scene =
+        dvr ? Scene::ForDvr(v, Ramp()) : Scene::ForSurfaces(v, TwoMaterials(SurfaceModel::kVoxel));
     ASSERT_TRUE(scene.ok()) << scene.status();
     std::mt19937_64 rng(dvr ? 7 : 5);
     const int64_t bound = Traversal::MaxSegments(dims);
@@ -180,7 +184,10 @@ TEST(TerminationTest, TenThousandHostileViewsFinish) {
   Volume v = BlobVolume(dims, 3);
   auto surfaces = Scene::ForSurfaces(v, TwoMaterials());
   auto dvr = Scene::ForDvr(v, Ramp());
-  ASSERT_TRUE(surfaces.ok() && dvr.ok());
+  // The bare walk's scene for surfaces: voxel surfaces, whose tracer takes
+  // it (smooth surfaces walk the field's cells, CrossingWalk).
+  auto voxel = Scene::ForSurfaces(v, TwoMaterials(SurfaceModel::kVoxel));
+  ASSERT_TRUE(surfaces.ok() && dvr.ok() && voxel.ok());
   const Vec3 extent{double(dims[0]), double(dims[1]), double(dims[2])};
   std::mt19937_64 rng(2024);
   std::uniform_real_distribution<double> u(-1, 1);
@@ -234,7 +241,7 @@ TEST(TerminationTest, TenThousandHostileViewsFinish) {
       if (!tracer.MakePrimary(world, 0, &ray)) continue;
       ASSERT_TRUE(tracer.Validate(ray).ok()) << tracer.Validate(ray) << " view " << i;
       // The bare walk first: a loop fails here rather than hanging below.
-      ASSERT_GE(Walk(scene, ray.origin, ray.direction), 0)
+      ASSERT_GE(Walk(i % 4 == 3 ? *dvr : *voxel, ray.origin, ray.direction), 0)
           << "view " << i << " pixel " << px << "," << py;
       std::vector<RayDescriptor> pending = {ray};
       Deposit deposit;
@@ -268,6 +275,10 @@ TEST(TerminationTest, CtheadAlongTheAxes) {
                  {.name = "bone", .min = 1350, .max = 4000, .opacity = 1.0f}};
   auto scene = Scene::ForSurfaces(*volume, c);
   ASSERT_TRUE(scene.ok()) << scene.status();
+  // The bare walk's scene: voxel surfaces, whose tracer takes it.
+  c.surface = SurfaceModel::kVoxel;
+  auto voxel = Scene::ForSurfaces(*volume, c);
+  ASSERT_TRUE(voxel.ok()) << voxel.status();
   const Vec3 extent{volume->dims[0] * volume->spacing[0], volume->dims[1] * volume->spacing[1],
                     volume->dims[2] * volume->spacing[2]};
   for (double az : {90.0, 0.0, 180.0, 270.0}) {
@@ -284,7 +295,7 @@ TEST(TerminationTest, CtheadAlongTheAxes) {
         for (int px = 0; px < 700; ++px) {
           RayDescriptor ray;
           if (!tracer.MakePrimary(camera->Generate(px, py), 0, &ray)) continue;
-          ASSERT_GE(Walk(*scene, ray.origin, ray.direction), 0)
+          ASSERT_GE(Walk(*voxel, ray.origin, ray.direction), 0)
               << "azimuth " << az << " elevation " << el << " pixel " << px << "," << py;
         }
       }

@@ -18,7 +18,7 @@ void BrickMap::SetDims(std::array<int, 3> dims) {
 }
 
 BrickMap BrickMap::Build(std::span<const uint8_t> labels, std::array<int, 3> dims,
-                         bool uniform_materials) {
+                         bool uniform_materials, int y_begin, int y_end) {
   BrickMap b;
   b.SetDims(dims);
   // The first voxel seen fixes a cell's material, any other makes it mixed;
@@ -58,8 +58,23 @@ BrickMap BrickMap::Build(std::span<const uint8_t> labels, std::array<int, 3> dim
     }
   });
   b.FillCells();
-  b.ComputeReach(0, dims[1]);
+  b.ComputeReach(y_begin, y_end < 0 ? dims[1] : y_end);
   return b;
+}
+
+size_t BrickMap::ReachBytes(std::array<int, 3> dims, int y_begin, int y_end) {
+  BrickMap b;
+  for (int a = 0; a < 3; ++a) b.cdims_[a] = ((dims[a] + kBrick - 1) >> kShift) * (kBrick / 2);
+  b.SetReachRows(y_begin, y_end);
+  return 8 * b.reach_cells_;
+}
+
+void BrickMap::SetReachRows(int y_begin, int y_end) {
+  // The rows of cells that hold planes [y_begin, y_end).
+  row_begin_ = std::clamp(y_begin >> 1, 0, cdims_[1]);
+  rows_ = y_end > y_begin ? std::clamp((y_end + 1) >> 1, row_begin_, cdims_[1]) - row_begin_ : 0;
+  if (rows_ == 0) row_begin_ = 0;  // no reach is one state, whatever the range
+  reach_cells_ = static_cast<size_t>(cdims_[0]) * rows_ * cdims_[2];
 }
 
 BrickMap BrickMap::ForSlab(int y_begin, int y_end) const {
@@ -97,10 +112,13 @@ void BrickMap::FillCells() {
 }
 
 void BrickMap::ComputeReach(int y_begin, int y_end) {
-  // The rows of cells that hold planes [y_begin, y_end).
-  row_begin_ = std::clamp(y_begin >> 1, 0, cdims_[1]);
-  rows_ = y_end > y_begin ? std::clamp((y_end + 1) >> 1, row_begin_, cdims_[1]) - row_begin_ : 0;
-  reach_cells_ = static_cast<size_t>(cdims_[0]) * rows_ * cdims_[2];
+  SetReachRows(y_begin, y_end);
+  if (reach_cells_ == 0) {
+    // No rows: none to compute (the passes below would still run over the
+    // whole map, for nothing).
+    reach_.clear();
+    return;
+  }
   // For each octant, the largest uniform box at each cell by the classic
   // largest-square recurrence in 3D: the box of side r + 1 with the cell at
   // its corner is uniform when the cell is and the boxes of side r at its

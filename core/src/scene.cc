@@ -184,8 +184,8 @@ std::vector<uint8_t> DvrVisibility(const Volume& volume, const TransferFunction&
   return labels;
 }
 
-absl::StatusOr<Scene> Scene::ForSurfaces(const Volume& volume,
-                                         const Classification& classification) {
+absl::StatusOr<Scene> Scene::ForSurfaces(const Volume& volume, const Classification& classification,
+                                         SceneUse use) {
   if (auto s = CheckDims(volume); !s.ok()) return s;
   if (auto s = classification.Validate(); !s.ok()) return s;
   std::vector<uint8_t> labels(volume.values.size());
@@ -201,19 +201,22 @@ absl::StatusOr<Scene> Scene::ForSurfaces(const Volume& volume,
   scene.spacing_ = volume.spacing;
   scene.value_range_ = volume.Range();
   scene.sticks_ = Sticks::Encode(labels, volume.dims, 0, volume.dims[1]);
-  scene.bricks_ = BrickMap::Build(labels, volume.dims, /*uniform_materials=*/true);
+  const bool reach = use == SceneUse::kTrace && WalksBricks(scene.mode_, classification);
+  scene.bricks_ = BrickMap::Build(labels, volume.dims, /*uniform_materials=*/true, 0,
+                                  reach ? volume.dims[1] : 0);
   scene.classification_ = classification;
   scene.scalar_y_begin_ = 0;
   scene.scalar_planes_ = volume.dims[1];
   scene.scalars_ = volume.values;
-  scene.BuildField();
+  if (use == SceneUse::kTrace) scene.BuildField();
   if (classification.surface == SurfaceModel::kSmooth) {
     scene.summary_ = FieldSummary::Build(volume.values, volume.dims, Bands(classification));
   }
   return scene;
 }
 
-absl::StatusOr<Scene> Scene::ForDvr(const Volume& volume, const TransferFunction& transfer) {
+absl::StatusOr<Scene> Scene::ForDvr(const Volume& volume, const TransferFunction& transfer,
+                                    SceneUse use) {
   if (auto s = CheckDims(volume); !s.ok()) return s;
   if (auto s = transfer.Validate(); !s.ok()) return s;
   std::vector<uint8_t> labels = DvrVisibility(volume, transfer);
@@ -223,7 +226,8 @@ absl::StatusOr<Scene> Scene::ForDvr(const Volume& volume, const TransferFunction
   scene.spacing_ = volume.spacing;
   scene.value_range_ = volume.Range();
   scene.sticks_ = Sticks::Encode(labels, volume.dims, 0, volume.dims[1]);
-  scene.bricks_ = BrickMap::Build(labels, volume.dims, /*uniform_materials=*/false);
+  scene.bricks_ = BrickMap::Build(labels, volume.dims, /*uniform_materials=*/false, 0,
+                                  use == SceneUse::kTrace ? volume.dims[1] : 0);
   scene.transfer_ = transfer;
   scene.scalar_y_begin_ = 0;
   scene.scalar_planes_ = volume.dims[1];
@@ -268,7 +272,11 @@ absl::StatusOr<Scene> Scene::FromParts(RenderMode mode, std::array<int, 3> dims,
   if (!summary.empty() && summary.brick_dims() != FieldSummary::BricksOf(dims)) {
     return absl::InvalidArgumentError("field summary and slab disagree on the volume's dimensions");
   }
-  if (!bricks.ReachCovers(sticks.y_begin(), sticks.y_end())) {
+  // The reach of the slab's planes where the tracer walks the map, else
+  // none.
+  if (!WalksBricks(mode, classification)) {
+    if (bricks.HoldsReach()) bricks = bricks.ForSlab(0, 0);
+  } else if (!bricks.ReachCovers(sticks.y_begin(), sticks.y_end())) {
     bricks = bricks.ForSlab(sticks.y_begin(), sticks.y_end());
   }
   scene.sticks_ = std::move(sticks);
@@ -313,7 +321,8 @@ absl::StatusOr<Scene> Scene::Reslab(int y_begin, int y_end, const std::vector<st
   s.dims_ = dims_;
   s.spacing_ = spacing_;
   s.value_range_ = value_range_;
-  s.bricks_ = bricks_.ForSlab(y_begin, y_end);
+  s.bricks_ =
+      WalksBricks(mode_, classification_) ? bricks_.ForSlab(y_begin, y_end) : bricks_.ForSlab(0, 0);
   s.classification_ = classification_;
   s.transfer_ = transfer_;
   s.summary_ = summary_;
@@ -379,6 +388,18 @@ bool Scene::SameParts(const Scene& o) const {
 size_t Scene::MemoryBytes() const {
   return sticks_.MemoryBytes() + scalars_.size() * sizeof(float) + bricks_.MemoryBytes() +
          field_.MemoryBytes() + summary_.MemoryBytes();
+}
+
+size_t Scene::TracingBytes() const {
+  size_t bytes = sticks_.MemoryBytes() + scalars_.size() * sizeof(float) + bricks_.MemoryBytes() +
+                 summary_.MemoryBytes();
+  if (WalksBricks(mode_, classification_) && !bricks_.ReachCovers(y_begin(), y_end())) {
+    bytes += BrickMap::ReachBytes(dims_, y_begin(), y_end());
+  }
+  if (!WalksBricks(mode_, classification_) && y_begin() < y_end()) {
+    bytes += FieldGrid::MemoryBytesFor(dims_, y_begin(), y_end() + 1);  // BuildField's rows
+  }
+  return bytes;
 }
 
 const char* RenderModeName(RenderMode mode) {

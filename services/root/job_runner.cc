@@ -208,7 +208,9 @@ int JobRunner::RingsFor(FrameTask& task, const std::vector<std::shared_ptr<Worke
   const Sites where = SitesOf(sites);
   ClusterShape shape = where.shape;
   shape.network = options_.network;
-  const VolumeSize volume{double(data.scene.MemoryBytes()), data.scene.dims()[1]};
+  // What the workers will hold for the whole volume, which the root's own
+  // scene (built only to cut) does not.
+  const VolumeSize volume{double(data.scene.TracingBytes()), data.scene.dims()[1]};
   // The rings whose slabs of this dataset the workers hold now: keeping
   // them costs no loading.
   int loaded = 0;

@@ -49,9 +49,11 @@ absl::StatusOr<std::shared_ptr<const Scene>> AssembleSlab(const v1::SlabHeader& 
   }
   auto sticks = Sticks::FromBlocks(dims, h.y_begin(), h.y_end(), max_material, blocks);
   if (!sticks.ok()) return sticks.status();
+  // The reach of the slab's planes, where its walks look it up.
+  const bool reach = Scene::WalksBricks(*mode, classification);
   auto bricks =
       BrickMap::FromBytes(dims, std::vector<uint8_t>(h.brick_map().begin(), h.brick_map().end()),
-                          h.y_begin(), h.y_end());
+                          reach ? h.y_begin() : 0, reach ? h.y_end() : 0);
   if (!bricks.ok()) return bricks.status();
   FieldSummary summary;
   if (!h.field_summary().empty()) {

@@ -29,9 +29,11 @@ class BrickMap {
 
   BrickMap() = default;
   // With `uniform_materials` false only void bricks and cells are uniform:
-  // dvr samples must stay within the column they are taken in.
+  // dvr samples must stay within the column they are taken in. The reach is
+  // that of the cells of planes [y_begin, y_end) (y_end < 0: all; an empty
+  // range: none, for a map no walk looks up, as smooth surfaces' is).
   static BrickMap Build(std::span<const uint8_t> labels, std::array<int, 3> dims,
-                        bool uniform_materials);
+                        bool uniform_materials, int y_begin = 0, int y_end = -1);
   // Rebuilds from the bytes of bytes() (docs/formats.md, "Brick map"), with
   // the reach of the cells of planes [y_begin, y_end) (y_end < 0: all). Fails
   // on a size that does not match the dims and the mixed bricks.
@@ -40,6 +42,11 @@ class BrickMap {
   // The same map with the reach of the cells of planes [y_begin, y_end)
   // instead: a slab's, which is all its walks look up.
   BrickMap ForSlab(int y_begin, int y_end) const;
+  // The bytes the reach of the cells of planes [y_begin, y_end) takes, for
+  // a volume of `dims` (MemoryBytes counts it where it is held).
+  static size_t ReachBytes(std::array<int, 3> dims, int y_begin, int y_end);
+  // Whether the map holds any reach.
+  bool HoldsReach() const { return !reach_.empty(); }
   // Whether Reach holds the cells of planes [y_begin, y_end).
   bool ReachCovers(int y_begin, int y_end) const {
     return y_begin >= y_end ||
@@ -118,6 +125,9 @@ class BrickMap {
   }
   // Fills cells_ of the uniform bricks.
   void FillCells();
+  // Sets row_begin_, rows_ and reach_cells_ for the cells of planes
+  // [y_begin, y_end). REQUIRES: cdims_ set.
+  void SetReachRows(int y_begin, int y_end);
   // Fills reach_ for the cells of planes [y_begin, y_end).
   void ComputeReach(int y_begin, int y_end);
 

@@ -82,6 +82,13 @@ class FieldGrid {
   uint8_t Label(int x, int y, int z) const { return groups_[GroupIndex(x, y, z)].label[Sub(x, y, z)]; }
 
   size_t MemoryBytes() const { return groups_.size() * sizeof(Group); }
+  // What Build's grid of rows [row_begin, row_end) of a volume of `dims`
+  // takes: its MemoryBytes, without building it.
+  static size_t MemoryBytesFor(std::array<int, 3> dims, int row_begin, int row_end) {
+    if (row_end <= row_begin) return 0;
+    const size_t gx = (dims[0] + 2) / 2, gy = (row_end - row_begin + 1) / 2, gz = (dims[2] + 2) / 2;
+    return gx * gy * gz * sizeof(Group);
+  }
   bool operator==(const FieldGrid&) const = default;  // every member equal
 
  private:

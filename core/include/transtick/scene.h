@@ -36,6 +36,13 @@ struct ScalarPlanes {
 // two planes out.
 inline constexpr int kGhostPlanes = 2;
 
+// What a scene is built for. A scene to trace holds what its walks look
+// up: the brick map's reach where the tracer walks the map (voxel surfaces
+// and dvr), the field's grid for smooth surfaces. The root only cuts its
+// scene into slabs, whose workers build those for their own planes: its
+// scene holds neither (docs/design.md, "What a scene holds").
+enum class SceneUse { kTrace, kCut };
+
 // Immutable after construction; thread-safe for concurrent reads. Movable,
 // not copyable (it can be large).
 class Scene {
@@ -48,11 +55,20 @@ class Scene {
 
   // Surfaces mode: labels from the classification.
   static absl::StatusOr<Scene> ForSurfaces(const Volume& volume,
-                                           const Classification& classification);
+                                           const Classification& classification,
+                                           SceneUse use = SceneUse::kTrace);
   // Dvr mode: a voxel is labelled 1 when the transfer function is non-zero
   // somewhere between the min and max of its 3x3x3 neighbourhood, so no
   // trilinear sample in a void voxel can have opacity.
-  static absl::StatusOr<Scene> ForDvr(const Volume& volume, const TransferFunction& transfer);
+  static absl::StatusOr<Scene> ForDvr(const Volume& volume, const TransferFunction& transfer,
+                                      SceneUse use = SceneUse::kTrace);
+
+  // Whether the tracer of this mode and classification walks the brick map
+  // (and needs its reach): voxel surfaces and dvr do, smooth surfaces walk
+  // the field's grid instead.
+  static bool WalksBricks(RenderMode mode, const Classification& classification) {
+    return mode == RenderMode::kDvr || classification.surface != SurfaceModel::kSmooth;
+  }
 
   // Assembles a slab scene from parts (as a worker receives them). The
   // field summary may be empty (then rays leaving the slab always go on).
@@ -137,6 +153,11 @@ class Scene {
   // Bytes held: sticks, scalars, the brick map, the field's cells and its
   // summary.
   size_t MemoryBytes() const;
+  // The bytes this scene holds when built to trace (SceneUse::kTrace):
+  // MemoryBytes, with the reach and field grid a scene to cut leaves out
+  // counted as if built. What the workers hold for these planes, give or
+  // take the ghost planes of their slabs.
+  size_t TracingBytes() const;
 
   // Whether `other` holds the same volume's parts bit for bit: mode, size,
   // spacing, value range, sticks, brick map and reach, scalars (compared

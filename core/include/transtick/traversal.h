@@ -78,10 +78,14 @@ class Traversal {
   // as parallel.
   // REQUIRES: the point at t lies within a cell of `cell` and the origin
   // within 1e9 of the volume (Tracer::Validate checks both for rays from
-  // elsewhere).
+  // elsewhere). The scene's tracer walks its brick map (Scene::WalksBricks:
+  // voxel surfaces and dvr; a scene of smooth surfaces holds no reach).
   Traversal(const Scene& scene, const Vec3& origin, const Vec3& direction,
             const std::array<int32_t, 3>& cell, double t)
       : scene_(&scene), origin_(origin), cell_(cell), t_(t) {
+    // Checked once a ray, not at each step: a walk of a map without its
+    // reach would read past it.
+    TRANSTICK_CHECK(scene.bricks().HoldsReach() || scene.y_begin() >= scene.y_end());
     for (int a = 0; a < 3; ++a) {
       const double d = direction[a];
       const bool moves = MovesAlong(d);
