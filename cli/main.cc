@@ -352,20 +352,12 @@ int Info(int argc, char** argv) {
   for (const std::string& note : volume->notes) std::cout << "  note: " << note << "\n";
   // A coarse histogram helps choose material intervals.
   constexpr int kBins = 16;
-  // In double: a float volume's range may span nearly all of float, and
-  // its NaN and infinite values (outside Range()) are counted apart.
-  std::vector<uint64_t> hist(kBins, 0);
-  uint64_t not_finite = 0;
+  // Its NaN and infinite values (outside Range()) are counted apart.
+  const std::vector<uint64_t> hist = Histogram(volume->values, range, kBins);
+  uint64_t not_finite = volume->values.size();
+  for (uint64_t n : hist) not_finite -= n;
   const double lo = range[0], hi = range[1];
   const double width = hi > lo ? (hi - lo) / kBins : 1;
-  for (float v : volume->values) {
-    if (!std::isfinite(v)) {
-      ++not_finite;
-      continue;
-    }
-    const double x = (v - lo) / width;
-    ++hist[x < 0 ? 0 : std::min<int>(kBins - 1, static_cast<int>(std::min(x, double{kBins})))];
-  }
   for (int b = 0; b < kBins; ++b) {
     std::printf("  [%10.1f, %10.1f)  %6.2f%%\n", lo + b * width, lo + (b + 1) * width,
                 100.0 * hist[b] / volume->values.size());
@@ -490,8 +482,17 @@ int RenderInProcess(const Flags& flags, const v1::View& view, bool dvr,
       classification = *std::move(c);
     }
   }
+  // As the root's, before the scene takes the volume's samples: what the
+  // reader passed over or chose, then what of the classification shows
+  // nothing.
+  std::vector<std::string> warnings = volume->notes;
+  for (std::string& w :
+       dvr ? UnseenTransfer(transfer, *volume) : UnseenMaterials(classification, *volume)) {
+    warnings.push_back(std::move(w));
+  }
   auto t_prepare = std::chrono::steady_clock::now();
-  auto scene = dvr ? Scene::ForDvr(*volume, transfer) : Scene::ForSurfaces(*volume, classification);
+  auto scene = dvr ? Scene::ForDvr(std::move(*volume), transfer)
+                   : Scene::ForSurfaces(std::move(*volume), classification);
   if (!scene.ok()) return fail(scene.status());
   const double prepare_ms = MsSince(t_prepare);
   Vec3 extent{volume->dims[0] * volume->spacing[0], volume->dims[1] * volume->spacing[1],
@@ -503,13 +504,6 @@ int RenderInProcess(const Flags& flags, const v1::View& view, bool dvr,
   auto camera = Camera::Create(*ToCameraSpec(*local_view), extent);
   if (!camera.ok()) return fail(camera.status());
   Progress progress(Progress::ForStderr(flags.Has("quiet")));
-  // As the root's: what the reader passed over or chose, then what of the
-  // classification shows nothing.
-  std::vector<std::string> warnings = volume->notes;
-  for (std::string& w :
-       dvr ? UnseenTransfer(transfer, *volume) : UnseenMaterials(classification, *volume)) {
-    warnings.push_back(std::move(w));
-  }
   for (const std::string& w : warnings) progress.Warn("warning: " + w);
   RenderStats stats;
   auto image = RenderLocal(*scene, *camera, ToRenderSettings(view), *threads, &stats,

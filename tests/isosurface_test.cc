@@ -369,6 +369,95 @@ TEST(IsosurfaceTest, FieldGridLabelsOnlyCellsOfOneBand) {
   EXPECT_GT(uniform, mixed);
 }
 
+// Each cell's label is the rule's (field_grid.h), computed here the plain
+// way: kMixed when a corner is NaN or the least and greatest corner's bands
+// differ or reach 255, else that band. Over random slabs of random volumes
+// whose values sit on the edges, a float either side, at -0, infinities and
+// NaN, with 1-400 edges (past 255 bands too) and rows of any width.
+TEST(IsosurfaceTest, FieldGridLabelsAreTheirCornersBand) {
+  std::mt19937_64 rng(41);
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  size_t mixed = 0, banded = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    Classification c;
+    const int materials = std::array<int, 5>{1, 2, 5, 100, 200}[rng() % 5];
+    for (int m = 0; m < materials; ++m) {
+      c.materials.push_back(Material{.name = "m", .min = 4.0f * m, .max = 4.0f * m + 3});
+    }
+    const Bands bands(c);
+    const std::vector<float>& edges = bands.edges();
+    const std::array<int, 3> dims = {1 + static_cast<int>(rng() % 37),
+                                     1 + static_cast<int>(rng() % 9),
+                                     1 + static_cast<int>(rng() % 7)};
+    const int row_begin = static_cast<int>(rng() % (dims[1] + 1));
+    const int row_end = row_begin + 1 + static_cast<int>(rng() % (dims[1] + 1 - row_begin));
+    // The planes the rows read, and a random plane more either side.
+    const int y0 =
+        std::max(0, std::clamp(row_begin - 1, 0, dims[1] - 1) - static_cast<int>(rng() % 2));
+    const int y1 = std::min(dims[1] - 1,
+                            std::clamp(row_end - 1, 0, dims[1] - 1) + static_cast<int>(rng() % 2));
+    const int planes = y1 - y0 + 1;
+    std::vector<float> scalars(static_cast<size_t>(dims[0]) * planes * dims[2]);
+    // Mostly long runs of one value, so that cells of one band are common.
+    float run = 0;
+    for (float& x : scalars) {
+      if (rng() % 6 == 0) {
+        const float e = edges[rng() % edges.size()];
+        switch (rng() % 6) {
+          case 0:
+            run = std::nextafter(e, -kInf);
+            break;
+          case 1:
+            run = std::nextafter(e, kInf);
+            break;
+          case 2:
+            run = std::bit_cast<float>(rng() % 2 ? 0x7fc00000u : 0x80000000u);
+            break;
+          case 3:
+            run = rng() % 2 ? kInf : -kInf;
+            break;
+          case 4:
+            run = e;
+            break;
+          default:
+            run = static_cast<float>(static_cast<int>(rng() % (4 * materials + 4)) - 2);
+        }
+      }
+      x = run;
+    }
+    const FieldGrid grid = FieldGrid::Build(scalars, dims, y0, planes, row_begin, row_end, bands);
+    auto at = [&](int x, int y, int z) {
+      x = std::clamp(x, 0, dims[0] - 1);
+      y = std::clamp(y, 0, dims[1] - 1);
+      z = std::clamp(z, 0, dims[2] - 1);
+      return scalars[(static_cast<size_t>(z) * planes + (y - y0)) * dims[0] + x];
+    };
+    for (int z = 0; z <= dims[2]; ++z)
+      for (int y = row_begin; y < row_end; ++y)
+        for (int x = 0; x <= dims[0]; ++x) {
+          float lo = kInf, hi = -kInf;
+          bool nan = false;
+          for (int k = 0; k < 8; ++k) {
+            const float v = at(x - 1 + (k & 1), y - 1 + (k >> 1 & 1), z - 1 + (k >> 2));
+            nan |= std::isnan(v);
+            lo = std::min(lo, v);
+            hi = std::max(hi, v);
+          }
+          const int bl = bands.Of(lo), bh = bands.Of(hi);
+          const uint8_t want = nan || bl != bh || bl >= FieldGrid::kMixed
+                                   ? FieldGrid::kMixed
+                                   : static_cast<uint8_t>(bl);
+          ASSERT_TRUE(grid.Holds(x, y, z));
+          ASSERT_EQ(grid.Label(x, y, z), want) << "trial " << trial << " cell " << x << "," << y
+                                               << "," << z << ", " << edges.size() << " edges";
+          (want == FieldGrid::kMixed ? mixed : banded) += 1;
+        }
+  }
+  // Both kinds of cell are common.
+  EXPECT_GT(banded, (banded + mixed) / 10);
+  EXPECT_GT(mixed, (banded + mixed) / 10);
+}
+
 // Rays through the whole volume, walked once on the whole scene and again
 // piece by piece on slabs of it (Scene::Slab: each with its own grid, which
 // jumps other boxes), each piece from where the last stopped, at the slab's

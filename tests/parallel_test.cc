@@ -5,7 +5,9 @@
 #include "transtick/parallel.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -185,6 +187,41 @@ TEST_F(BuildThreadsTest, ScenesAreTheSameOnAnyNumberOfThreads) {
   EXPECT_GT(dvr, 10);
 }
 
+// A scene that takes the volume's samples (Scene::ForSurfaces and ForDvr of
+// a Volume&&) is the scene of a copy, part for part, for tracing and for
+// cutting; it leaves the volume without values but its other fields, and a
+// volume it refuses (an invalid classification) keeps its values.
+TEST_F(BuildThreadsTest, ATakenVolumeGivesTheSameScene) {
+  std::mt19937_64 rng(23);
+  for (int trial = 0; trial < 40; ++trial) {
+    const Case k = RandomCase(rng, trial);
+    for (SceneUse use : {SceneUse::kTrace, SceneUse::kCut}) {
+      auto copied = k.Build(use);
+      ASSERT_TRUE(copied.ok()) << copied.status();
+      Volume taken = k.v;
+      auto built = k.dvr ? Scene::ForDvr(std::move(taken), k.t, use)
+                         : Scene::ForSurfaces(std::move(taken), k.c, use);
+      ASSERT_TRUE(built.ok()) << built.status();
+      EXPECT_TRUE(copied->SameParts(*built)) << "trial " << trial;
+      // Bit for bit: the values hold NaN.
+      ASSERT_EQ(built->scalars().size(), k.v.values.size());
+      EXPECT_EQ(std::memcmp(built->scalars().data(), k.v.values.data(),
+                            k.v.values.size() * sizeof(float)),
+                0)
+          << "trial " << trial;
+      EXPECT_TRUE(taken.values.empty());
+      EXPECT_EQ(taken.dims, k.v.dims);
+    }
+  }
+  Case k = RandomCase(rng, 1);
+  k.c.materials.push_back(Material{.name = "backwards", .min = 9, .max = 3});
+  Volume kept = k.v;
+  EXPECT_FALSE(Scene::ForSurfaces(std::move(kept), k.c).ok());
+  ASSERT_EQ(kept.values.size(), k.v.values.size());
+  EXPECT_EQ(std::memcmp(kept.values.data(), k.v.values.data(), k.v.values.size() * sizeof(float)),
+            0);
+}
+
 // The root's scene (SceneUse::kCut) leaves out what only walks look up:
 // the field's grid and the brick map's reach. It sends the same parts (the
 // brick map's bytes, sticks, summary, scalars), a slab cut from it is the
@@ -316,6 +353,101 @@ TEST_F(BuildThreadsTest, RangeKeepsTheFirstOfEqualExtremes) {
     EXPECT_EQ(v.Range(), (std::array<float, 2>{7.0f, 9.5f})) << threads << " threads";
     v.values[999999] = v.values[500000] = v.values[3] = 7.0f;
   }
+}
+
+// The value range is one pass's, bit for bit (the sign of a zero
+// included), over random volumes of zeros of both signs, NaN, infinities and
+// ordinary values, of every length modulo the lanes, on any thread count.
+TEST_F(BuildThreadsTest, RangeIsOnePasssBitForBit) {
+  std::mt19937_64 rng(29);
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  const float kinds[] = {0.0f, -0.0f,  kInf,  -kInf, std::numeric_limits<float>::quiet_NaN(),
+                         1.5f, -2.25f, 3e38f, -3e38f};
+  for (int trial = 0; trial < 600; ++trial) {
+    Volume v;
+    v.dims = {1 + static_cast<int>(rng() % (trial < 300 ? 40 : 4000)), 1,
+              1 + static_cast<int>(rng() % (trial < 300 ? 3 : 300))};
+    v.values.resize(v.VoxelCount());
+    const int mix = 1 + static_cast<int>(rng() % 9);  // how many kinds appear
+    for (float& x : v.values) x = kinds[rng() % mix];
+    float lo = kInf, hi = -kInf;
+    for (float x : v.values) {
+      if (x < lo && x != -kInf) lo = x;
+      if (x > hi && x != kInf) hi = x;
+    }
+    const std::array<float, 2> expected =
+        lo > hi ? std::array<float, 2>{0.0f, 0.0f} : std::array<float, 2>{lo, hi};
+    for (int threads : {1, 2, 5}) {
+      SetBuildThreads(threads);
+      const auto range = v.Range();
+      ASSERT_EQ(std::bit_cast<uint32_t>(range[0]), std::bit_cast<uint32_t>(expected[0]))
+          << "trial " << trial << ", " << threads << " threads";
+      ASSERT_EQ(std::bit_cast<uint32_t>(range[1]), std::bit_cast<uint32_t>(expected[1]))
+          << "trial " << trial << ", " << threads << " threads";
+    }
+  }
+}
+
+// The histogram counts each finite sample in the bin of the division rule
+// (volume.h), on any thread count: over random volumes whose values sit on
+// the bins' edges, a float below and above them, at the range's ends, at
+// -0, near the largest float and among denormals, with NaN and infinities.
+TEST_F(BuildThreadsTest, HistogramCountsAsTheDivisionDoes) {
+  std::mt19937_64 rng(17);
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  constexpr float kMax = std::numeric_limits<float>::max();
+  constexpr float kTiny = std::numeric_limits<float>::denorm_min();
+  const std::vector<std::array<float, 2>> spans = {
+      {0, 1},          {-1024, 3071}, {0, 255},      {-kMax, kMax},    {-3e38f, 1},
+      {0, 64 * kTiny}, {5, 5},        {-0.0f, 0.0f}, {1e-30f, 1e-29f}, {-7.25f, 1e6f}};
+  int checked = 0;
+  for (int trial = 0; trial < 120; ++trial) {
+    const auto span = spans[trial % spans.size()];
+    const int bins = std::array<int, 6>{1, 2, 7, 16, 64, 1000}[rng() % 6];
+    const double lo = span[0], hi = span[1];
+    const double width = hi > lo ? (hi - lo) / bins : 1;
+    Volume v;
+    v.dims = {1 + static_cast<int>(rng() % 300), 1 + static_cast<int>(rng() % 40),
+              1 + static_cast<int>(rng() % 30)};
+    v.values.resize(v.VoxelCount());
+    std::uniform_real_distribution<double> unit(0, 1);
+    for (float& x : v.values) {
+      switch (rng() % 8) {
+        case 0: {  // on an edge, or a float either side of it
+          const float e = static_cast<float>(lo + static_cast<double>(rng() % (bins + 1)) * width);
+          const int side = static_cast<int>(rng() % 3) - 1;
+          x = side == 0 ? e : std::nextafter(e, side < 0 ? -kInf : kInf);
+          break;
+        }
+        case 1:
+          x = rng() % 2 ? span[0] : span[1];
+          break;
+        case 2: {
+          const uint32_t kinds[] = {0x7fc00000u, 0x7f800000u, 0xff800000u, 0x80000000u};
+          x = std::bit_cast<float>(kinds[rng() % 4]);
+          break;
+        }
+        default:
+          x = static_cast<float>(lo + unit(rng) * (hi - lo));
+      }
+      // Samples stay within the span, as Range() would give it.
+      if (std::isfinite(x)) x = std::clamp(x, span[0], span[1]);
+    }
+    std::vector<uint64_t> expected(bins, 0);
+    for (float x : v.values) {
+      if (!std::isfinite(x)) continue;
+      const double q = (x - lo) / width;
+      ++expected[std::clamp(static_cast<int>(q), 0, bins - 1)];
+    }
+    for (int threads : {1, 3}) {
+      SetBuildThreads(threads);
+      ASSERT_EQ(Histogram(v.values, span, bins), expected)
+          << "span " << span[0] << " .. " << span[1] << ", " << bins << " bins, " << threads
+          << " threads";
+      ++checked;
+    }
+  }
+  EXPECT_EQ(checked, 240);
 }
 
 }  // namespace

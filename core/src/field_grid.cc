@@ -6,7 +6,99 @@
 #include "transtick/check.h"
 #include "transtick/parallel.h"
 
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
+
 namespace transtick {
+namespace {
+
+constexpr uint8_t kMixedLabel = FieldGrid::kMixed;
+
+// Each value's band as a byte (the edges at or below it; NaN and a band of
+// 255 or more give 255), for out[0, n).
+void BandRow(const float* __restrict v, int n, const std::vector<float>& edges,
+             uint8_t* __restrict out) {
+  if (edges.size() >= kMixedLabel) {
+    for (int x = 0; x < n; ++x) {
+      const auto b = std::upper_bound(edges.begin(), edges.end(), v[x]) - edges.begin();
+      out[x] =
+          v[x] != v[x] ? kMixedLabel : static_cast<uint8_t>(std::min<ptrdiff_t>(b, kMixedLabel));
+    }
+    return;
+  }
+  int x = 0;
+#if defined(__SSE2__)
+  // Sixteen values at once: each edge's comparisons, packed to bytes of -1
+  // or 0, are subtracted from the count (NaN compares false); NaN then sets
+  // all bits.
+  for (; x + 16 <= n; x += 16) {
+    const __m128 v0 = _mm_loadu_ps(v + x), v1 = _mm_loadu_ps(v + x + 4),
+                 v2 = _mm_loadu_ps(v + x + 8), v3 = _mm_loadu_ps(v + x + 12);
+    auto bytes = [](__m128 m0, __m128 m1, __m128 m2, __m128 m3) {
+      return _mm_packs_epi16(_mm_packs_epi32(_mm_castps_si128(m0), _mm_castps_si128(m1)),
+                             _mm_packs_epi32(_mm_castps_si128(m2), _mm_castps_si128(m3)));
+    };
+    __m128i count = _mm_setzero_si128();
+    for (const float e : edges) {
+      const __m128 ev = _mm_set1_ps(e);
+      count = _mm_sub_epi8(count, bytes(_mm_cmpge_ps(v0, ev), _mm_cmpge_ps(v1, ev),
+                                        _mm_cmpge_ps(v2, ev), _mm_cmpge_ps(v3, ev)));
+    }
+    const __m128i nan = bytes(_mm_cmpunord_ps(v0, v0), _mm_cmpunord_ps(v1, v1),
+                              _mm_cmpunord_ps(v2, v2), _mm_cmpunord_ps(v3, v3));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + x), _mm_or_si128(count, nan));
+  }
+#endif
+  for (; x < n; ++x) {
+    uint8_t b = 0;
+    for (const float e : edges) b += v[x] >= e;
+    out[x] = v[x] != v[x] ? kMixedLabel : b;
+  }
+}
+
+// The labels of a row of n + 1 cells from the bands of the four voxel rows
+// their corners read (a, b, c, d): the band all eight corners share, else
+// kMixed. lo and hi (n bytes) are scratch.
+void LabelRow(const uint8_t* __restrict a, const uint8_t* __restrict b, const uint8_t* __restrict c,
+              const uint8_t* __restrict d, int n, uint8_t* __restrict lo, uint8_t* __restrict hi,
+              uint8_t* __restrict out) {
+  int x = 0;
+#if defined(__SSE2__)
+  auto load = [](const uint8_t* p) { return _mm_loadu_si128(reinterpret_cast<const __m128i*>(p)); };
+  for (; x + 16 <= n; x += 16) {
+    const __m128i va = load(a + x), vb = load(b + x), vc = load(c + x), vd = load(d + x);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(lo + x),
+                     _mm_min_epu8(_mm_min_epu8(va, vb), _mm_min_epu8(vc, vd)));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(hi + x),
+                     _mm_max_epu8(_mm_max_epu8(va, vb), _mm_max_epu8(vc, vd)));
+  }
+#endif
+  for (; x < n; ++x) {
+    lo[x] = std::min(std::min(a[x], b[x]), std::min(c[x], d[x]));
+    hi[x] = std::max(std::max(a[x], b[x]), std::max(c[x], d[x]));
+  }
+  // Cell cx reads voxels cx - 1 and cx along x, clamped at the faces.
+  out[0] = lo[0] == hi[0] ? hi[0] : kMixedLabel;
+  int cx = 1;
+#if defined(__SSE2__)
+  // Where the least and greatest band agree, that band; elsewhere all bits.
+  const __m128i ones = _mm_set1_epi8(-1);
+  for (; cx + 16 <= n; cx += 16) {
+    const __m128i l = _mm_min_epu8(load(lo + cx - 1), load(lo + cx));
+    const __m128i h = _mm_max_epu8(load(hi + cx - 1), load(hi + cx));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + cx),
+                     _mm_or_si128(h, _mm_xor_si128(_mm_cmpeq_epi8(l, h), ones)));
+  }
+#endif
+  for (; cx < n; ++cx) {
+    const uint8_t l = std::min(lo[cx - 1], lo[cx]), h = std::max(hi[cx - 1], hi[cx]);
+    out[cx] = l == h ? h : kMixedLabel;
+  }
+  out[n] = lo[n - 1] == hi[n - 1] ? hi[n - 1] : kMixedLabel;
+}
+
+}  // namespace
 
 FieldGrid FieldGrid::Build(const std::vector<float>& scalars, std::array<int, 3> dims,
                            int scalar_y_begin, int scalar_planes, int row_begin, int row_end,
@@ -18,49 +110,51 @@ FieldGrid FieldGrid::Build(const std::vector<float>& scalars, std::array<int, 3>
   g.row_begin_ = row_begin;
   std::vector<uint8_t> labels(static_cast<size_t>(g.cells_[0]) * g.cells_[1] * g.cells_[2]);
   const std::vector<float>& edges = bands.edges();
-  // The band of a value: how many edges lie at or below it (Bands::Of).
-  auto band = [&](float v) {
-    if (edges.size() <= 8) {
-      int b = 0;
-      for (float e : edges) b += e <= v;
-      return b;
-    }
-    return static_cast<int>(std::upper_bound(edges.begin(), edges.end(), v) - edges.begin());
-  };
+  // A cell's label, by the rule of field_grid.h: kMixed when a corner is NaN,
+  // or when its least and greatest corner lie in different bands or in a
+  // band of 255 or more; else that band. A band (the edges at or below a
+  // value) never decreases with the value, so the least and greatest
+  // corner's bands are the least and greatest of the corners' bands. Each
+  // voxel's band is therefore found once, as a byte (255 for NaN and for a
+  // band of 255 or more), and a cell's label is the band its eight corners
+  // share, or kMixed (255) when they differ: bytes compared sixteen at once.
   const size_t row = nx, plane = row * scalar_planes;
   auto voxel_row = [&](int y, int z) {
-    y = std::clamp(y, 0, ny - 1);
-    z = std::clamp(z, 0, nz - 1);
     TRANSTICK_CHECK(y >= scalar_y_begin && y < scalar_y_begin + scalar_planes);
     return scalars.data() + z * plane + (y - scalar_y_begin) * row;
   };
-  // Per row of cells: the least and greatest of the four voxel rows its
-  // corners read, then of each pair along x (clamped at the faces). Planes
-  // of cells on as many threads.
+  // The voxel rows the cells read: row_begin - 1 .. row_end - 1, clamped.
+  const int y0 = std::clamp(row_begin - 1, 0, ny - 1), y1 = std::clamp(row_end - 1, 0, ny - 1);
+  const size_t band_plane = static_cast<size_t>(y1 - y0 + 1) * nx;
+  // Planes of cells on as many threads, each keeping the voxel bands of the
+  // two planes of voxels its cells read.
   const size_t plane_cells = static_cast<size_t>(g.cells_[0]) * g.cells_[1];
   ParallelFor(nz + 1, 4, [&](size_t z_begin, size_t z_end) {
-    std::vector<float> lo(nx), hi(nx);
-    std::vector<uint8_t> nan(nx);
+    std::vector<uint8_t> bands_of[2] = {std::vector<uint8_t>(band_plane),
+                                        std::vector<uint8_t>(band_plane)};
+    int held[2] = {-1, -1};  // the voxel plane each holds
+    auto plane_bands = [&](int z) -> const uint8_t* {
+      for (int k = 0; k < 2; ++k) {
+        if (held[k] == z) return bands_of[k].data();
+      }
+      // The other plane is the one still needed (z - 1 of the next cell plane).
+      const int k = held[0] == z - 1 ? 1 : 0;
+      for (int y = y0; y <= y1; ++y) {
+        BandRow(voxel_row(y, z), nx, edges, bands_of[k].data() + (y - y0) * nx);
+      }
+      held[k] = z;
+      return bands_of[k].data();
+    };
+    std::vector<uint8_t> lo(nx), hi(nx);
     uint8_t* out = labels.data() + z_begin * plane_cells;
     for (int cz = static_cast<int>(z_begin); cz < static_cast<int>(z_end); ++cz) {
+      const uint8_t* back = plane_bands(std::clamp(cz - 1, 0, nz - 1));
+      const uint8_t* front = plane_bands(std::clamp(cz, 0, nz - 1));
       for (int cy = row_begin; cy < row_end; ++cy) {
-        const float* r[4] = {voxel_row(cy - 1, cz - 1), voxel_row(cy, cz - 1),
-                             voxel_row(cy - 1, cz), voxel_row(cy, cz)};
-        for (int x = 0; x < nx; ++x) {
-          const float a = r[0][x], b = r[1][x], c = r[2][x], d = r[3][x];
-          lo[x] = std::min(std::min(a, b), std::min(c, d));
-          hi[x] = std::max(std::max(a, b), std::max(c, d));
-          // A NaN corner makes the cell mixed: its cubic finds no root there,
-          // as it would without the label.
-          nan[x] = (a != a) | (b != b) | (c != c) | (d != d);
-        }
-        for (int cx = 0; cx <= nx; ++cx) {
-          const int x0 = std::max(cx - 1, 0), x1 = std::min(cx, nx - 1);
-          const float l = std::min(lo[x0], lo[x1]), h = std::max(hi[x0], hi[x1]);
-          const int bl = band(l), bh = band(h);
-          *out++ =
-              nan[x0] | nan[x1] || bl != bh || bl >= kMixed ? kMixed : static_cast<uint8_t>(bl);
-        }
+        const size_t ya = (std::clamp(cy - 1, 0, ny - 1) - y0) * row;
+        const size_t yb = (std::clamp(cy, 0, ny - 1) - y0) * row;
+        LabelRow(back + ya, back + yb, front + ya, front + yb, nx, lo.data(), hi.data(), out);
+        out += nx + 1;
       }
     }
   });

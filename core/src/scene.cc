@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "transtick/check.h"
@@ -186,6 +187,27 @@ std::vector<uint8_t> DvrVisibility(const Volume& volume, const TransferFunction&
 
 absl::StatusOr<Scene> Scene::ForSurfaces(const Volume& volume, const Classification& classification,
                                          SceneUse use) {
+  return MakeSurfaces(volume, classification, use, nullptr);
+}
+
+absl::StatusOr<Scene> Scene::ForSurfaces(Volume&& volume, const Classification& classification,
+                                         SceneUse use) {
+  return MakeSurfaces(volume, classification, use, &volume.values);
+}
+
+absl::StatusOr<Scene> Scene::ForDvr(const Volume& volume, const TransferFunction& transfer,
+                                    SceneUse use) {
+  return MakeDvr(volume, transfer, use, nullptr);
+}
+
+absl::StatusOr<Scene> Scene::ForDvr(Volume&& volume, const TransferFunction& transfer,
+                                    SceneUse use) {
+  return MakeDvr(volume, transfer, use, &volume.values);
+}
+
+absl::StatusOr<Scene> Scene::MakeSurfaces(const Volume& volume,
+                                          const Classification& classification, SceneUse use,
+                                          std::vector<float>* take) {
   if (auto s = CheckDims(volume); !s.ok()) return s;
   if (auto s = classification.Validate(); !s.ok()) return s;
   std::vector<uint8_t> labels(volume.values.size());
@@ -207,16 +229,16 @@ absl::StatusOr<Scene> Scene::ForSurfaces(const Volume& volume, const Classificat
   scene.classification_ = classification;
   scene.scalar_y_begin_ = 0;
   scene.scalar_planes_ = volume.dims[1];
-  scene.scalars_ = volume.values;
+  scene.scalars_ = take ? std::exchange(*take, {}) : volume.values;
   if (use == SceneUse::kTrace) scene.BuildField();
   if (classification.surface == SurfaceModel::kSmooth) {
-    scene.summary_ = FieldSummary::Build(volume.values, volume.dims, Bands(classification));
+    scene.summary_ = FieldSummary::Build(scene.scalars_, volume.dims, Bands(classification));
   }
   return scene;
 }
 
-absl::StatusOr<Scene> Scene::ForDvr(const Volume& volume, const TransferFunction& transfer,
-                                    SceneUse use) {
+absl::StatusOr<Scene> Scene::MakeDvr(const Volume& volume, const TransferFunction& transfer,
+                                     SceneUse use, std::vector<float>* take) {
   if (auto s = CheckDims(volume); !s.ok()) return s;
   if (auto s = transfer.Validate(); !s.ok()) return s;
   std::vector<uint8_t> labels = DvrVisibility(volume, transfer);
@@ -231,7 +253,7 @@ absl::StatusOr<Scene> Scene::ForDvr(const Volume& volume, const TransferFunction
   scene.transfer_ = transfer;
   scene.scalar_y_begin_ = 0;
   scene.scalar_planes_ = volume.dims[1];
-  scene.scalars_ = volume.values;
+  scene.scalars_ = take ? std::exchange(*take, {}) : volume.values;
   return scene;
 }
 

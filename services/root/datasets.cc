@@ -18,7 +18,6 @@
 #include "convert.h"
 #include "security.h"
 #include "transtick/image_io.h"
-#include "transtick/parallel.h"
 #include "transtick/partition.h"
 #include "transtick/volume_io.h"
 
@@ -217,17 +216,22 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
       classification = *std::move(t);
     }
   }
+  // What the user is told of the values comes from the volume, before the
+  // scene takes its samples (they are not copied: SceneUse::kCut keeps them
+  // as the scalars it sends).
+  data->range = volume->Range();
+  data->histogram = Histogram(volume->values, data->range, LoadedDataset::kHistogramBins);
   absl::StatusOr<Scene> scene;
   if (const auto* c = std::get_if<Classification>(&classification)) {
     data->mode = RenderMode::kSurfaces;
-    // The root only cuts it into slabs (SceneUse::kCut).
-    scene = Scene::ForSurfaces(*volume, *c, SceneUse::kCut);
     data->warnings = UnseenMaterials(*c, *volume);
+    // The root only cuts it into slabs (SceneUse::kCut).
+    scene = Scene::ForSurfaces(std::move(*volume), *c, SceneUse::kCut);
   } else {
     data->mode = RenderMode::kDvr;
     const auto& transfer = std::get<TransferFunction>(classification);
-    scene = Scene::ForDvr(*volume, transfer, SceneUse::kCut);
     data->warnings = UnseenTransfer(transfer, *volume);
+    scene = Scene::ForDvr(std::move(*volume), transfer, SceneUse::kCut);
   }
   // What the reader passed over or chose (a DICOM directory's other files
   // and series) comes first: the user sees which data was rendered.
@@ -237,27 +241,6 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
     return absl::Status(scene.status().code(),
                         absl::StrCat(Shown(ds.volume()), ": ", scene.status().message()));
   data->scene = *std::move(scene);
-  data->range = data->scene.value_range();  // the volume's, found once
-  data->histogram.assign(LoadedDataset::kHistogramBins, 0);
-  {
-    // In double: a float volume's range may span nearly all of float. On
-    // every core, each range of voxels counting on its own; the counts are
-    // added up, in any order, to the same totals.
-    const double lo = data->range[0], hi = data->range[1];
-    const double width = hi > lo ? (hi - lo) / LoadedDataset::kHistogramBins : 1;
-    absl::Mutex mu;
-    ParallelFor(volume->values.size(), size_t{1} << 18, [&](size_t begin, size_t end) {
-      std::vector<uint64_t> counts(LoadedDataset::kHistogramBins, 0);
-      for (size_t i = begin; i < end; ++i) {
-        const float v = volume->values[i];
-        if (!std::isfinite(v)) continue;
-        const double x = (v - lo) / width;
-        ++counts[std::clamp(static_cast<int>(x), 0, LoadedDataset::kHistogramBins - 1)];
-      }
-      absl::MutexLock hold(&mu);
-      for (int b = 0; b < LoadedDataset::kHistogramBins; ++b) data->histogram[b] += counts[b];
-    });
-  }
   data->direction = volume->direction;
   data->load_ms = MsSince(t0);
   spdlog::info("dataset {} ({}): {}x{}x{}, {} sticks, prepared in {:.0f} ms", Shown(ds.volume()),

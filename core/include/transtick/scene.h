@@ -62,6 +62,13 @@ class Scene {
   // trilinear sample in a void voxel can have opacity.
   static absl::StatusOr<Scene> ForDvr(const Volume& volume, const TransferFunction& transfer,
                                       SceneUse use = SceneUse::kTrace);
+  // The same scenes, taking the volume's samples as the scene's scalars
+  // instead of copying them: the volume is left without values when the
+  // scene is made, untouched when an error is returned.
+  static absl::StatusOr<Scene> ForSurfaces(Volume&& volume, const Classification& classification,
+                                           SceneUse use = SceneUse::kTrace);
+  static absl::StatusOr<Scene> ForDvr(Volume&& volume, const TransferFunction& transfer,
+                                      SceneUse use = SceneUse::kTrace);
 
   // Whether the tracer of this mode and classification walks the brick map
   // (and needs its reach): voxel surfaces and dvr do, smooth surfaces walk
@@ -168,6 +175,12 @@ class Scene {
   bool SameParts(const Scene& other) const;
 
  private:
+  // Scenes from `volume`, its samples taken from *take when given.
+  static absl::StatusOr<Scene> MakeSurfaces(const Volume& volume,
+                                            const Classification& classification, SceneUse use,
+                                            std::vector<float>* take);
+  static absl::StatusOr<Scene> MakeDvr(const Volume& volume, const TransferFunction& transfer,
+                                       SceneUse use, std::vector<float>* take);
   // Labels the field's cells for smooth surfaces (field()).
   void BuildField();
 

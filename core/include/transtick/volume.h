@@ -5,6 +5,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -66,6 +67,15 @@ struct Volume {
   // {0, 0} for a volume without one.
   std::array<float, 2> Range() const;
 };
+
+// Counts of the finite `values` in `bins` equal bins over `range` (as
+// Volume::Range() gives it): value v falls in bin floor((v - lo) / w), w =
+// (hi - lo) / bins (1 when hi <= lo), computed in double and clamped to [0,
+// bins). NaN and infinities are not counted. The same counts on any number
+// of threads.
+// REQUIRES: bins >= 1.
+std::vector<uint64_t> Histogram(std::span<const float> values, std::array<float, 2> range,
+                                int bins);
 
 }  // namespace transtick
 
