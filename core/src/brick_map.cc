@@ -5,7 +5,64 @@
 #include "absl/strings/str_cat.h"
 #include "transtick/parallel.h"
 
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
+
 namespace transtick {
+namespace {
+
+constexpr uint8_t kMixedCell = BrickMap::kMixed;
+
+// The least and greatest label of each column x of the n rows (n >= 1), each
+// label taken as itself with uniform materials, else as 0 for void and
+// kMixed for anything else.
+void ColumnRange(const uint8_t* const* rows, int n, int width, bool uniform, uint8_t* __restrict lo,
+                 uint8_t* __restrict hi) {
+  auto as = [uniform](uint8_t l) -> uint8_t { return uniform || l == 0 ? l : kMixedCell; };
+  for (int x = 0; x < width; ++x) lo[x] = hi[x] = as(rows[0][x]);
+  for (int r = 1; r < n; ++r) {
+    const uint8_t* __restrict row = rows[r];
+    for (int x = 0; x < width; ++x) {
+      const uint8_t m = as(row[x]);
+      lo[x] = std::min(lo[x], m);
+      hi[x] = std::max(hi[x], m);
+    }
+  }
+}
+
+// Cell c of a row is made of columns 2c and 2c + 1: the label they share,
+// else kMixed, for c in [0, cells).
+void PairLabels(const uint8_t* __restrict lo, const uint8_t* __restrict hi, int cells,
+                uint8_t* __restrict out) {
+  int c = 0;
+#if defined(__SSE2__)
+  // Even and odd bytes apart (the low and high byte of each 16-bit lane,
+  // packed back without saturating: each is at most 255), then as one.
+  const __m128i low = _mm_set1_epi16(0x00ff), ones = _mm_set1_epi8(-1);
+  auto load = [](const uint8_t* p) { return _mm_loadu_si128(reinterpret_cast<const __m128i*>(p)); };
+  auto even = [&](__m128i a, __m128i b) {
+    return _mm_packus_epi16(_mm_and_si128(a, low), _mm_and_si128(b, low));
+  };
+  auto odd = [](__m128i a, __m128i b) {
+    return _mm_packus_epi16(_mm_srli_epi16(a, 8), _mm_srli_epi16(b, 8));
+  };
+  for (; c + 16 <= cells; c += 16) {
+    const __m128i l0 = load(lo + 2 * c), l1 = load(lo + 2 * c + 16);
+    const __m128i h0 = load(hi + 2 * c), h1 = load(hi + 2 * c + 16);
+    const __m128i l = _mm_min_epu8(even(l0, l1), odd(l0, l1));
+    const __m128i h = _mm_max_epu8(even(h0, h1), odd(h0, h1));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + c),
+                     _mm_or_si128(h, _mm_xor_si128(_mm_cmpeq_epi8(l, h), ones)));
+  }
+#endif
+  for (; c < cells; ++c) {
+    const uint8_t l = std::min(lo[2 * c], lo[2 * c + 1]), h = std::max(hi[2 * c], hi[2 * c + 1]);
+    out[c] = l == h ? h : kMixedCell;
+  }
+}
+
+}  // namespace
 
 void BrickMap::SetDims(std::array<int, 3> dims) {
   for (int a = 0; a < 3; ++a) {
@@ -21,28 +78,34 @@ BrickMap BrickMap::Build(std::span<const uint8_t> labels, std::array<int, 3> dim
                          bool uniform_materials, int y_begin, int y_end) {
   BrickMap b;
   b.SetDims(dims);
-  // The first voxel seen fixes a cell's material, any other makes it mixed;
-  // without uniform materials every voxel that is not void does. A cell with
-  // no voxel inside the volume stays void.
+  // A cell's material is the one its voxels inside the volume (up to 2^3)
+  // share, else it is mixed; without uniform materials every voxel that is
+  // not void counts as mixed. A cell with no voxel inside the volume stays
+  // void. Per row of cells, from the least and greatest of each column of
+  // its voxels: bytes, compared sixteen at a time.
   std::vector<uint8_t> seen(b.cells_.size(), 0);
-  // Pairs of planes, which share their cells, on as many threads.
   const size_t plane = static_cast<size_t>(dims[0]) * dims[1];
-  ParallelFor((dims[2] + 1) / 2, 2, [&](size_t pair_begin, size_t pair_end) {
-    size_t i = 2 * pair_begin * plane;
-    const int z_end = std::min(dims[2], static_cast<int>(2 * pair_end));
-    for (int z = static_cast<int>(2 * pair_begin); z < z_end; ++z) {
-      for (int y = 0; y < dims[1]; ++y) {
-        const size_t row = b.CellIndex(0, y, z);
-        for (int x = 0; x < dims[0]; ++x, ++i) {
-          const size_t k = row + (x >> 1);
-          const uint8_t m = uniform_materials || labels[i] == 0 ? labels[i] : kMixed;
-          if (!seen[k]) {
-            seen[k] = 1;
-            b.cells_[k] = m;
-          } else if (b.cells_[k] != m) {
-            b.cells_[k] = kMixed;
+  const int nx = dims[0], cells_x = b.cinside_[0];
+  // Pairs of planes, which share their cells, on as many threads.
+  ParallelFor(b.cinside_[2], 2, [&](size_t pair_begin, size_t pair_end) {
+    // One more column than the volume, so that an odd width pairs its last
+    // voxel with itself.
+    std::vector<uint8_t> lo(nx + 1), hi(nx + 1);
+    for (int cz = static_cast<int>(pair_begin); cz < static_cast<int>(pair_end); ++cz) {
+      for (int cy = 0; cy < b.cinside_[1]; ++cy) {
+        const uint8_t* rows[4];
+        int n = 0;
+        for (int z = 2 * cz; z < std::min(2 * cz + 2, dims[2]); ++z) {
+          for (int y = 2 * cy; y < std::min(2 * cy + 2, dims[1]); ++y) {
+            rows[n++] = labels.data() + z * plane + static_cast<size_t>(y) * nx;
           }
         }
+        ColumnRange(rows, n, nx, uniform_materials, lo.data(), hi.data());
+        lo[nx] = lo[nx - 1];
+        hi[nx] = hi[nx - 1];
+        const size_t at = b.CellIndex(0, 2 * cy, 2 * cz);
+        PairLabels(lo.data(), hi.data(), cells_x, b.cells_.data() + at);
+        std::fill_n(seen.data() + at, cells_x, 1);
       }
     }
   });
