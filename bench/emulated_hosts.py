@@ -2,7 +2,7 @@
 
   emulated_hosts.py point PDIR W R LAT_MS GBIT FRAMES IDENTICAL ROUND ROWS
       reads PDIR/turn.json (the turntable job's statistics: docs/formats.md,
-      "Cluster frame statistics"), the display's /metrics and every relay's
+      "Cluster frame statistics") and PDIR/warm.json (the warm-up job's), the display's /metrics and every relay's
       byte counts scraped before and after that job, prints the point's row
       and appends it as one JSON object to ROWS. Exit status 1 when a frame
       is not bit-identical to the in-process render.
@@ -22,7 +22,7 @@ import sys
 
 HEADER = (f"{'W':>2} {'R':>2} {'lat_ms':>6} {'Gbit':>5} {'frame_ms':>9} {'fps':>6} {'idle%':>5} "
           f"{'rays/link/frame':>22} {'wire KB/link/frm':>18} {'hops':>6} {'assem_ms':>9} "
-          f"{'tail_ms':>7}")
+          f"{'tail_ms':>7} {'load_ms':>8}")
 
 
 def ip(host):
@@ -54,6 +54,12 @@ def relay_counts(pdir, prefix, host):
 
 def point(pdir, w, r, lat, gbit, frames, identical, rnd, rows_path):
     stats = json.load(open(f"{pdir}/turn.json"))
+    # The warm-up job's first frame waited for the slabs to go out over the
+    # links: its load_ms.
+    try:
+        load_ms = float(json.load(open(f"{pdir}/warm.json"))[0].get("load_ms", 0))
+    except (FileNotFoundError, IndexError, ValueError):
+        load_ms = float("nan")
     # R "auto": the root's cluster model chose; the rings it formed.
     auto = r == "auto"
     r = int(stats[0].get("rings", 1)) if auto else int(r)
@@ -107,6 +113,7 @@ def point(pdir, w, r, lat, gbit, frames, identical, rnd, rows_path):
         "rays_sent": count("rays_sent"), "ray_bytes_sent": count("bytes_sent"),
         "deposits": count("deposits"), "deposit_bytes": count("deposit_bytes"),
         "assembly_ms_mean": assembly_ms, "tail_ms": statistics.mean(frame_ms) - assembly_ms,
+        "load_ms": load_ms,
         # For the cluster model (bench/cluster_model): a frame's summed
         # tracer CPU, slowest over mean active time, and pixels.
         "tracer_cpu_ms": statistics.median(sum(wk.get("cpu_ms", 0) for wk in s["workers"])
@@ -140,7 +147,7 @@ def format_row(p):
     return (f"{p['workers']:>2} {rings:>2} {p['latency_ms']:>6g} {gbit:>5} "
             f"{p['frame_ms_median']:>9.1f} {p['frames_per_s']:>6.2f} {100 * p['idle_share']:>5.1f} "
             f"{span(rays, 1):>22} {span(wire, 1e3):>18} {p['hops_per_ray']:>6.3f} "
-            f"{p['assembly_ms_mean']:>9.1f} {p['tail_ms']:>7.1f}")
+            f"{p['assembly_ms_mean']:>9.1f} {p['tail_ms']:>7.1f} {p.get('load_ms', float('nan')):>8.1f}")
 
 
 def summary(rows_path, json_path):
@@ -157,7 +164,7 @@ def summary(rows_path, json_path):
         del m["round"]
         for field in ("frame_ms_median", "frame_ms_min", "frame_ms_mean", "frames_per_s",
                       "idle_share", "assembly_ms_mean", "tail_ms", "tracer_cpu_ms",
-                      "active_imbalance"):
+                      "active_imbalance", "load_ms"):
             m[field] = statistics.median(p[field] for p in ps)
         m["frames_identical"] = min(p["frames_identical"] for p in ps)
         # Balancing is off: the same cuts and the same rays every round.

@@ -2,8 +2,8 @@
 # Fuzzes what transtick reads from outside for a bounded time, under ASan and
 # UBSan (docs/design.md, "Fuzzing"): volume files (volume_fuzzer), job files
 # (job_fuzzer), the ray and deposit batches a worker and the display
-# receive (batch_fuzzer), and the sticks blocks, brick map and field
-# summary of a slab (sticks_fuzzer). Builds them with clang and libFuzzer into
+# receive (batch_fuzzer), and the sticks blocks, brick map, field
+# summary and scalars of a slab (sticks_fuzzer). Builds them with clang and libFuzzer into
 # build-fuzz/, writes the seed corpora, runs each fuzzer for
 # SECONDS_PER_FUZZER seconds (default 60) and fails on any crash, leak,
 # undefined behaviour, hang (an input slower than 20 s) or large allocation.

@@ -95,6 +95,16 @@ TEST(ClusterModel, FiguresMoveTheRightWay) {
     slower = s;
     slower.network.gbits /= 2;
     ASSERT_GE(Predict(c, v, slower).frame_ms, p.frame_ms);
+    // Fewer bytes on the wire (scalars in a narrower coding) load sooner,
+    // at the same memory; as many as held load as before.
+    VolumeSize coded = v;
+    coded.wire_bytes = v.bytes * (0.25 + 0.7 * u(rng));
+    const Prediction w = Predict(c, coded, s);
+    ASSERT_LT(w.load_ms, p.load_ms);
+    ASSERT_EQ(w.memory_per_worker, p.memory_per_worker);
+    ASSERT_EQ(w.frame_ms, p.frame_ms);
+    coded.wire_bytes = v.bytes;
+    ASSERT_EQ(Predict(c, coded, s).load_ms, p.load_ms);
     if (s.rings < s.workers) {
       ClusterShape more = s;
       ++more.rings;

@@ -22,6 +22,7 @@
 #include "transtick/orientation.h"
 #include "transtick/ray_codec.h"
 #include "transtick/render.h"
+#include "transtick/scalar_codec.h"
 #include "transtick/synthetic.h"
 #include "transtick/volume_io.h"
 
@@ -33,6 +34,25 @@ namespace fs = std::filesystem;
 // A phantom written as a raw NRRD into a fresh data directory.
 std::string WritePhantom(const std::string& dir, std::array<int, 3> dims) {
   Volume v = MakeNoisyPhantom(dims, 33);
+  // Its slabs' scalars travel in every coding (docs/formats.md, "Slab
+  // scalars"): the first third of its z planes rounded to integers (bytes),
+  // the second too with a line of -1 along x = 0 in each (shorts), the rest
+  // floats.
+  const size_t plane = static_cast<size_t>(dims[0]) * dims[1];
+  for (int z = 0; z < 2 * dims[2] / 3; ++z) {
+    for (size_t i = 0; i < plane; ++i) {
+      float& value = v.values[z * plane + i];
+      value = std::round(value);
+      if (z >= dims[2] / 3 && i % dims[0] == 0) value = -1;
+    }
+  }
+  for (int z : {0, dims[2] / 3, dims[2] - 1}) {
+    const float* first = v.values.data() + z * plane;
+    const ScalarsCoding want = z == 0            ? ScalarsCoding::kU8
+                               : z < dims[2] - 1 ? ScalarsCoding::kI16
+                                                 : ScalarsCoding::kF32;
+    EXPECT_EQ(NarrowestCoding(first, plane), want) << "plane " << z;
+  }
   std::ofstream f(dir + "/phantom.nrrd", std::ios::binary);
   f << "NRRD0004\ntype: float\ndimension: 3\nsizes: " << dims[0] << " " << dims[1] << " " << dims[2]
     << "\nendian: little\nencoding: raw\nspacings: 1 1 1.5\n\n";

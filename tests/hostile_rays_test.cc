@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <utility>
 #include <vector>
 
@@ -14,6 +15,7 @@
 #include "gtest/gtest.h"
 #include "nodes_fixture.h"
 #include "transtick/ray_codec.h"
+#include "transtick/scalar_codec.h"
 
 namespace transtick {
 namespace {
@@ -280,6 +282,59 @@ TEST_F(HostileRaysTest, DamagedFieldSummaryIsRefused) {
   }
   EXPECT_TRUE(SendSlab(*scene_, "whole", &bytes).ok());
   EXPECT_TRUE(Prepare(50).ok());  // the first slab is still here
+}
+
+// Slab scalars that do not decode (docs/formats.md, "Slab scalars"), or
+// do not add up to what the header announced, are refused by name, and an
+// absurd count is refused before anything is allocated for it (times 4 it
+// wraps around to 0); the worker keeps the slabs it has and loads a good one.
+TEST_F(HostileRaysTest, BrokenSlabScalarsAreRefusedByName) {
+  const uint64_t count = scene_->scalars().size();
+  struct Case {
+    std::function<void(v1::SlabChunk&)> edit;
+    grpc::StatusCode code;
+    const char* why;
+  };
+  const Case cases[] = {
+      {[](v1::SlabChunk& c) { c.mutable_header()->set_scalar_count(uint64_t{1} << 62); },
+       grpc::StatusCode::RESOURCE_EXHAUSTED, "exceed this worker's limit"},
+      {[](v1::SlabChunk& c) { c.set_scalars_coding(static_cast<v1::ScalarsCoding>(7)); },
+       grpc::StatusCode::INVALID_ARGUMENT, "unknown coding 7"},
+      {[](v1::SlabChunk& c) {
+         c.set_scalars_coding(v1::SCALARS_I16);
+         c.mutable_scalars()->push_back('x');
+       },
+       grpc::StatusCode::INVALID_ARGUMENT, "not a whole number of 2-byte samples"},
+      {[count](v1::SlabChunk& c) { c.mutable_header()->set_scalar_count(count - 1); },
+       grpc::StatusCode::INVALID_ARGUMENT, "were left to fill"},
+      {[](v1::SlabChunk& c) { c.mutable_scalars()->resize(c.scalars().size() - 4); },
+       grpc::StatusCode::INVALID_ARGUMENT, "scalars arrived, header said"},
+      // Floats read as shorts are twice the samples the header announced.
+      {[](v1::SlabChunk& c) { c.set_scalars_coding(v1::SCALARS_I16); },
+       grpc::StatusCode::INVALID_ARGUMENT, "were left to fill"},
+      {[](v1::SlabChunk& c) {
+         c.set_scalars_coding(v1::SCALARS_U8);
+         c.mutable_scalars()->resize(c.scalars().size() / 8);
+       },
+       grpc::StatusCode::INVALID_ARGUMENT, "scalars arrived, header said"},
+  };
+  for (const Case& c : cases) {
+    grpc::Status s = SendSlab(*scene_, "broken", nullptr, c.edit);
+    EXPECT_EQ(s.error_code(), c.code) << s.error_message();
+    EXPECT_NE(s.error_message().find(c.why), std::string::npos) << s.error_message();
+  }
+  EXPECT_EQ(Evict("broken").error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_TRUE(Prepare(60).ok());  // the first slab is still here
+  // A slab of integers coded as shorts loads.
+  std::vector<float> rounded(scene_->scalars().begin(), scene_->scalars().end());
+  for (float& v : rounded) v = std::round(v);
+  ASSERT_EQ(NarrowestCoding(rounded.data(), rounded.size()), ScalarsCoding::kI16);
+  EXPECT_TRUE(SendSlab(*scene_, "bytes", nullptr, [&](v1::SlabChunk& c) {
+                c.set_scalars_coding(v1::SCALARS_I16);
+                c.clear_scalars();
+                AppendScalars(rounded.data(), rounded.size(), ScalarsCoding::kI16,
+                              c.mutable_scalars());
+              }).ok());
 }
 
 }  // namespace

@@ -75,7 +75,8 @@ void NodesTest::LoadWholeSlab(const Scene& scene, const std::string& key) {
 }
 
 grpc::Status NodesTest::SendSlab(const Scene& scene, const std::string& key,
-                                 const std::string* summary) {
+                                 const std::string* summary,
+                                 const std::function<void(v1::SlabChunk&)>& edit) {
   grpc::ClientContext ctx;
   ctx.set_deadline(Deadline(30));
   v1::LoadReply reply;
@@ -111,6 +112,7 @@ grpc::Status NodesTest::SendSlab(const Scene& scene, const std::string& key,
   h->set_scalar_count(scene.scalars().size());
   for (std::string& b : scene.sticks().EncodeRows(0, dims_[1])) chunk.add_blocks(std::move(b));
   AppendFloats(scene.scalars().data(), scene.scalars().size(), chunk.mutable_scalars());
+  if (edit) edit(chunk);
   writer->Write(chunk);
   writer->WritesDone();
   return writer->Finish();

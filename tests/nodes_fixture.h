@@ -64,9 +64,11 @@ class NodesTest : public ::testing::Test {
   RayDescriptor CentreRay() const;
 
   // The whole volume of `scene` as one slab under `key`, sent as the root
-  // sends it, with `summary` as its field summary (null: the scene's own).
+  // sends it, with `summary` as its field summary (null: the scene's own),
+  // in one message that `edit` (when given) changes before it goes.
   grpc::Status SendSlab(const Scene& scene, const std::string& key,
-                        const std::string* summary = nullptr);
+                        const std::string* summary = nullptr,
+                        const std::function<void(v1::SlabChunk&)>& edit = {});
 
   const std::array<int, 3> dims_ = {40, 36, 44};
   Classification classification_;

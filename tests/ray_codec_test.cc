@@ -12,6 +12,7 @@
 #include "absl/strings/str_cat.h"
 #include "gtest/gtest.h"
 #include "transtick/framebuffer.h"
+#include "transtick/scalar_codec.h"
 
 namespace transtick {
 namespace {
@@ -874,6 +875,150 @@ TEST(RayCodecTest, PackedDepositsRefuseBadRecordsByName) {
       ASSERT_GT(uint64_t{r.primaries} + r.shadows, 0u);
     }
   }
+}
+
+// The coding docs/formats.md ("Slab scalars") gives `values`, worked out in
+// double: integers in [0, 255], else in [-32768, 32767], else floats; -0,
+// NaN and infinities are floats.
+ScalarsCoding ExpectedCoding(const std::vector<float>& values) {
+  ScalarsCoding c = ScalarsCoding::kU8;
+  for (float v : values) {
+    const double d = v;
+    if (!std::isfinite(d) || d != std::trunc(d) || (d == 0 && std::signbit(d)) || d < -32768 ||
+        d > 32767) {
+      return ScalarsCoding::kF32;
+    }
+    if (d < 0 || d > 255) c = ScalarsCoding::kI16;
+  }
+  return c;
+}
+
+// The bytes of `values` in `coding`, written out as the format says.
+std::string ExpectedBytes(const std::vector<float>& values, ScalarsCoding coding) {
+  std::string out;
+  for (float v : values) {
+    uint32_t bits = coding == ScalarsCoding::kF32
+                        ? std::bit_cast<uint32_t>(v)
+                        : static_cast<uint32_t>(static_cast<int32_t>(std::lround(v)));
+    for (size_t k = 0; k < ScalarsCodingBytes(coding); ++k) {
+      out.push_back(static_cast<char>((bits >> (8 * k)) & 0xff));
+    }
+  }
+  return out;
+}
+
+TEST(ScalarCodecTest, EachPieceTakesTheNarrowestCodingThatGivesItBackBitForBit) {
+  // Values on and past every coding's edges, the signed zeros, NaNs with
+  // payloads, infinities, fractions a float away from integers, denormals
+  // and the ends of int32, mixed into runs of every length modulo the
+  // vector loops.
+  const float nan_payload = std::bit_cast<float>(0x7fc01234u);
+  const float neg_nan = std::bit_cast<float>(0xffc00000u);
+  const std::vector<float> special = {0.0f,
+                                      -0.0f,
+                                      1.0f,
+                                      255.0f,
+                                      256.0f,
+                                      -1.0f,
+                                      32767.0f,
+                                      32768.0f,
+                                      -32768.0f,
+                                      -32769.0f,
+                                      65535.0f,
+                                      0.5f,
+                                      std::nextafter(255.0f, 0.0f),
+                                      std::nextafter(1.0f, 2.0f),
+                                      std::numeric_limits<float>::quiet_NaN(),
+                                      nan_payload,
+                                      neg_nan,
+                                      std::numeric_limits<float>::infinity(),
+                                      -std::numeric_limits<float>::infinity(),
+                                      std::numeric_limits<float>::denorm_min(),
+                                      2147483648.0f,
+                                      -2147483648.0f,
+                                      4294967296.0f,
+                                      1e30f,
+                                      -1e30f};
+  std::mt19937 rng(20261207);
+  int seen[3] = {0, 0, 0};
+  for (int round = 0; round < 3000; ++round) {
+    const size_t n = rng() % (round % 10 == 0 ? 5000 : 70);
+    const int kind = round % 4;  // bytes, shorts, anything, bytes with one odd value
+    std::vector<float> values(n);
+    for (float& v : values) {
+      if (kind == 0) {
+        v = static_cast<float>(rng() % 256);
+      } else if (kind == 1) {
+        v = static_cast<float>(static_cast<int>(rng() % 65536) - 32768);
+      } else {
+        v = rng() % 3 == 0 ? special[rng() % special.size()]
+                           : std::bit_cast<float>(static_cast<uint32_t>(rng()));
+      }
+    }
+    if (kind == 3 && n > 0) values[rng() % n] = special[rng() % special.size()];
+    const ScalarsCoding expected = ExpectedCoding(values);
+    ASSERT_EQ(NarrowestCoding(values.data(), n), expected) << "round " << round << ", n " << n;
+    ++seen[static_cast<int>(expected)];
+    // In its own coding and every wider one: the format's bytes, and back
+    // bit for bit.
+    std::vector<ScalarsCoding> codings = {expected};
+    if (expected == ScalarsCoding::kU8) codings.push_back(ScalarsCoding::kI16);
+    if (expected != ScalarsCoding::kF32) codings.push_back(ScalarsCoding::kF32);
+    for (ScalarsCoding c : codings) {
+      std::string bytes = "prefix";
+      AppendScalars(values.data(), n, c, &bytes);
+      ASSERT_EQ(bytes.substr(6), ExpectedBytes(values, c)) << "round " << round;
+      std::vector<float> back(n + 3, 7.0f);
+      auto got =
+          DecodeScalars(std::string_view(bytes).substr(6), static_cast<int>(c), back.data(), n);
+      ASSERT_TRUE(got.ok()) << got.status();
+      ASSERT_EQ(*got, n);
+      for (size_t i = 0; i < n; ++i) {
+        ASSERT_EQ(std::bit_cast<uint32_t>(back[i]), std::bit_cast<uint32_t>(values[i]))
+            << "round " << round << " sample " << i;
+      }
+      EXPECT_EQ(back[n], 7.0f);  // nothing written past the samples
+    }
+  }
+  for (int c = 0; c < 3; ++c) EXPECT_GT(seen[c], 100) << "coding " << c;
+}
+
+TEST(ScalarCodecTest, EveryByteAndShortDecodesToItsInteger) {
+  std::string bytes;
+  for (int v = 0; v < 65536; ++v) {
+    bytes.push_back(static_cast<char>(v & 0xff));
+    bytes.push_back(static_cast<char>(v >> 8));
+  }
+  std::vector<float> out(65536 * 2);
+  auto n = DecodeScalars(bytes, static_cast<int>(ScalarsCoding::kI16), out.data(), out.size());
+  ASSERT_TRUE(n.ok());
+  ASSERT_EQ(*n, 65536u);
+  for (int v = 0; v < 65536; ++v) ASSERT_EQ(out[v], static_cast<float>(static_cast<int16_t>(v)));
+  n = DecodeScalars(bytes, static_cast<int>(ScalarsCoding::kU8), out.data(), out.size());
+  ASSERT_TRUE(n.ok());
+  ASSERT_EQ(*n, 131072u);
+  for (size_t i = 0; i < bytes.size(); ++i) {
+    ASSERT_EQ(out[i], static_cast<float>(static_cast<uint8_t>(bytes[i])));
+  }
+}
+
+TEST(ScalarCodecTest, BrokenScalarsAreRefusedByName) {
+  std::vector<float> out(4);
+  auto refused = [&](std::string_view bytes, int coding, size_t room, std::string_view why) {
+    auto n = DecodeScalars(bytes, coding, out.data(), room);
+    ASSERT_FALSE(n.ok()) << "coding " << coding << ", " << bytes.size() << " bytes";
+    EXPECT_EQ(n.status().code(), absl::StatusCode::kInvalidArgument);
+    EXPECT_NE(std::string(n.status().message()).find(why), std::string::npos) << n.status();
+  };
+  refused("abcd", 3, 4, "unknown coding 3");
+  refused("abcd", -1, 4, "unknown coding -1");
+  refused("abc", static_cast<int>(ScalarsCoding::kI16), 4, "3 bytes are not a whole number of 2");
+  refused("abcdef", static_cast<int>(ScalarsCoding::kF32), 4, "not a whole number of 4");
+  refused("abcde", static_cast<int>(ScalarsCoding::kU8), 4, "5 samples where 4 were left");
+  refused("abcdefghij", static_cast<int>(ScalarsCoding::kI16), 4, "5 samples where 4");
+  auto none = DecodeScalars("", static_cast<int>(ScalarsCoding::kI16), out.data(), 0);
+  ASSERT_TRUE(none.ok());
+  EXPECT_EQ(*none, 0u);
 }
 
 }  // namespace

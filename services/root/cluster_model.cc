@@ -75,7 +75,8 @@ Prediction PredictFrame(const FrameCosts& c, const VolumeSize& v, const ClusterS
   p.memory_per_worker = 2 * slab + kFrameBytes;
   // The root sends each ring a whole copy, through its own link; the
   // workers build their slabs at once.
-  p.load_ms = TransferMs(v.bytes * s.rings, ring_gbits) + kBuildMsPerMb * slab / (1 << 20);
+  const double sent = v.wire_bytes > 0 ? v.wire_bytes : v.bytes;
+  p.load_ms = TransferMs(sent * s.rings, ring_gbits) + kBuildMsPerMb * slab / (1 << 20);
   return p;
 }
 

@@ -63,6 +63,9 @@ struct ClusterShape {
 struct VolumeSize {
   double bytes = 0;  // sticks, scalars and brick map of all planes
   int planes = 1;    // along Y, the axis of the slabs
+  // What loading all planes sends, scalars in their coding (docs/formats.md,
+  // "Slab scalars"); 0: `bytes`.
+  double wire_bytes = 0;
 };
 
 struct Prediction {

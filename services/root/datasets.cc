@@ -221,6 +221,7 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
   // as the scalars it sends).
   data->range = volume->Range();
   data->histogram = Histogram(volume->values, data->range, LoadedDataset::kHistogramBins);
+  data->coding = NarrowestCoding(volume->values.data(), volume->values.size());
   absl::StatusOr<Scene> scene;
   if (const auto* c = std::get_if<Classification>(&classification)) {
     data->mode = RenderMode::kSurfaces;
@@ -243,9 +244,12 @@ absl::StatusOr<std::shared_ptr<LoadedDataset>> Datasets::Load(const v1::Dataset&
   data->scene = *std::move(scene);
   data->direction = volume->direction;
   data->load_ms = MsSince(t0);
-  spdlog::info("dataset {} ({}): {}x{}x{}, {} sticks, prepared in {:.0f} ms", Shown(ds.volume()),
-               RenderModeName(data->mode), volume->dims[0], volume->dims[1], volume->dims[2],
-               data->scene.sticks().StickCount(), data->load_ms);
+  spdlog::info(
+      "dataset {} ({}): {}x{}x{}, {} sticks, scalars sent in {} bytes or fewer, prepared "
+      "in {:.0f} ms",
+      Shown(ds.volume()), RenderModeName(data->mode), volume->dims[0], volume->dims[1],
+      volume->dims[2], data->scene.sticks().StickCount(), ScalarsCodingBytes(data->coding),
+      data->load_ms);
   cache_ = data;
   return data;
 }

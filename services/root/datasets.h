@@ -20,6 +20,7 @@
 #include "transtick/classification.h"
 #include "transtick/partition.h"
 #include "transtick/render.h"
+#include "transtick/scalar_codec.h"
 #include "transtick/scene.h"
 #include "transtick/volume_io.h"
 
@@ -100,6 +101,9 @@ struct LoadedDataset {
   static constexpr int kHistogramBins = 64;
   std::array<float, 2> range = {0, 0};
   std::vector<uint64_t> histogram;
+  // The narrowest coding that gives back every sample: the widest in which
+  // a piece of its slabs' scalars travels (docs/formats.md, "Slab scalars").
+  ScalarsCoding coding = ScalarsCoding::kF32;
 };
 
 class Datasets {

@@ -210,7 +210,11 @@ int JobRunner::RingsFor(FrameTask& task, const std::vector<std::shared_ptr<Worke
   shape.network = options_.network;
   // What the workers will hold for the whole volume, which the root's own
   // scene (built only to cut) does not.
-  const VolumeSize volume{double(data.scene.TracingBytes()), data.scene.dims()[1]};
+  // Its scalars travel in their coding, not as the floats held.
+  const double scalars = double(data.scene.scalars().size());
+  const double bytes = double(data.scene.TracingBytes());
+  const VolumeSize volume{bytes, data.scene.dims()[1],
+                          bytes - scalars * (sizeof(float) - ScalarsCodingBytes(data.coding))};
   // The rings whose slabs of this dataset the workers hold now: keeping
   // them costs no loading.
   int loaded = 0;

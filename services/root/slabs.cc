@@ -8,11 +8,11 @@
 
 #include "absl/strings/str_cat.h"
 #include "clock.h"
-#include "daemon.h"
 #include "convert.h"
+#include "daemon.h"
 #include "fanout.h"
+#include "slab_scalars.h"
 #include "transtick/partition.h"
-#include "transtick/ray_codec.h"
 
 namespace transtick {
 namespace {
@@ -111,12 +111,12 @@ absl::Status Slabs::LoadSlab(const LoadedDataset& data, WorkerEntry& worker, con
     chunk.add_blocks(std::move(block));
     if (pending >= kChunkBytes) ok = send();
   }
+  // Each z's rows of the slab, in the narrowest coding that gives them back
+  // (docs/formats.md, "Slab scalars").
   const size_t row = static_cast<size_t>(dims[0]) * (se - sb);
   for (int z = 0; ok && z < dims[2]; ++z) {
     const float* plane = scene.scalars().data() + (static_cast<size_t>(z) * dims[1] + sb) * dims[0];
-    AppendFloats(plane, row, chunk.mutable_scalars());
-    pending += row * 4;
-    if (pending >= kChunkBytes) ok = send();
+    ok = AppendSlabScalars(plane, row, chunk, pending, kChunkBytes, send);
   }
   if (ok && (pending > 0 || chunk.has_header())) ok = send();
   writer->WritesDone();

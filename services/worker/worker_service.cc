@@ -14,8 +14,8 @@
 #include "daemon.h"
 #include "refused.h"
 #include "rpc_status.h"
+#include "slab_scalars.h"
 #include "transtick/partition.h"
-#include "transtick/ray_codec.h"
 
 namespace transtick {
 namespace {
@@ -26,7 +26,7 @@ grpc::Status Invalid(const std::string& message) {
 
 absl::StatusOr<std::shared_ptr<const Scene>> AssembleSlab(const v1::SlabHeader& h,
                                                           std::vector<std::string> blocks,
-                                                          std::string scalar_bytes) {
+                                                          std::vector<float> scalars) {
   if (h.dims_size() != 3 || h.spacing_size() != 3 || h.value_range_size() != 2) {
     return absl::InvalidArgumentError("slab header: dims, spacing and value_range incomplete");
   }
@@ -62,11 +62,6 @@ absl::StatusOr<std::shared_ptr<const Scene>> AssembleSlab(const v1::SlabHeader& 
     if (!s.ok()) return s.status();
     summary = *std::move(s);
   }
-  if (scalar_bytes.size() % 4 != 0) {
-    return absl::InvalidArgumentError("slab scalars: not a whole number of floats");
-  }
-  std::vector<float> scalars(scalar_bytes.size() / 4);
-  DecodeFloats(scalar_bytes, scalars.data());
   auto scene =
       Scene::FromParts(dvr ? RenderMode::kDvr : RenderMode::kSurfaces, dims,
                        {h.spacing(0), h.spacing(1), h.spacing(2)},
@@ -195,23 +190,27 @@ grpc::Status WorkerService::LoadSlab(grpc::ServerContext* ctx,
   }
   const v1::SlabHeader header = chunk.header();
   if (header.dataset_key().empty()) return Invalid("LoadSlab: empty dataset_key");
-  if (header.scalar_count() * 4 > options_.max_slab_bytes) {
+  // Compared as samples: a hostile count times 4 could wrap around.
+  if (header.scalar_count() > options_.max_slab_bytes / sizeof(float)) {
     return ToGrpc(absl::ResourceExhaustedError(
-        absl::StrCat("LoadSlab: ", header.scalar_count() * 4,
-                     " bytes of scalars exceed this worker's limit of ", options_.max_slab_bytes)));
+        absl::StrCat("LoadSlab: ", header.scalar_count(),
+                     " scalars (4 bytes each held) exceed this worker's limit of ",
+                     options_.max_slab_bytes, " bytes")));
   }
   std::vector<std::string> blocks;
-  std::string scalars;
-  scalars.reserve(header.scalar_count() * 4);
+  // Each message's scalars decoded as they arrive, in their coding
+  // (docs/formats.md, "Slab scalars").
+  std::vector<float> scalars(header.scalar_count());
+  size_t filled = 0;
   do {
     for (auto& b : *chunk.mutable_blocks()) blocks.push_back(std::move(b));
-    if (scalars.size() + chunk.scalars().size() > header.scalar_count() * 4) {
-      return Invalid("LoadSlab: more scalars than the header announced");
+    if (absl::Status s = TakeSlabScalars(chunk, scalars.data(), scalars.size(), &filled); !s.ok()) {
+      return Invalid(absl::StrCat("LoadSlab: ", s.message(), " (the header announced ",
+                                  header.scalar_count(), " samples)"));
     }
-    scalars += chunk.scalars();
   } while (reader->Read(&chunk));
-  if (scalars.size() != header.scalar_count() * 4) {
-    return Invalid(absl::StrCat("LoadSlab: ", scalars.size() / 4, " scalars arrived, header said ",
+  if (filled != scalars.size()) {
+    return Invalid(absl::StrCat("LoadSlab: ", filled, " scalars arrived, header said ",
                                 header.scalar_count()));
   }
   auto scene = AssembleSlab(header, std::move(blocks), std::move(scalars));
@@ -272,28 +271,29 @@ grpc::Status WorkerService::FetchPlanes(grpc::ServerContext* ctx, const v1::Plan
   constexpr size_t kChunkBytes = 1 << 20;
   v1::SlabChunk chunk;
   size_t pending = 0;
+  auto flush = [&] {
+    const bool ok = writer->Write(chunk);
+    chunk.Clear();
+    pending = 0;
+    return ok;
+  };
   if (req->y_begin() < req->y_end()) {
     for (std::string& b : scene->sticks().EncodeRows(req->y_begin(), req->y_end())) {
       pending += b.size();
       chunk.add_blocks(std::move(b));
-      if (pending >= kChunkBytes) {
-        if (!writer->Write(chunk)) return ToGrpc(absl::CancelledError("reader left"));
-        chunk.Clear();
-        pending = 0;
-      }
+      if (pending >= kChunkBytes && !flush()) return ToGrpc(absl::CancelledError("reader left"));
     }
   }
   if (req->scalar_begin() < req->scalar_end()) {
     ScalarPlanes planes = scene->CopyScalars(req->scalar_begin(), req->scalar_end());
-    const size_t per_chunk = kChunkBytes / 4;
-    for (size_t i = 0; i < planes.values.size(); i += per_chunk) {
-      AppendFloats(planes.values.data() + i, std::min(per_chunk, planes.values.size() - i),
-                   chunk.mutable_scalars());
-      if (!writer->Write(chunk)) return ToGrpc(absl::CancelledError("reader left"));
-      chunk.Clear();
+    if (!AppendSlabScalars(planes.values.data(), planes.values.size(), chunk, pending, kChunkBytes,
+                           flush)) {
+      return ToGrpc(absl::CancelledError("reader left"));
     }
   }
-  if (chunk.blocks_size() > 0) writer->Write(chunk);
+  if ((chunk.blocks_size() > 0 || !chunk.scalars().empty()) && !flush()) {
+    return ToGrpc(absl::CancelledError("reader left"));
+  }
   return grpc::Status::OK;
 }
 
@@ -329,13 +329,25 @@ void RunFetch(Fetch& f, const std::array<int, 3>& dims) {
   req.set_scalar_begin(f.scalar_begin);
   req.set_scalar_end(f.scalar_end);
   auto reader = stub->FetchPlanes(&ctx, req);
-  std::string bytes;
+  // The planes asked for, decoded as they arrive (docs/formats.md, "Slab
+  // scalars").
+  f.scalars.values.resize(static_cast<size_t>(f.scalar_end - f.scalar_begin) * dims[0] * dims[2]);
+  size_t filled = 0;
+  absl::Status decoded;
   v1::SlabChunk chunk;
   while (reader->Read(&chunk)) {
     for (auto& b : *chunk.mutable_blocks()) f.blocks.push_back(std::move(b));
-    bytes += chunk.scalars();
+    if (decoded.ok()) {
+      decoded = TakeSlabScalars(chunk, f.scalars.values.data(), f.scalars.values.size(), &filled);
+      if (!decoded.ok()) ctx.TryCancel();
+    }
   }
   grpc::Status s = reader->Finish();
+  if (!decoded.ok()) {
+    f.status = absl::AbortedError(
+        absl::StrCat("planes from ", f.source->address(), ": ", decoded.message()));
+    return;
+  }
   if (!s.ok()) {
     // ABORTED, whatever the source said: this worker is fine, a source is not.
     f.status = absl::AbortedError(
@@ -344,15 +356,10 @@ void RunFetch(Fetch& f, const std::array<int, 3>& dims) {
   }
   f.scalars.y_begin = f.scalar_begin;
   f.scalars.y_end = f.scalar_end;
-  const size_t want =
-      static_cast<size_t>(f.scalar_end - f.scalar_begin) * dims[0] * dims[2] * sizeof(float);
-  if (bytes.size() != want) {
-    f.status = absl::AbortedError(absl::StrCat("planes from ", f.source->address(), ": ",
-                                               bytes.size(), " bytes of scalars, expected ", want));
-    return;
+  if (filled != f.scalars.values.size()) {
+    f.status = absl::AbortedError(absl::StrCat("planes from ", f.source->address(), ": ", filled,
+                                               " scalars, expected ", f.scalars.values.size()));
   }
-  f.scalars.values.resize(want / sizeof(float));
-  DecodeFloats(bytes, f.scalars.values.data());
 }
 
 }  // namespace

@@ -10,11 +10,13 @@
 // promise. The whole input is also read as a field summary
 // (FieldSummary::FromBytes), which must refuse any size but its own and any
 // byte naming no band; of one it accepts, every brick a ray's path passes
-// through must have the band Clear accepted the path for.
+// through must have the band Clear accepted the path for. And it is read
+// as a message's slab scalars (CheckScalars).
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -22,6 +24,7 @@
 #include "transtick/check.h"
 #include "transtick/field_summary.h"
 #include "transtick/isosurface.h"
+#include "transtick/scalar_codec.h"
 #include "transtick/scene.h"
 #include "transtick/sticks.h"
 #include "transtick/traversal.h"
@@ -31,6 +34,38 @@ namespace {
 
 constexpr std::array<int, 3> kDims = {40, 70, 36};
 constexpr int kSummaryBands = 4;  // as fuzz_seeds.cc writes them
+
+// The input as a message's slab scalars (docs/formats.md, "Slab
+// scalars"): byte 0 the coding (3: one this build does not know), byte 1
+// the room left, the rest the bytes. DecodeScalars must refuse them, saying
+// why, or give samples that code back to the same bytes in their coding,
+// and bit for bit through the narrowest coding of them.
+void CheckScalars(const uint8_t* data, size_t size) {
+  if (size < 2) return;
+  const int coding = data[0] % 4;
+  const std::string_view bytes(reinterpret_cast<const char*>(data) + 2, size - 2);
+  std::vector<float> out(bytes.size() + 1);
+  const size_t room = data[1] == 255 ? bytes.size() : data[1];
+  auto n = DecodeScalars(bytes, coding, out.data(), room);
+  if (!n.ok()) {
+    TRANSTICK_CHECK(!n.status().message().empty());
+    TRANSTICK_CHECK(coding == 3 || bytes.size() % ScalarsCodingBytes(ScalarsCoding(coding)) != 0 ||
+                    bytes.size() / ScalarsCodingBytes(ScalarsCoding(coding)) > room);
+    return;
+  }
+  TRANSTICK_CHECK(coding != 3 && *n <= room);
+  std::string again;
+  AppendScalars(out.data(), *n, ScalarsCoding(coding), &again);
+  TRANSTICK_CHECK(again == bytes);
+  const ScalarsCoding narrow = NarrowestCoding(out.data(), *n);
+  TRANSTICK_CHECK(ScalarsCodingBytes(narrow) <= ScalarsCodingBytes(ScalarsCoding(coding)));
+  std::string narrowed;
+  AppendScalars(out.data(), *n, narrow, &narrowed);
+  std::vector<float> back(*n + 1);
+  auto m = DecodeScalars(narrowed, static_cast<int>(narrow), back.data(), *n);
+  TRANSTICK_CHECK(m.ok() && *m == *n);
+  TRANSTICK_CHECK(std::memcmp(back.data(), out.data(), *n * sizeof(float)) == 0);
+}
 
 // A summary read from the input: as FromBytes says, and the paths Clear
 // accepts lie in bricks of their band (points 1/4 voxel apart, away from
@@ -136,6 +171,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace transtick::fuzz;
   const Base& base = GetBase();
   CheckSummary(data, size);
+  CheckScalars(data, size);
   if (size < 2) return 0;
   // Byte 0: the slab asked for (inside, or past, the blocks' [10, 60)) and
   // the largest material; byte 1: blocks dropped or truncated.
