@@ -285,10 +285,17 @@ grpc::Status WorkerService::FetchPlanes(grpc::ServerContext* ctx, const v1::Plan
     }
   }
   if (req->scalar_begin() < req->scalar_end()) {
-    ScalarPlanes planes = scene->CopyScalars(req->scalar_begin(), req->scalar_end());
-    if (!AppendSlabScalars(planes.values.data(), planes.values.size(), chunk, pending, kChunkBytes,
-                           flush)) {
-      return ToGrpc(absl::CancelledError("reader left"));
+    // Each z's rows asked for, straight from the slab's planes (in the order
+    // CopyScalars gives them), as the root sends a slab.
+    const auto& dims = scene->dims();
+    const size_t row = static_cast<size_t>(req->scalar_end() - req->scalar_begin()) * dims[0];
+    for (int z = 0; z < dims[2]; ++z) {
+      const float* first =
+          scene->scalars().data() +
+          (static_cast<size_t>(z) * (se - sb) + (req->scalar_begin() - sb)) * dims[0];
+      if (!AppendSlabScalars(first, row, chunk, pending, kChunkBytes, flush)) {
+        return ToGrpc(absl::CancelledError("reader left"));
+      }
     }
   }
   if ((chunk.blocks_size() > 0 || !chunk.scalars().empty()) && !flush()) {
