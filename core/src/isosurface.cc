@@ -559,30 +559,161 @@ std::optional<Crossing> CrossingWalk::Next() {
   return std::nullopt;
 }
 
+namespace {
+
+// When a walk's ray leaves its cell across each axis's face ahead, which
+// face it leaves by, and the face after each: a walk's steps from cell to
+// cell are one chain of dependent operations (the exit face's time, the
+// comparisons that find the next exit, the time of the face after it), so
+// this keeps the times in registers and has each next face's time made one
+// step early, off that chain. Every time is FaceTime's, (k + 0.5 - o) * (1 / d),
+// from its plane k (k + 0.5 is kept exactly, whole numbers and halves
+// being exact in double), and the exit is SetExit's, the lowest axis on a
+// tie: the same bits and path as a walk computing them one at a time. An
+// axis the ray does not move along leaves at +inf and is never the exit.
+#if defined(__SSE2__)
+class FaceClock {
+ public:
+  TRANSTICK_INLINE FaceClock(const std::array<double, 3>& origin, const std::array<double, 3>& inv,
+                             const std::array<int, 3>& step)
+      : o_xy_(_mm_loadu_pd(origin.data())),
+        o_z_(_mm_load_sd(&origin[2])),
+        i_xy_(_mm_loadu_pd(inv.data())),
+        i_z_(_mm_load_sd(&inv[2])),
+        s_xy_(_mm_cvtepi32_pd(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(step.data())))),
+        s_z_(_mm_set_sd(step[2])) {}
+
+  // The walk in cell c, whose faces ahead are c + ahead, leaving it at
+  // leave (per axis).
+  TRANSTICK_INLINE void Set(const double leave[3], const std::array<int, 3>& c,
+                            const int ahead[3]) {
+    l_xy_ = _mm_loadu_pd(leave);
+    l_z_ = _mm_load_sd(&leave[2]);
+    const __m128d half = _mm_set1_pd(0.5);
+    p_xy_ = _mm_add_pd(
+        _mm_add_pd(_mm_cvtepi32_pd(_mm_setr_epi32(c[0] + ahead[0], c[1] + ahead[1], 0, 0)), half),
+        s_xy_);
+    p_z_ = _mm_add_sd(_mm_add_sd(_mm_set_sd(c[2] + ahead[2]), half), s_z_);
+    Next();
+    Choose();
+  }
+  // Across the exit face into the next cell.
+  TRANSTICK_INLINE void Advance() {
+    l_xy_ = Select(m_xy_, n_xy_, l_xy_);
+    l_z_ = Select(m_z_, n_z_, l_z_);
+    p_xy_ = _mm_add_pd(p_xy_, _mm_and_pd(m_xy_, s_xy_));
+    p_z_ = _mm_add_sd(p_z_, _mm_and_pd(m_z_, s_z_));
+    Choose();
+    Next();
+  }
+  TRANSTICK_INLINE void Store(double leave[3]) const {
+    _mm_storeu_pd(leave, l_xy_);
+    _mm_store_sd(&leave[2], l_z_);
+  }
+  int exit() const { return exit_; }
+  double t_out() const { return t_out_; }
+
+ private:
+  static TRANSTICK_INLINE __m128d Select(__m128d mask, __m128d a, __m128d b) {
+#if defined(__SSE4_1__)
+    return _mm_blendv_pd(b, a, mask);
+#else
+    return _mm_or_pd(_mm_and_pd(mask, a), _mm_andnot_pd(mask, b));
+#endif
+  }
+  // The face after the one ahead, along each axis.
+  TRANSTICK_INLINE void Next() {
+    n_xy_ = _mm_mul_pd(_mm_sub_pd(p_xy_, o_xy_), i_xy_);
+    n_z_ = _mm_mul_sd(_mm_sub_sd(p_z_, o_z_), i_z_);
+  }
+  // The exit: y before x only when strictly sooner, z before both so,
+  // the comparisons side by side (z before both is z before the sooner of
+  // the two: no time is NaN), and the masks of its lanes. Only lane 0 of a
+  // scalar comparison is a mask; lane 1 of the z registers stays 0.
+  TRANSTICK_INLINE void Choose() {
+    const __m128d l_y = _mm_unpackhi_pd(l_xy_, l_xy_);
+    const __m128d before_x = _mm_cmplt_pd(_mm_shuffle_pd(l_xy_, l_z_, 1),  // (y, z) < (x, x)
+                                          _mm_unpacklo_pd(l_xy_, l_xy_));
+    const __m128d z_first =
+        _mm_and_pd(_mm_unpackhi_pd(before_x, before_x), _mm_cmplt_sd(l_z_, l_y));
+    const __m128d y_not_x = _mm_unpacklo_pd(
+        _mm_andnot_pd(before_x, _mm_castsi128_pd(_mm_set1_epi32(-1))), before_x);  // (!y, y)
+    m_xy_ = _mm_andnot_pd(_mm_unpacklo_pd(z_first, z_first), y_not_x);
+    m_z_ = z_first;
+    t_out_ = _mm_cvtsd_f64(Select(z_first, l_z_, Select(before_x, l_y, l_xy_)));
+    const int y = _mm_movemask_pd(before_x) & 1, z = _mm_movemask_pd(z_first) & 1;
+    exit_ = z ? 2 : y;
+  }
+
+  const __m128d o_xy_, o_z_, i_xy_, i_z_, s_xy_, s_z_;  // origin, 1 / d, step (per axis)
+  __m128d l_xy_, l_z_;  // when the ray leaves the cell along each axis
+  __m128d p_xy_, p_z_;  // the plane after the one ahead, + 0.5
+  __m128d n_xy_, n_z_;  // when it crosses that plane
+  __m128d m_xy_, m_z_;  // all ones on the exit axis
+  int exit_ = 0;
+  double t_out_ = 0;
+};
+#else
+class FaceClock {
+ public:
+  FaceClock(const std::array<double, 3>& origin, const std::array<double, 3>& inv,
+            const std::array<int, 3>& step)
+      : origin_(origin), inv_(inv), step_(step) {}
+  void Set(const double leave[3], const std::array<int, 3>& c, const int ahead[3]) {
+    for (int a = 0; a < 3; ++a) {
+      leave_[a] = leave[a];
+      plane_[a] = c[a] + ahead[a];
+    }
+    Choose();
+  }
+  void Advance() {
+    const int a = exit_;
+    plane_[a] += step_[a];
+    leave_[a] = (plane_[a] + 0.5 - origin_[a]) * inv_[a];
+    Choose();
+  }
+  void Store(double leave[3]) const {
+    for (int a = 0; a < 3; ++a) leave[a] = leave_[a];
+  }
+  int exit() const { return exit_; }
+  double t_out() const { return t_out_; }
+
+ private:
+  void Choose() {
+    const double l01 = leave_[1] < leave_[0] ? leave_[1] : leave_[0];
+    const int e01 = leave_[1] < leave_[0] ? 1 : 0;
+    exit_ = leave_[2] < l01 ? 2 : e01;
+    t_out_ = leave_[2] < l01 ? leave_[2] : l01;
+  }
+  const std::array<double, 3> origin_, inv_;
+  const std::array<int, 3> step_;
+  double leave_[3];
+  int plane_[3];  // the face ahead along each axis
+  int exit_ = 0;
+  double t_out_ = 0;
+};
+#endif
+
+}  // namespace
+
 std::optional<Crossing> CrossingWalk::Scan() {
   // The walk's state in locals while it moves (written back whenever it
   // stops), so that it stays in registers.
   std::array<int, 3> c = c_;
-  double leave[3] = {leave_[0], leave_[1], leave_[2]};
-  double t_in = t_in_, t_out = t_out_;
-  int exit = exit_axis_;
+  FaceClock clock(origin_, inv_, step_);
+  clock.Set(leave_, c, ahead_);
+  double t_in = t_in_, t_out = clock.t_out();
+  int exit = clock.exit();
   int steps = steps_;
   bool loaded = false;  // the current cell's corners were read
   auto stop = [&] {
     c_ = c;
-    for (int a = 0; a < 3; ++a) leave_[a] = leave[a];
+    clock.Store(leave_);
     t_in_ = t_in;
     t_out_ = t_out;
     exit_axis_ = exit;
     steps_ = steps;
     loaded_ = loaded;
-  };
-  auto set_exit = [&] {
-    // Without branches (which axis is next is random).
-    const double l01 = leave[1] < leave[0] ? leave[1] : leave[0];
-    const int e01 = leave[1] < leave[0] ? 1 : 0;
-    exit = leave[2] < l01 ? 2 : e01;
-    t_out = leave[2] < l01 ? leave[2] : l01;
   };
   // The walk's constants, read once: no store in the loop below may alias
   // them, so they stay in registers.
@@ -650,6 +781,8 @@ std::optional<Crossing> CrossingWalk::Scan() {
         // Every face crossed up to t, the box's own included: the cell a
         // walk stepping cell by cell would be in after leaving the box,
         // entered at t.
+        double leave[3];
+        clock.Store(leave);
         for (int a = 0; a < 3; ++a) {
           if (a == out) {
             c[a] = face - ahead_[a] + step_[a];
@@ -659,7 +792,9 @@ std::optional<Crossing> CrossingWalk::Scan() {
           }
         }
         t_in = t;
-        set_exit();
+        clock.Set(leave, c, ahead_);
+        t_out = clock.t_out();
+        exit = clock.exit();
         ++jumps_;
         if (planes) Count(c[1], work_.step);
         locate();
@@ -718,8 +853,9 @@ std::optional<Crossing> CrossingWalk::Scan() {
     const int a = exit;
     t_in = t_out;
     c[a] += step_[a];
-    leave[a] = FaceTime(a, c[a] + ahead_[a]);
-    set_exit();
+    clock.Advance();
+    t_out = clock.t_out();
+    exit = clock.exit();
     loaded = false;
     if (held) {
       // Into the next group when the new cell is its first along a.
