@@ -653,11 +653,15 @@ class FaceClock {
   int exit_ = 0;
   double t_out_ = 0;
 };
-#else
-class FaceClock {
+#endif
+
+// FaceClock in plain double arithmetic, one axis at a time: what a
+// processor without SSE2 runs, and the reference the tests hold the vector
+// form to.
+class PortableFaceClock {
  public:
-  FaceClock(const std::array<double, 3>& origin, const std::array<double, 3>& inv,
-            const std::array<int, 3>& step)
+  PortableFaceClock(const std::array<double, 3>& origin, const std::array<double, 3>& inv,
+                    const std::array<int, 3>& step)
       : origin_(origin), inv_(inv), step_(step) {}
   void Set(const double leave[3], const std::array<int, 3>& c, const int ahead[3]) {
     for (int a = 0; a < 3; ++a) {
@@ -692,6 +696,8 @@ class FaceClock {
   int exit_ = 0;
   double t_out_ = 0;
 };
+#if !defined(__SSE2__)
+using FaceClock = PortableFaceClock;
 #endif
 
 }  // namespace
@@ -868,6 +874,34 @@ std::optional<Crossing> CrossingWalk::Scan() {
     }
     if (planes) Count(c[1], work_.step);
   }
+}
+
+std::vector<FaceStep> FaceSteps(const Vec3& origin, const RayAxes& axes,
+                                const std::array<int, 3>& cell, int steps, bool portable) {
+  const std::array<double, 3> o = {origin.x, origin.y, origin.z};
+  double leave[3];
+  int ahead[3];
+  for (int a = 0; a < 3; ++a) {
+    ahead[a] = axes.step[a] < 0 ? -1 : 0;
+    leave[a] = axes.step[a] == 0 ? std::numeric_limits<double>::infinity()
+                                 : (cell[a] + ahead[a] + 0.5 - o[a]) * axes.inv[a];
+  }
+  std::vector<FaceStep> out;
+  auto walk = [&](auto& clock) {
+    clock.Set(leave, cell, ahead);
+    for (int k = 0; k < steps; ++k) {
+      out.push_back({clock.exit(), clock.t_out()});
+      clock.Advance();
+    }
+  };
+  if (portable) {
+    PortableFaceClock clock(o, axes.inv, axes.step);
+    walk(clock);
+  } else {
+    FaceClock clock(o, axes.inv, axes.step);
+    walk(clock);
+  }
+  return out;
 }
 
 }  // namespace transtick

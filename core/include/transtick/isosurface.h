@@ -84,6 +84,17 @@ struct RayAxes {
   std::array<double, 3> inv;
 };
 
+// The faces a walk from `cell` crosses, one a step: the axis of each (the
+// lowest on a tie) and its time, each from its plane. What CrossingWalk's
+// vector registers compute or, with `portable`, the same in plain double
+// arithmetic, bit for bit alike. For tests.
+struct FaceStep {
+  int axis;
+  double t;
+};
+std::vector<FaceStep> FaceSteps(const Vec3& origin, const RayAxes& axes,
+                                const std::array<int, 3>& cell, int steps, bool portable);
+
 // Where a ray's band changes: at t the ray enters `band`. Most are roots,
 // where the field crosses an interval edge. The others (root false) take
 // the band the field has where the walk found the ray in another: at the
