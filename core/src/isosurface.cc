@@ -708,16 +708,15 @@ std::optional<Crossing> CrossingWalk::Scan() {
   std::array<int, 3> c = c_;
   FaceClock clock(origin_, inv_, step_);
   clock.Set(leave_, c, ahead_);
-  double t_in = t_in_, t_out = clock.t_out();
-  int exit = clock.exit();
+  double t_in = t_in_;
   int steps = steps_;
   bool loaded = false;  // the current cell's corners were read
   auto stop = [&] {
     c_ = c;
     clock.Store(leave_);
     t_in_ = t_in;
-    t_out_ = t_out;
-    exit_axis_ = exit;
+    t_out_ = clock.t_out();
+    exit_axis_ = clock.exit();
     steps_ = steps;
     loaded_ = loaded;
   };
@@ -750,6 +749,7 @@ std::optional<Crossing> CrossingWalk::Scan() {
     // The cell's part of [t0, t1): [from, to), and its far face when that
     // lies before t1. A cell the ray only touches at an edge or a corner
     // (t_in = t_out) has none.
+    const double t_out = clock.t_out();
     const double from = std::max(t_in, t_here), to = std::min(t_out, t1);
     bool mixed = true;
     if (held) {
@@ -799,8 +799,6 @@ std::optional<Crossing> CrossingWalk::Scan() {
         }
         t_in = t;
         clock.Set(leave, c, ahead_);
-        t_out = clock.t_out();
-        exit = clock.exit();
         ++jumps_;
         if (planes) Count(c[1], work_.step);
         locate();
@@ -856,12 +854,10 @@ std::optional<Crossing> CrossingWalk::Scan() {
       truncated_ = done_ = true;
       return std::nullopt;
     }
-    const int a = exit;
+    const int a = clock.exit();
     t_in = t_out;
     c[a] += step_[a];
     clock.Advance();
-    t_out = clock.t_out();
-    exit = clock.exit();
     loaded = false;
     if (held) {
       // Into the next group when the new cell is its first along a.
