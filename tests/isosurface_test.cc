@@ -618,6 +618,107 @@ TEST(IsosurfaceTest, CrossingsDoNotDependOnTheSlabsAGridIsCutInto) {
   EXPECT_GT(pieces, 3000u);
 }
 
+// A walk that defers its crossings' times (DeferTimes, as the tracer's
+// walks do) meets the same crossings, bands and cells as one that does
+// not, and each time it is asked for is the other's bit for bit; asked or
+// not, a deferred time changes nothing after it (the next crossing in the
+// same cell compares with it, later cells start past it). Random rays
+// through blob volumes with plateaus (three materials: two edges of a
+// band in one cell) and through noise (several roots a cell), whole and as
+// a walk extended piece by piece.
+TEST(IsosurfaceTest, ADeferredTimeIsTheOneTheWalkWouldHaveGiven) {
+  std::mt19937_64 rng(29);
+  std::uniform_real_distribution<double> unit(0, 1), dir(-1, 1);
+  size_t crossings = 0, deferred = 0, asked = 0, same_cell = 0, extended = 0;
+  for (int trial = 0; trial < 24; ++trial) {
+    Classification c;
+    Volume v = BlobVolume(rng, {14 + static_cast<int>(rng() % 8), 12, 11}, &c);
+    if (trial % 3 == 2) {
+      for (float& x : v.values) x = static_cast<float>(unit(rng) * 1000);
+    }
+    const Bands bands(c);
+    auto scene = Scene::ForSurfaces(v, c);
+    ASSERT_TRUE(scene.ok()) << scene.status();
+    for (int r = 0; r < 400; ++r) {
+      Vec3 o{unit(rng) * v.dims[0], unit(rng) * v.dims[1], unit(rng) * v.dims[2]};
+      Vec3 d{dir(rng), dir(rng), dir(rng)};
+      if (r % 7 == 0) d = {0, 0, r % 2 ? 1.0 : -1.0};
+      if (r % 11 == 0) d = {1, r % 2 ? 1.0 : -1.0, 0};
+      if (r % 13 == 0) o = {std::floor(o.x) + 0.5, std::floor(o.y) + 0.5, o.z};
+      d = d * (1 / Length(d));
+      const auto box = IntersectBox(o, d, v.dims);
+      if (!box) continue;
+      const double t0 = std::max(0.0, (*box)[0]), t1 = (*box)[1];
+      struct Seen {
+        Crossing x;
+        std::array<int, 3> cell;
+      };
+      std::vector<Seen> eager;
+      CrossingWalk walk(*scene, bands, o, d, t0, t1, -1);
+      while (auto x = walk.Next()) {
+        ASSERT_FALSE(std::isnan(x->t));
+        ASSERT_EQ(std::bit_cast<uint64_t>(walk.t()), std::bit_cast<uint64_t>(x->t));
+        eager.push_back({*x, walk.cell()});
+      }
+      ASSERT_EQ(walk.deferred(), 0);
+      // Deferring, the range cut at random points and the walk extended
+      // over them (or begun afresh).
+      std::vector<double> cuts = {t0, t1};
+      for (int k = r % 3 == 0 ? 1 + static_cast<int>(rng() % 4) : 0; k > 0; --k) {
+        cuts.push_back(t0 + unit(rng) * (t1 - t0));
+      }
+      std::sort(cuts.begin(), cuts.end());
+      std::optional<CrossingWalk> lazy;
+      int band = -1;
+      size_t k = 0;
+      bool unasked = false;  // the last crossing's time was deferred and not asked
+      std::array<int, 3> last_cell = {0, 0, 0};
+      for (size_t piece = 0; piece + 1 < cuts.size(); ++piece) {
+        if (!lazy || rng() % 4 == 0) {
+          if (lazy) deferred += lazy->deferred();
+          lazy.emplace(*scene, bands, o, d, cuts[piece], cuts[piece + 1], band);
+          lazy->DeferTimes();
+          unasked = false;
+        } else {
+          lazy->Extend(cuts[piece + 1]);
+          ++extended;
+        }
+        while (auto x = lazy->Next()) {
+          ASSERT_LT(k, eager.size()) << "trial " << trial << " ray " << r;
+          const Seen& e = eager[k++];
+          ASSERT_EQ(x->band, e.x.band) << "trial " << trial << " ray " << r << " crossing " << k;
+          ASSERT_EQ(x->root, e.x.root);
+          ASSERT_EQ(lazy->cell(), e.cell);
+          if (unasked && lazy->cell() == last_cell) ++same_cell;
+          unasked = std::isnan(x->t);
+          last_cell = lazy->cell();
+          if (unasked) {
+            ASSERT_TRUE(x->root);
+            if (rng() % 2 == 0) continue;
+            ++asked;
+            unasked = false;
+          }
+          ASSERT_EQ(std::bit_cast<uint64_t>(lazy->t()), std::bit_cast<uint64_t>(e.x.t))
+              << "trial " << trial << " ray " << r << " crossing " << k;
+          if (!std::isnan(x->t))
+            ASSERT_EQ(std::bit_cast<uint64_t>(x->t), std::bit_cast<uint64_t>(e.x.t));
+          band = x->band;
+        }
+        if (k > 0) band = eager[k - 1].x.band;
+      }
+      deferred += lazy->deferred();
+      ASSERT_EQ(k, eager.size()) << "trial " << trial << " ray " << r;
+      ASSERT_EQ(lazy->truncated(), walk.truncated());
+      crossings += eager.size();
+    }
+  }
+  EXPECT_GT(crossings, 20000u);
+  EXPECT_GT(deferred, crossings / 10);
+  EXPECT_GT(asked, deferred / 4);
+  EXPECT_GT(same_cell, 50u);
+  EXPECT_GT(extended, 500u);
+}
+
 // A brick of the field summary has a band exactly when every cell of the
 // field within one cell of it (as the whole volume's grid labels them)
 // has that band; volumes as small as one voxel and with no band at all

@@ -318,6 +318,7 @@ TRANSTICK_INLINE void CrossingWalk::Step() {
   leave_[a] = FaceTime(a, c_[a] + ahead_[a]);
   SetExit();
   loaded_ = false;
+  pending_ = -1;  // its time is never needed past the cell (NextRoot)
   if (work_.planes) Count(c_[1], work_.step);
 }
 
@@ -373,6 +374,7 @@ TRANSTICK_INLINE void CrossingWalk::Load() {
   solved_ = false;
   cache_[0].edge = cache_[1].edge = -1;
   last_edge_ = -1;
+  pending_ = -1;
   ++loads_;
   if (work_.planes) Count(c_[1], work_.cell);
 }
@@ -491,19 +493,47 @@ TRANSTICK_INLINE CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
   return r;
 }
 
-TRANSTICK_INLINE std::optional<std::pair<double, int>> CrossingWalk::Candidate(int edge, bool up) {
+TRANSTICK_INLINE void CrossingWalk::Refine(int edge) {
+  EdgeRoots& r = cache_[edge & 1];
+  if (r.refined) return;
+  RayCubic g = cubic_;
+  g.d -= bands_->edges()[edge];
+  r.at[0].t = RefineRoot(g, 0, g.d, t_out_ - t_in_, r.end) + t_in_;
+  r.refined = true;
+}
+
+TRANSTICK_INLINE void CrossingWalk::Settle() {
+  if (pending_ < 0) return;
+  Refine(pending_);
+  t_ = cache_[pending_ & 1].at[0].t;
+  pending_ = -1;
+}
+
+double CrossingWalk::t() {
+  Settle();
+  return t_;
+}
+
+TRANSTICK_INLINE std::optional<std::pair<double, int>> CrossingWalk::Candidate(int edge, bool up,
+                                                                               bool defer) {
   EdgeRoots& r = Roots(edge);
   for (int k = 0; k < r.count; ++k) {
     if (r.at[k].up != up) continue;
-    if (!r.refined) {
-      RayCubic g = cubic_;
-      g.d -= bands_->edges()[edge];
-      r.at[0].t = RefineRoot(g, 0, g.d, t_out_ - t_in_, r.end) + t_in_;
-      r.refined = true;
-    }
     // One edge's roots alternate in direction: past the one just taken
-    // by index, so that a double root (up and down at one t) is taken twice.
-    if (edge == last_edge_ ? k > last_index_ : r.at[k].t >= t_) return std::pair{r.at[k].t, k};
+    // by index, so that a double root (up and down at one t) is taken
+    // twice. That needs no time; another edge's root is compared with t_.
+    if (edge == last_edge_) {
+      if (k <= last_index_) continue;
+      Refine(edge);
+      return std::pair{r.at[k].t, k};
+    }
+    if (!r.refined) {
+      // The one root of this edge, inside the cell's span (see NextRoot).
+      if (defer) return std::pair{std::numeric_limits<double>::quiet_NaN(), kDeferred};
+      Refine(edge);
+    }
+    Settle();
+    if (r.at[k].t >= t_) return std::pair{r.at[k].t, k};
   }
   return std::nullopt;
 }
@@ -512,12 +542,40 @@ std::optional<Crossing> CrossingWalk::NextRoot() {
   // Band b lies between edge b - 1 below and edge b above. An edge the
   // corners do not straddle (lo < e <= hi) is not crossed in this cell.
   const int down = band_ - 1, up = band_;
+  // An unrefined root lies in (t_in, t_in + span] (RefineRoot keeps to its
+  // bracket, and rounding is monotonic). When the walk is at or before t_in
+  // and that bound lies before t1 and within the cell, it is a crossing here
+  // whatever its exact time, and the first unless the other edge has one:
+  // its time can wait until asked (DeferTimes).
+  const double span = t_out_ - t_in_;
+  const bool defer =
+      defer_ && pending_ < 0 && t_ <= t_in_ && t_out_ < t1_ && t_in_ + span <= t_out_;
   std::optional<std::pair<double, int>> best;
   bool best_up = false;
-  if (Straddles(down_edge_, lo_value_, hi_value_)) best = Candidate(down, false);
+  if (Straddles(down_edge_, lo_value_, hi_value_)) best = Candidate(down, false, defer);
   if (Straddles(up_edge_, lo_value_, hi_value_)) {
-    auto c = Candidate(up, true);
+    auto c = Candidate(up, true, defer);
+    if (c && best) {
+      // Two edges' roots: the first is taken, so both times are needed.
+      for (auto* x : {&best, &c}) {
+        if ((*x)->second != kDeferred) continue;
+        const int edge = x == &best ? down : up;
+        Refine(edge);
+        **x = {cache_[edge & 1].at[0].t, 0};
+      }
+    }
     if (c && (!best || c->first < best->first)) best = c, best_up = true;
+  }
+  if (best && best->second == kDeferred) {
+    last_edge_ = best_up ? up : down;
+    last_index_ = 0;
+    pending_ = last_edge_;
+    ++deferred_;
+    // Until refined, a bound below it: every later cell's span begins after
+    // the root, so that Scan's start at max(t_in, t_) is the same.
+    t_ = t_in_;
+    SetBand(best_up ? Bands::Above(up) : Bands::Below(down));
+    return Crossing{std::numeric_limits<double>::quiet_NaN(), band_, true};
   }
   // A root on the cell's far face is the cell's; one at t1 is the next
   // walk's.

@@ -354,6 +354,9 @@ Tracer::Outcome Tracer::TraceSmooth(RayDescriptor& ray, std::vector<RayDescripto
   if (counters.plane_work) work = {counters.plane_work, y_begin, y_end, work_->step, work_->cell};
   CrossingWalk walk(scene_, bands_, ray.origin, axes, ray.t, end,
                     ray.band == RayDescriptor::kNoBand ? -1 : ray.band, work);
+  // Only a shaded crossing's time is asked: a root's refinement is left
+  // out where the ray enters no material, and for every shadow ray.
+  walk.DeferTimes();
   const bool primary = ray.kind == RayKind::kPrimary;
   std::optional<Vec3> view;  // toward the eye, made at the first hit (divisions and a root)
   const auto& materials = scene_.classification().materials;
@@ -370,7 +373,7 @@ Tracer::Outcome Tracer::TraceSmooth(RayDescriptor& ray, std::vector<RayDescripto
         // viewer), in the band it came from: the walk leaves that band only
         // by an edge's next root. Where the band was not a root's (the
         // ray's start, or after rounding), in the band found there.
-        const Vec3 p = HitPoint(ray, c->t, walk.cell());
+        const Vec3 p = HitPoint(ray, walk.t(), walk.cell());
         const uint16_t light_band = c->root && before != RayDescriptor::kNoBand ? before : ray.band;
         const std::array<int32_t, 3> at = {FloorClamped(p.x, 0, dims[0] - 1),
                                            FloorClamped(p.y, y_begin, y_end - 1),

@@ -157,6 +157,16 @@ class CrossingWalk {
 
   std::optional<Crossing> Next();
 
+  // From now on a root crossing's time may be left unrefined when taking
+  // the crossing does not need it: Next returns it with t NaN, and t(),
+  // asked before the next Next, refines it to the bits Next would have
+  // returned. The crossings and their bands are the same. (A shadow ray
+  // counts the materials it enters, not where; a primary ray needs the
+  // time only of the crossings it shades.)
+  void DeferTimes() { defer_ = true; }
+  // The time of the crossing Next last returned.
+  double t();
+
   // Goes on past t1 to a new end, as a walk begun with that end would.
   // REQUIRES: every crossing before t1 was taken.
   void Extend(double new_t1);
@@ -169,6 +179,8 @@ class CrossingWalk {
   int cells() const { return steps_; }
   int jumps() const { return jumps_; }
   int solved() const { return loads_; }
+  // Root crossings returned with their time left unrefined (DeferTimes).
+  int deferred() const { return deferred_; }
   // Whether the walk stopped at its bound on steps before t1 (never, by
   // the argument in docs/design.md, "Why every ray ends").
   bool truncated() const { return truncated_; }
@@ -206,8 +218,12 @@ class CrossingWalk {
   int StartBand();    // the field's band at t_
   EdgeRoots& Roots(int edge);
   // The first root of `edge` going `up` at or after t_, past the root just
-  // taken when it is this edge's.
-  std::optional<std::pair<double, int>> Candidate(int edge, bool up);
+  // taken when it is this edge's: its time and index, or {NaN, kDeferred}
+  // when `defer` lets an unrefined root's time wait (NextRoot says when).
+  std::optional<std::pair<double, int>> Candidate(int edge, bool up, bool defer);
+  static constexpr int kDeferred = -1;
+  void Refine(int edge);  // the loaded cell's unrefined root of `edge`, if any, refined
+  void Settle();          // t_ made exact when a crossing's time was deferred
   std::optional<Crossing> NextRoot();
   // The field along the ray in the loaded cell: cubic_ and hull_.
   void Solve();
@@ -270,6 +286,9 @@ class CrossingWalk {
   double t_;               // where the ray is: crossings before it are behind
   int last_edge_ = -1;     // the edge of the crossing just taken, in this cell
   int last_index_ = -1;    // and its index among that edge's roots
+  bool defer_ = false;     // DeferTimes
+  int pending_ = -1;       // the edge whose root, just taken, is unrefined (t_ below it)
+  int deferred_ = 0;
   // Per axis, the face ahead of cell c (c + ahead_) and behind it.
   int ahead_[3], behind_[3];
   // The current cell, and along each axis when the ray leaves its slab of
