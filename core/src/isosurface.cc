@@ -447,16 +447,32 @@ TRANSTICK_INLINE void CrossingWalk::Solve() {
   cubic_ = Cubic(corners_, entry, dir_, 0);
   const double p1 = cubic_.c * span, p2 = cubic_.b * span * span,
                p3 = cubic_.a * span * span * span;
+  // The middle two times 3, so that no division waits on the hull test.
   hull_[0] = cubic_.d;
-  hull_[1] = cubic_.d + p1 / 3;
-  hull_[2] = cubic_.d + (2 * p1 + p2) / 3;
+  hull_[1] = 3 * cubic_.d + p1;
+  hull_[2] = 3 * cubic_.d + (2 * p1 + p2);
   hull_[3] = cubic_.d + p1 + p2 + p3;
   solved_ = true;
 }
 
+TRANSTICK_INLINE unsigned CrossingWalk::HullBelow(double e) const {
+  // h - e < 0 is h < e, for every double and infinity (a difference rounds
+  // to its sign, and is 0 only when the two are equal), and false for NaN.
+  // The middle two are 3 times theirs, against 3e (exact: e is a float).
+#if defined(__SSE2__)
+  const __m128d v = _mm_set_sd(e), v3 = _mm_set_sd(3 * e);
+  return static_cast<unsigned>(
+      _mm_movemask_pd(_mm_cmplt_pd(_mm_loadu_pd(hull_), _mm_unpacklo_pd(v, v3))) |
+      _mm_movemask_pd(_mm_cmplt_pd(_mm_loadu_pd(hull_ + 2), _mm_unpacklo_pd(v3, v))) << 2);
+#else
+  return static_cast<unsigned>(hull_[0] < e) | static_cast<unsigned>(hull_[1] < 3 * e) << 1 |
+         static_cast<unsigned>(hull_[2] < 3 * e) << 2 | static_cast<unsigned>(hull_[3] < e) << 3;
+#endif
+}
+
 TRANSTICK_INLINE bool CrossingWalk::HullStraddles(double e) const {
-  const bool below = hull_[0] - e < 0;
-  return (hull_[1] - e < 0) != below || (hull_[2] - e < 0) != below || (hull_[3] - e < 0) != below;
+  // Some coefficients below e and some not: 1 .. 14.
+  return HullBelow(e) - 1 < 14;
 }
 
 TRANSTICK_INLINE CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
@@ -478,7 +494,7 @@ TRANSTICK_INLINE CrossingWalk::EdgeRoots& CrossingWalk::Roots(int edge) {
   // One change of sign among the coefficients, none of them 0, leaves the
   // cubic one simple root in the span (Bernstein polynomials diminish
   // variation): bracketed by the span's ends, with no extrema to find.
-  const double b0 = hull_[0] - e, b1 = hull_[1] - e, b2 = hull_[2] - e, b3 = hull_[3] - e;
+  const double b0 = hull_[0] - e, b1 = hull_[1] - 3 * e, b2 = hull_[2] - 3 * e, b3 = hull_[3] - e;
   const int changes = ((b0 < 0) != (b1 < 0)) + ((b1 < 0) != (b2 < 0)) + ((b2 < 0) != (b3 < 0));
   const double g_end = g(span);
   if (changes == 1 && b0 != 0 && b1 != 0 && b2 != 0 && b3 != 0 && (g.d < 0) != (g_end < 0)) {
@@ -890,8 +906,14 @@ std::optional<Crossing> CrossingWalk::Scan() {
       // the hull of the cubic says so here, without NextRoot's search.
       const bool down = Straddles(down_edge_, lo_value_, hi_value_);
       const bool up = Straddles(up_edge_, lo_value_, hi_value_);
-      if (down || up) Solve();
-      if (((down && HullStraddles(down_edge_)) || (up && HullStraddles(up_edge_)))) {
+      // One branch on both edges' hull tests: which way it goes is hard to
+      // foretell.
+      bool look = false;
+      if (down || up) {
+        Solve();
+        look = (down & HullStraddles(down_edge_)) | (up & HullStraddles(up_edge_));
+      }
+      if (look) {
         if (auto crossing = NextRoot()) {
           stop();
           state_ = State::kRoots;

@@ -230,6 +230,7 @@ class CrossingWalk {
   // Whether the hull of the loaded cell's cubic (Solve) leaves a root of
   // edge value `e` possible: its coefficients are not all on one side.
   bool HullStraddles(double e) const;
+  unsigned HullBelow(double e) const;  // bit i set: hull_[i] < e
   void SetBand(int band) {
     band_ = band;
     label_band_ = band >= 0 && band < FieldGrid::kMixed ? band : -1;
@@ -300,7 +301,7 @@ class CrossingWalk {
   float lo_value_ = 0, hi_value_ = 0;  // its corners' least and greatest value
   bool solved_ = false;                // cubic_ and hull_ are set
   RayCubic cubic_;                     // the field along the ray, s = t - t_in
-  double hull_[4];                     // its Bernstein coefficients on [0, t_out - t_in]
+  double hull_[4];  // its Bernstein coefficients on [0, t_out - t_in], the middle two times 3
   CellCorners corners_;
   EdgeRoots cache_[2];
 };
