@@ -610,9 +610,11 @@ void Frame::ReceiveBatch(const v1::RayBatch& batch, Link& from) {
     rays[kept++] = rays[i];
   }
   rays.resize(kept);
-  if (rejected > 0) Reject(rejected, side, first_error);
+  // Counted before a rejection is reported, so that whoever hears of the
+  // abort and asks for the frame's stats finds the kept rays among them.
   from.rays_received += rays.size();
   from.bytes_received += batch.ByteSizeLong();
+  if (rejected > 0) Reject(rejected, side, first_error);
   inbox_.Push(std::move(rays));
 }
 
