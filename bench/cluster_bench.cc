@@ -1388,6 +1388,7 @@ int Tables(const Options& o) {
 }  // namespace transtick
 
 int main(int argc, char** argv) {
+  transtick::UseReleaseLocking();  // as the daemons it stands for
   // The embedded daemons' per-frame log lines would bury the tables.
   spdlog::set_level(spdlog::level::warn);
   transtick::Options options;

@@ -12,6 +12,7 @@
 // "Image chunks"); the gateway always asks for rgb8.
 //
 // Needs TRANSTICK_DATA_DIR (the volume's directory; default ../shared/data).
+#include <httplib.h>
 #include <spdlog/spdlog.h>
 
 #include <atomic>
@@ -24,10 +25,9 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "bench_util.h"
-#include <httplib.h>
-
 #include "client.h"
 #include "convert.h"
+#include "daemon.h"
 #include "gateway.h"
 #include "local_cluster.h"
 #include "web.pb.h"
@@ -265,6 +265,7 @@ int Main(int argc, char** argv) {
 }  // namespace transtick
 
 int main(int argc, char** argv) {
+  transtick::UseReleaseLocking();          // as the daemons it stands for
   spdlog::set_level(spdlog::level::warn);  // the embedded root logs every frame at info
   return transtick::Main(argc, argv);
 }

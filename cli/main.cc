@@ -1195,6 +1195,7 @@ int Health(int argc, char** argv) {
 int main(int argc, char** argv) {
   // The embedded cluster's daemons allocate as the real ones do.
   transtick::TuneHeap();
+  transtick::UseReleaseLocking();
   // The embedded cluster logs only warnings unless asked for more.
   spdlog::set_level(spdlog::level::warn);
   if (const char* level = std::getenv("TRANSTICK_LOG_LEVEL")) {

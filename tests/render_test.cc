@@ -772,6 +772,52 @@ TEST(FramebufferTest, HostileDepositsNeitherCountTwiceNorOverflow) {
   EXPECT_EQ(forward.Resolve().rgb, backward.Resolve().rgb);
 }
 
+// Resolving is the fixed-point sum over kScale * samples, divided, for any
+// sample count (powers of two take a multiplication by the exact
+// reciprocal): bit for bit, for sums anywhere in an int64, rows resolved
+// whole or in pieces; and a cleared framebuffer is as good as a new one,
+// for the next frame's sample count too.
+TEST(FramebufferTest, ResolveIsTheSumOverTheSamplesAndClearForgetsAll) {
+  std::mt19937_64 rng(17);
+  const int width = 7, height = 5;
+  Framebuffer reused(width, height, 1);
+  for (int samples = 1; samples <= 64; ++samples) {
+    reused.Clear(samples);
+    Framebuffer fresh(width, height, samples);
+    std::vector<std::array<int64_t, 3>> sums(width * height, {0, 0, 0});
+    for (uint32_t p = 0; p < sums.size(); ++p) {
+      for (int s = 0; s < samples; ++s) {
+        Deposit d{p, RayKind::kPrimary, 0, {}};
+        for (int c = 0; c < 3; ++c) {
+          // Colours from tiny to the largest ToFixed keeps, either sign.
+          const int shift = static_cast<int>(rng() % 60);
+          const int64_t v = static_cast<int64_t>(rng() >> 4) >> shift;
+          d.color[c] = static_cast<float>(static_cast<double>(rng() % 2 ? v : -v) / 0x1p32);
+          sums[p][c] =
+              static_cast<int64_t>(static_cast<uint64_t>(sums[p][c]) +
+                                   static_cast<uint64_t>(Framebuffer::ToFixed(d.color[c])));
+        }
+        reused.Add(d);
+        fresh.Add(d);
+      }
+    }
+    ASSERT_TRUE(reused.Complete());
+    const Image a = reused.Resolve(), b = fresh.Resolve();
+    ASSERT_EQ(a.rgb, b.rgb) << samples << " samples";
+    for (size_t p = 0; p < sums.size(); ++p) {
+      for (int c = 0; c < 3; ++c) {
+        const float want =
+            static_cast<float>(static_cast<double>(sums[p][c]) / (Framebuffer::kScale * samples));
+        ASSERT_EQ(std::bit_cast<uint32_t>(a.rgb[p * 3 + c]), std::bit_cast<uint32_t>(want))
+            << samples << " samples, pixel " << p << " channel " << c;
+      }
+    }
+    std::vector<float> rows(static_cast<size_t>(2) * width * 3);
+    reused.ResolveRows(2, 4, rows.data());
+    ASSERT_TRUE(std::equal(rows.begin(), rows.end(), a.rgb.begin() + 2 * width * 3));
+  }
+}
+
 }  // namespace
 }  // namespace transtick
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 
 #include "transtick/check.h"
 
@@ -31,7 +32,10 @@ Framebuffer::Framebuffer(int width, int height, int samples)
 
 void Framebuffer::Clear(int samples) {
   samples_ = samples;
-  std::fill(pixels_.begin(), pixels_.end(), Pixel{{0, 0, 0}, 0, 0, 0});
+  // All bytes zero is Pixel{} (checked where Pixel is declared). memset
+  // writes 32 bytes at a time; std::fill wrote each field, and the display
+  // clears 5 MB of a 400x400 frame's pixels each frame.
+  std::memset(static_cast<void*>(pixels_.data()), 0, pixels_.size() * sizeof(Pixel));
   complete_.store(0, std::memory_order_relaxed);
   complete_prefix_ = 0;
 }
@@ -105,6 +109,17 @@ void Framebuffer::ResolveRows(int row_begin, int row_end, float* rgb) const {
   const size_t end = static_cast<size_t>(row_end) * width_;
   // The mean of the samples; one sample is its sum as it stands.
   const double scale = kScale * samples_;
+  if ((samples_ & (samples_ - 1)) == 0) {
+    // A power of two: multiplying by its reciprocal (exact) is the same
+    // bits as dividing, and a division is several multiplications' time.
+    const double inverse = 1.0 / scale;
+    for (size_t i = begin; i < end; ++i) {
+      for (int c = 0; c < 3; ++c) {
+        *rgb++ = static_cast<float>(static_cast<double>(pixels_[i].sum[c]) * inverse);
+      }
+    }
+    return;
+  }
   for (size_t i = begin; i < end; ++i) {
     for (int c = 0; c < 3; ++c) *rgb++ = static_cast<float>(pixels_[i].sum[c] / scale);
   }

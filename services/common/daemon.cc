@@ -12,6 +12,7 @@
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "absl/synchronization/mutex.h"
 
 namespace transtick {
 
@@ -180,6 +181,12 @@ class JsonMessage : public spdlog::custom_flag_formatter {
 };
 
 }  // namespace
+
+void UseReleaseLocking() {
+#ifdef NDEBUG
+  absl::SetMutexDeadlockDetectionMode(absl::OnDeadlockCycle::kIgnore);
+#endif
+}
 
 void InitLogging(const std::string& name) {
   const char* format = std::getenv("TRANSTICK_LOG_FORMAT");

@@ -11,6 +11,7 @@ int main(int argc, char** argv) {
   using namespace transtick;
   BlockTerminationSignals();
   TuneHeap();
+  UseReleaseLocking();
   InitLogging("display");
   auto flags = Flags::Parse(
       argc, argv, 1,

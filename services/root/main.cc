@@ -12,6 +12,7 @@ int main(int argc, char** argv) {
   using namespace transtick;
   BlockTerminationSignals();
   TuneHeap();
+  UseReleaseLocking();
   InitLogging("root");
   auto flags = Flags::Parse(
       argc, argv, 1,

@@ -13,6 +13,7 @@ int main(int argc, char** argv) {
   using namespace transtick;
   BlockTerminationSignals();
   TuneHeap();
+  UseReleaseLocking();
   InitLogging("web");
   auto flags = Flags::Parse(argc, argv, 1,
                             {"listen", "root", "https-cert", "https-key", "max-sessions", "idle-s",

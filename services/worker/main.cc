@@ -13,6 +13,7 @@ int main(int argc, char** argv) {
   using namespace transtick;
   BlockTerminationSignals();
   TuneHeap();
+  UseReleaseLocking();
   InitLogging("worker");
   auto flags = Flags::Parse(argc, argv, 1,
                             WithSecurityFlags({"listen", "root", "advertise", "threads",

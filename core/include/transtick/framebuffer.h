@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdint>
 #include <span>
+#include <type_traits>
 #include <vector>
 
 #include "transtick/ray.h"
@@ -116,6 +117,7 @@ class Framebuffer {
     uint8_t primary_seen;  // primary deposits, up to 255
     uint8_t counted;  // in complete_ already
   };
+  static_assert(std::is_trivially_copyable_v<Pixel>, "Clear zeroes pixels with memset");
   // Whether this deposit completes p: then it is marked, and the caller
   // counts it in complete_. A pixel completes once: deposits after its
   // last one (which no renderer sends) must not count it again, or
