@@ -480,7 +480,10 @@ if (dvrOpen) {
 
 await check('Cancel button cancels a running job', async () => {
   const name = 'web viewer test long job';
-  const submit = spawn(BIN, ['submit', '--root', ROOT, writeJob(name, 200, 128), '--out-dir', TMP, '--quiet'],
+  // Long enough to outlast the page's next look at the jobs and the click
+  // on a loaded machine: 200 such frames once finished first (2 s), and the
+  // job showed done, not cancelled. It is cancelled within its first frames.
+  const submit = spawn(BIN, ['submit', '--root', ROOT, writeJob(name, 5000, 128), '--out-dir', TMP, '--quiet'],
                        {stdio: ['ignore', 'ignore', 'pipe']});
   let stderr = '';
   submit.stderr.on('data', (d) => { stderr += d; });
