@@ -13,7 +13,7 @@
 #
 # Usage: bench/emulated_hosts.sh [--build DIR] [--full] [--point W:R:LAT_MS:GBIT]...
 #          [--rounds N] [--frames N] [--size WxH] [--volume FILE] [--materials FILE]
-#          [--threads N] [--batch-rays N] [--linger-us US] [--json FILE]
+#          [--threads N] [--frames-tracing auto|1|2] [--batch-rays N] [--linger-us US] [--json FILE]
 #          [--timeout S] [--keep]
 #   Default points: a subset of the sweep (below), 3 rounds (about 6 minutes
 #   on 2 cores). --full: every point of latency 0.05/0.5/5 ms x 1/10 Gbit/s x
@@ -26,7 +26,10 @@
 #   spreads over all points; the summary takes the median over rounds.
 #   Defaults: 10 frames of cthead.nrrd (from TRANSTICK_DATA_DIR, default
 #   ../shared/data) at 400x400, elevation 15, shadows, one tracer thread per
-#   worker, the worker's own batch and linger, 300 s per job at most.
+#   worker, the worker's own batch and linger, 300 s per job at most, and
+#   the root's --frames-tracing 2: the emulated hosts share one boot id, so
+#   the root's auto would take them for one machine (docs/design.md,
+#   "Overlapped frames").
 #   --json FILE: one JSON object per point (tests/emulated_hosts_test.sh).
 set -uo pipefail
 src=$(cd "$(dirname "$0")/.." && pwd)
@@ -34,7 +37,7 @@ build=$src/build
 data=${TRANSTICK_DATA_DIR:-$src/../shared/data}
 volume=$data/cthead.nrrd
 materials=$src/examples/cthead_materials.json
-frames=10 size=400x400 threads=1 rounds="" json="" timeout_s=300 keep=0 full=0
+frames=10 size=400x400 threads=1 rounds="" json="" timeout_s=300 keep=0 full=0 frames_tracing=2
 worker_extra=()
 points=()
 while (($#)); do
@@ -48,6 +51,7 @@ while (($#)); do
     --volume) volume=$2; shift ;;
     --materials) materials=$2; shift ;;
     --threads) threads=$2; shift ;;
+    --frames-tracing) frames_tracing=$2; shift ;;
     --batch-rays) worker_extra+=(--batch-rays "$2"); shift ;;
     --linger-us) worker_extra+=(--linger-us "$2"); shift ;;
     --json) json=$2; shift ;;
@@ -219,7 +223,7 @@ run_point() {
   nsx "$root_ns" "$build/services/root/transtick-root" --listen 127.0.0.1:7000 \
     --data-dir "$(dirname "$volume")" --display "$(ip_of 2):8002" --rings "$r" \
     --link-latency-ms "$lat" --link-gbits "$(python3 -c "print($gbit or 100)")" \
-    --metrics 127.0.0.1:7100 >"$pdir/root.log" 2>&1 &
+    --frames-tracing "$frames_tracing" --metrics 127.0.0.1:7100 >"$pdir/root.log" 2>&1 &
   pids+=($!)
   for ((i = 0; i < w; ++i)); do
     local ns=$run-h$((10 + i))

@@ -93,6 +93,34 @@ TEST(RegistryTest, WhereAWorkerRunsIsCheckedAndKept) {
   EXPECT_EQ(status.workers(0).machine(), r.machine());
 }
 
+// Whether the workers share one machine (the root's, for its frames'
+// overlap: RunnerOptions::frames_tracing auto).
+TEST(RegistryTest, AllOnSaysWhetherEveryWorkerRunsOnOneMachine) {
+  const std::string here = "0b9e0c7a-6c1f-4a55-9d7e-2f1c3b5a7d90";
+  const std::string there = "7d1e3c2b-0000-4a55-9d7e-2f1c3b5a7d91";
+  Registry registry(std::chrono::milliseconds(5000));
+  EXPECT_TRUE(registry.AllOn(here));  // no worker: none elsewhere
+  v1::RegisterRequest a = Request("a", "127.0.0.1:1");
+  a.set_machine(here);
+  ASSERT_TRUE(registry.Register(a).ok());
+  EXPECT_TRUE(registry.AllOn(here));
+  EXPECT_FALSE(registry.AllOn(there));
+  EXPECT_FALSE(registry.AllOn(""));  // the root's own machine unknown
+  v1::RegisterRequest b = Request("b", "127.0.0.1:2");
+  b.set_machine(here);
+  ASSERT_TRUE(registry.Register(b).ok());
+  EXPECT_TRUE(registry.AllOn(here));
+  v1::RegisterRequest c = Request("c", "10.0.0.3:1");
+  c.set_machine(there);
+  ASSERT_TRUE(registry.Register(c).ok());
+  EXPECT_FALSE(registry.AllOn(here));
+  v1::RegisterRequest d = Request("d", "10.0.0.4:1");  // says nothing of its machine
+  Registry unknown(std::chrono::milliseconds(5000));
+  ASSERT_TRUE(unknown.Register(a).ok());
+  ASSERT_TRUE(unknown.Register(d).ok());
+  EXPECT_FALSE(unknown.AllOn(here));
+}
+
 TEST(RegistryTest, WorkersWaitsForAFirstWorkerAndHonoursCancel) {
   Registry registry;
   auto none = registry.Workers(std::chrono::milliseconds(50), [] { return false; });

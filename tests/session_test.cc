@@ -2,7 +2,9 @@
 // stream"): the frames equal the in-process render of their camera and
 // classification bit for bit, a burst of cameras is not rendered one by
 // one but ends on the newest, a bad request is an error event and the
-// session goes on, and batch jobs still run beside a session.
+// session goes on, and batch jobs still run beside a session, whose frames
+// go first.
+#include <chrono>
 #include <fstream>
 #include <limits>
 #include <random>
@@ -302,6 +304,50 @@ TEST_F(SessionTest, BatchJobsRunBesideAnOpenSession) {
   EXPECT_EQ(image->rgb, Reference(Camera(45)).rgb);
   auto seq = (*s)->SetView(Camera(60));
   EXPECT_EQ(NextFull(**s).seq, *seq);
+}
+
+// A session's frame does not wait for the batch frame that traces when it
+// comes: the root gives it a turn at once, and the workers trace it first
+// (FrameSpec.interactive, TraceOrder), the batch frame's rays waiting in
+// their inboxes meanwhile. Both images stay bit for bit the in-process ones.
+TEST_F(SessionTest, ASessionFrameGoesBeforeABatchFrameThatIsTracing) {
+  auto s = SessionClient::Open(cluster_->root_address(), Dataset(Camera(30)));
+  ASSERT_TRUE(s.ok());
+  ASSERT_TRUE((*s)->Next()->ready);
+  NextFull(**s);
+  // A batch frame of a few seconds on this cluster: 64 samples a pixel.
+  v1::View big = Camera(45, 640, 512);
+  big.set_samples(64);
+  big.set_output(dir_ + "/big.exr");
+  v1::Job job;
+  *job.add_datasets() = Dataset(big);
+  absl::StatusOr<std::vector<v1::ClusterFrameStats>> stats;
+  const auto submitted = std::chrono::steady_clock::now();
+  std::thread batch([&] { stats = SubmitAndWatch(cluster_->root_address(), job, WatchOptions{}); });
+  // Well inside the batch frame (which starts within milliseconds).
+  std::this_thread::sleep_for(std::chrono::milliseconds(150));
+  auto seq = (*s)->SetView(Camera(60));
+  ASSERT_TRUE(seq.ok());
+  auto frame = NextFull(**s);
+  const double session_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - submitted)
+          .count();
+  batch.join();
+  ASSERT_TRUE(stats.ok()) << stats.status();
+  ASSERT_EQ(stats->size(), 1u);
+  EXPECT_EQ(frame.seq, *seq);
+  EXPECT_EQ(frame.image.rgb, Reference(Camera(60)).rgb);
+  auto image = ReadImage(dir_ + "/big.exr");
+  ASSERT_TRUE(image.ok()) << image.status();
+  EXPECT_EQ(image->rgb, Reference(big).rgb);
+  // Waiting for its turn, the session's frame would come only once the
+  // batch frame had traced, about since_submit_ms + frame_ms after the
+  // submission; first on the workers, it comes in the batch frame's
+  // first half.
+  const double batch_start_ms = stats->front().since_submit_ms();
+  const double batch_ms = stats->front().frame_ms();
+  EXPECT_LT(session_ms, batch_start_ms + 0.5 * batch_ms)
+      << "the batch frame took " << batch_ms << " ms from " << batch_start_ms << " ms";
 }
 
 }  // namespace

@@ -9,6 +9,7 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <fstream>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -202,6 +203,13 @@ void InitLogging(const std::string& name) {
   if (const char* level = std::getenv("TRANSTICK_LOG_LEVEL")) {
     spdlog::set_level(spdlog::level::from_str(level));
   }
+}
+
+std::string MachineId() {
+  std::ifstream in("/proc/sys/kernel/random/boot_id");
+  std::string id;
+  if (!std::getline(in, id) || id.size() > 64) return "";
+  return id;
 }
 
 }  // namespace transtick

@@ -87,6 +87,10 @@ void InitLogging(const std::string& name);
 // the detection.
 void UseReleaseLocking();
 
+// The kernel's boot id: the same for every process of one machine, in any
+// container or network namespace; empty when unreadable.
+std::string MachineId();
+
 }  // namespace transtick
 
 #endif  // TRANSTICK_SERVICES_COMMON_DAEMON_H_

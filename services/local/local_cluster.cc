@@ -20,6 +20,7 @@ absl::StatusOr<std::unique_ptr<LocalCluster>> LocalCluster::Start(const Options&
   ro.data_dir = options.data_dir;
   ro.display = absl::StrCat("127.0.0.1:", c->display_->port());
   ro.rings = options.rings;
+  ro.frames_tracing = options.frames_tracing;
   ro.worker_wait_s = 30;
   auto root = RootNode::Start("127.0.0.1:0", ro, metrics);
   if (!root.ok()) return root.status();

@@ -26,6 +26,9 @@ class LocalCluster {
     int threads_per_worker = 1;
     std::string data_dir;  // the root's data directory
     bool metrics = false;  // each node serves /metrics on a port of 127.0.0.1
+    // The root's RunnerOptions::frames_tracing: 0 auto (1 here: one
+    // machine), 1 or 2.
+    int frames_tracing = 0;
   };
   // Returns once every worker has registered with the root.
   static absl::StatusOr<std::unique_ptr<LocalCluster>> Start(const Options& options);

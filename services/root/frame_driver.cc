@@ -48,7 +48,8 @@ absl::StatusOr<FrameResult> FrameDriver::Run(
     const v1::View& view, const LoadedDataset& data, const Layout& layout,
     const std::function<bool()>& cancelled, const ProgressFn& on_progress, const ChunkFn& on_chunk,
     const std::function<void()>& on_traced, bool work_profile,
-    const std::function<void(const FrameResult&)>& on_reported, v1::ImageEncoding image_encoding) {
+    const std::function<void(const FrameResult&)>& on_reported, v1::ImageEncoding image_encoding,
+    const std::function<void()>& on_running, bool interactive) {
   const uint64_t frame_id = next_frame_id_++;
   const auto t0 = Clock::now();
   const double started_unix =
@@ -79,6 +80,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(
       spec.set_row_end(view.height());
       spec.set_row_step(rings);
       spec.set_work_profile(work_profile || !on_chunk);
+      spec.set_interactive(interactive);
       // Prepared and started in one round (FrameSpec.run): a neighbour's
       // rays or a worker's deposits that come before a node knows the frame
       // wait there for it.
@@ -197,6 +199,7 @@ absl::StatusOr<FrameResult> FrameDriver::Run(
         members[i].worker->stub->async()->RunFrame(ctx, &ref, &acks[i], std::move(done));
       }));
   if (!s.ok()) return abort(s);
+  if (on_running) on_running();
 
   // Wait for the display, relaying progress and the image's chunks as they
   // come, until the image is through.

@@ -54,7 +54,10 @@ class FrameDriver {
   // workers have ended the frame and reported, on another thread, while the
   // image may still be on its way: with the statistics Run would return
   // and the frame's time until then. It is not called when the frame
-  // fails before every deposit is in. Fails UNAVAILABLE
+  // fails before every deposit is in. `on_running`, when set, is called
+  // once every worker runs the frame, on the calling thread. An
+  // `interactive` frame goes first on workers that trace several at once
+  // (FrameSpec.interactive). Fails UNAVAILABLE
   // when a worker or the display failed (a failed worker is dropped from
   // the registry), CANCELLED when `cancelled()` turned true.
   absl::StatusOr<FrameResult> Run(
@@ -63,7 +66,8 @@ class FrameDriver {
       const ChunkFn& on_chunk, const std::function<void()>& on_traced = nullptr,
       bool work_profile = false,
       const std::function<void(const FrameResult&)>& on_reported = nullptr,
-      v1::ImageEncoding image_encoding = v1::FLOAT32);
+      v1::ImageEncoding image_encoding = v1::FLOAT32,
+      const std::function<void()>& on_running = nullptr, bool interactive = false);
 
  private:
   Registry& registry_;

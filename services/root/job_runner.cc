@@ -12,6 +12,7 @@
 #include "absl/strings/str_cat.h"
 #include "clock.h"
 #include "convert.h"
+#include "daemon.h"
 #include "security.h"
 #include "transtick/tracer.h"
 
@@ -50,6 +51,8 @@ FrameCosts CostsFor(const FrameTask& task) ABSL_EXCLUSIVE_LOCKS_REQUIRED(task.da
 JobRunner::JobRunner(const RunnerOptions& options, JobQueue& queue, Registry& registry,
                      Metrics& metrics)
     : options_(options),
+      machine_(MachineId()),
+      turns_(options.frames_tracing == 1 ? 1 : 2),
       queue_(queue),
       registry_(registry),
       metrics_(metrics),
@@ -152,9 +155,15 @@ absl::Status JobRunner::RunJob(Job& job) {
     }
     auto next = std::make_shared<Flight>();
     next->frame = *frame;
-    if (last) last->traced.WaitForNotification();
+    // With two frames tracing, the next one starts once the last runs on
+    // every worker: the workers trace the older first, and the next fills
+    // what its tail leaves idle.
+    if (last) {
+      (Overlap() ? last->running : last->traced).WaitForNotification();
+    }
     next->thread = std::thread([this, &job, data, &chosen, me = next, before = last] {
       me->status = RunView(job, *data, chosen, *me, before.get());
+      if (!me->running.HasBeenNotified()) me->running.Notify();
       if (!me->traced.HasBeenNotified()) me->traced.Notify();
       if (!me->learned.HasBeenNotified()) me->learned.Notify();
       if (!me->published.HasBeenNotified()) me->published.Notify();
@@ -169,11 +178,19 @@ absl::Status JobRunner::RunJob(Job& job) {
   return land(/*abandon=*/false);
 }
 
+bool JobRunner::Overlap() const {
+  if (options_.frames_tracing != kAutoFramesTracing) return options_.frames_tracing > 1;
+  return !registry_.AllOn(machine_);
+}
+
 bool FrameTurns::Acquire(bool interactive, const std::function<bool()>& cancelled) {
   absl::MutexLock lock(&mu_);
   if (interactive) ++interactive_waiting_;
   auto mine = [&]() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
-    return !busy_ && (interactive || interactive_waiting_ == 0);
+    // With frames overlapping, an interactive frame need not wait for a
+    // turn: the workers trace it first (FrameSpec.interactive).
+    if (interactive) return busy_ < frames_ || (frames_ > 1 && busy_ <= frames_);
+    return busy_ < frames_ && interactive_waiting_ == 0;
   };
   // Woken by Release; the timeout only looks at `cancelled` now and then.
   while (!mine() && !cancelled()) {
@@ -181,13 +198,13 @@ bool FrameTurns::Acquire(bool interactive, const std::function<bool()>& cancelle
   }
   if (interactive) --interactive_waiting_;
   if (!mine()) return false;
-  busy_ = true;
+  ++busy_;
   return true;
 }
 
 void FrameTurns::Release() {
   absl::MutexLock lock(&mu_);
-  busy_ = false;
+  --busy_;
 }
 
 int JobRunner::RingsFor(FrameTask& task, const std::vector<std::shared_ptr<WorkerEntry>>& workers) {
@@ -295,7 +312,8 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
           [&](const v1::View& test, Layout& probe) -> absl::StatusOr<FrameResult> {
             prerendered = true;
             if (absl::Status s = slabs_.Distribute(data, probe); !s.ok()) return s;
-            return driver_.Run(test, data, probe, task.cancelled, nullptr, nullptr);
+            return driver_.Run(test, data, probe, task.cancelled, nullptr, nullptr, nullptr, false,
+                               nullptr, v1::FLOAT32, nullptr, task.interactive);
           },
           &out.report);
       if (status.ok()) status = slabs_.Distribute(data, layout);
@@ -324,7 +342,8 @@ absl::StatusOr<RenderedFrame> JobRunner::Render(FrameTask& task) {
           turn.Release();
           if (task.on_traced) task.on_traced();
         },
-        task.balancer->LearnsFromProfiles(), learn, task.image_encoding);
+        task.balancer->LearnsFromProfiles(), learn, task.image_encoding, task.on_running,
+        task.interactive);
     if (!result.ok()) {
       status = result.status();
       if (status.code() != absl::StatusCode::kUnavailable || task.cancelled()) return status;
@@ -379,6 +398,9 @@ absl::Status JobRunner::RunView(Job& job, LoadedDataset& data, FrameTask::Chosen
   task.image_encoding = job.spec().image_encoding() == v1::RGB8 ? v1::RGB8 : v1::FLOAT32;
   task.cancelled = [&] { return job.cancelled() || queue_.stopping() || me.abandon.load(); };
   task.on_attempt = [&] { held.reset(); };
+  task.on_running = [&] {
+    if (!me.running.HasBeenNotified()) me.running.Notify();
+  };
   task.on_traced = [&] {
     if (!me.traced.HasBeenNotified()) me.traced.Notify();
   };

@@ -27,6 +27,8 @@
 
 namespace transtick {
 
+constexpr int kAutoFramesTracing = 0;
+
 struct RunnerOptions {
   std::string data_dir = "/data";
   std::string display = "127.0.0.1:7002";
@@ -35,23 +37,37 @@ struct RunnerOptions {
   uint64_t max_volume_bytes = uint64_t{8} << 30;
   double frame_timeout_s = 600;
   double worker_wait_s = 120;  // how long a job waits for a first worker
+  // Frames the cluster traces at once (FrameTurns), 1 or 2, or
+  // kAutoFramesTracing. With 2 a job's next frame starts as soon as the last
+  // one runs on every worker, which trace the older first (TraceOrder); with
+  // 1 once the last one has traced. Auto: 2 when a worker runs on another
+  // machine than the root, where the frame's hops wait on the network; 1
+  // when they share one machine's cores (docs/design.md, "Overlapped
+  // frames").
+  int frames_tracing = kAutoFramesTracing;
 };
 
-// Who traces on the cluster next: one frame at a time (a frame uses every
-// worker; it gives up its turn once it has traced, and its image travels
-// while the next one traces), and an interactive session's frame before any batch job's that
-// waits. Batch frames go between session frames, so a session that renders
-// without pause holds the jobs off until it pauses. Thread-safe.
+// Who traces on the cluster next: `frames` frames at a time (a frame uses
+// every worker; it gives up its turn once it has traced, and its image
+// travels while the next one traces; a second frame traces where the first
+// leaves the workers idle, RunnerOptions::frames_tracing), and an
+// interactive session's frame before any batch job's that waits. Batch
+// frames go between session frames, so a session that renders without
+// pause holds the jobs off until it pauses. With frames overlapping, an
+// interactive frame may take one turn more than `frames`: the workers trace
+// it before the batch frames they hold. Thread-safe.
 class FrameTurns {
  public:
+  explicit FrameTurns(int frames = 1) : frames_(frames) {}
   // Blocks until it is the caller's turn; false (no turn) if `cancelled()`
   // turns true first.
   bool Acquire(bool interactive, const std::function<bool()>& cancelled);
   void Release();
 
  private:
+  const int frames_;
   absl::Mutex mu_;
-  bool busy_ ABSL_GUARDED_BY(mu_) = false;
+  int busy_ ABSL_GUARDED_BY(mu_) = 0;
   int interactive_waiting_ ABSL_GUARDED_BY(mu_) = 0;
 };
 
@@ -70,6 +86,9 @@ struct FrameTask {
   // Once the frame has traced (FrameDriver::Run's on_traced), on the
   // rendering thread; again if a later attempt traces.
   std::function<void()> on_traced;
+  // Once the frame runs on every worker (FrameDriver::Run's on_running),
+  // on the rendering thread; again if a later attempt runs.
+  std::function<void()> on_running;
   // Once the balancer has learned from the frame's statistics (the workers
   // have reported; the image may still travel), on another thread; again
   // if a later attempt reports.
@@ -155,6 +174,7 @@ class JobRunner {
   struct Flight {
     int frame = 0;
     absl::Status status;
+    absl::Notification running;    // it runs on every worker, or the frame ended
     absl::Notification traced;     // every deposit is in, or the frame ended
     absl::Notification published;  // its image is out, or the frame ended
     absl::Notification learned;    // its balancer learned from it, or the frame ended
@@ -163,6 +183,9 @@ class JobRunner {
   };
   // Renders the job's frame (on attempt after attempt while workers or the
   // display fail) and publishes its image, after `before`'s (null: none).
+  // Whether a job's next frame starts once the last one runs, rather than
+  // once it has traced (RunnerOptions::frames_tracing).
+  bool Overlap() const;
   absl::Status RunView(Job& job, LoadedDataset& data, FrameTask::Chosen& chosen, Flight& me,
                        const Flight* before);
 
@@ -171,6 +194,7 @@ class JobRunner {
       ABSL_EXCLUSIVE_LOCKS_REQUIRED(task.data->mu);
 
   const RunnerOptions options_;
+  const std::string machine_;  // the root's (MachineId)
   FrameTurns turns_;
   JobQueue& queue_;
   Registry& registry_;

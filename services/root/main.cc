@@ -14,30 +14,36 @@ int main(int argc, char** argv) {
   TuneHeap();
   UseReleaseLocking();
   InitLogging("root");
-  auto flags = Flags::Parse(
-      argc, argv, 1,
-      WithSecurityFlags({"listen", "data-dir", "state-dir", "display", "rings", "link-latency-ms",
-                         "link-gbits", "max-volume-mb",
-                         "frame-timeout", "max-queued-jobs", "max-jobs-per-client",
-                         "max-job-megapixels", "metrics"}),
-      WithSecuritySwitches({"help"}));
+  auto flags =
+      Flags::Parse(argc, argv, 1,
+                   WithSecurityFlags({"listen", "data-dir", "state-dir", "display", "rings",
+                                      "frames-tracing", "link-latency-ms", "link-gbits",
+                                      "max-volume-mb", "frame-timeout", "max-queued-jobs",
+                                      "max-jobs-per-client", "max-job-megapixels", "metrics"}),
+                   WithSecuritySwitches({"help"}));
   if (!flags.ok() || flags->Has("help")) {
     if (!flags.ok()) std::cerr << "transtick-root: " << flags.status().message() << "\n";
-    std::cerr << "usage: transtick-root [--listen ADDR] [--data-dir DIR] [--state-dir DIR] "
-                 "[--display ADDR] [--rings R|auto] [--link-latency-ms MS] [--link-gbits G] "
-                 "[--max-volume-mb N] [--frame-timeout S] "
-                 "[--max-queued-jobs N] [--max-jobs-per-client N] [--max-job-megapixels N]\n"
-                 "(environment: TRANSTICK_LISTEN, TRANSTICK_DATA_DIR, TRANSTICK_STATE_DIR, "
-                 "TRANSTICK_DISPLAY, TRANSTICK_RINGS, TRANSTICK_LINK_LATENCY_MS, TRANSTICK_LINK_GBITS, "
-                 "TRANSTICK_MAX_VOLUME_MB, "
-                 "TRANSTICK_FRAME_TIMEOUT, TRANSTICK_MAX_QUEUED_JOBS, "
-                 "TRANSTICK_MAX_JOBS_PER_CLIENT, TRANSTICK_MAX_JOB_MEGAPIXELS)\n"
-                 "TLS: " << kSecurityUsage << " [--tokens FILE] (or TRANSTICK_TLS_CA, TRANSTICK_TLS_CERT, "
-                 "TRANSTICK_TLS_KEY, TRANSTICK_TOKENS); without them it serves plaintext on loopback only "
-                 "(docs/security.md)\n"
-                 "Without a state directory the jobs live in memory and a restart loses them.\n"
-                 "/metrics (Prometheus): --metrics ADDR|off (TRANSTICK_METRICS), default the --listen "
-                 "address with port + 100; HTTPS with TLS\n";
+    std::cerr
+        << "usage: transtick-root [--listen ADDR] [--data-dir DIR] [--state-dir DIR] "
+           "[--display ADDR] [--rings R|auto] [--frames-tracing auto|1|2] [--link-latency-ms MS] "
+           "[--link-gbits G] "
+           "[--max-volume-mb N] [--frame-timeout S] "
+           "[--max-queued-jobs N] [--max-jobs-per-client N] [--max-job-megapixels N]\n"
+           "(environment: TRANSTICK_LISTEN, TRANSTICK_DATA_DIR, TRANSTICK_STATE_DIR, "
+           "TRANSTICK_DISPLAY, TRANSTICK_RINGS, TRANSTICK_FRAMES_TRACING, "
+           "TRANSTICK_LINK_LATENCY_MS, TRANSTICK_LINK_GBITS, "
+           "TRANSTICK_MAX_VOLUME_MB, "
+           "TRANSTICK_FRAME_TIMEOUT, TRANSTICK_MAX_QUEUED_JOBS, "
+           "TRANSTICK_MAX_JOBS_PER_CLIENT, TRANSTICK_MAX_JOB_MEGAPIXELS)\n"
+           "TLS: "
+        << kSecurityUsage
+        << " [--tokens FILE] (or TRANSTICK_TLS_CA, TRANSTICK_TLS_CERT, "
+           "TRANSTICK_TLS_KEY, TRANSTICK_TOKENS); without them it serves plaintext on loopback "
+           "only "
+           "(docs/security.md)\n"
+           "Without a state directory the jobs live in memory and a restart loses them.\n"
+           "/metrics (Prometheus): --metrics ADDR|off (TRANSTICK_METRICS), default the --listen "
+           "address with port + 100; HTTPS with TLS\n";
     return flags.ok() ? 0 : 2;
   }
   if (absl::Status s = UseDaemonSecurity(*flags); !s.ok()) {
@@ -57,6 +63,9 @@ int main(int argc, char** argv) {
         std::stoull(Setting(*flags, "max-volume-mb", "TRANSTICK_MAX_VOLUME_MB", "8192")) << 20;
     o.frame_timeout_s =
         std::stod(Setting(*flags, "frame-timeout", "TRANSTICK_FRAME_TIMEOUT", "600"));
+    const std::string frames_tracing =
+        Setting(*flags, "frames-tracing", "TRANSTICK_FRAMES_TRACING", "auto");
+    o.frames_tracing = frames_tracing == "auto" ? kAutoFramesTracing : std::stoi(frames_tracing);
     o.max_queued = std::stoi(Setting(*flags, "max-queued-jobs", "TRANSTICK_MAX_QUEUED_JOBS", "1000"));
     o.max_jobs_per_client =
         std::stoi(Setting(*flags, "max-jobs-per-client", "TRANSTICK_MAX_JOBS_PER_CLIENT", "100"));
@@ -64,8 +73,12 @@ int main(int argc, char** argv) {
                            *flags, "max-job-megapixels", "TRANSTICK_MAX_JOB_MEGAPIXELS", "2048")))
                        << 20;
   } catch (...) {
-    std::cerr << "transtick-root: --max-volume-mb, --frame-timeout, --link-* and the --max-* "
-                 "limits take numbers\n";
+    std::cerr << "transtick-root: --max-volume-mb, --frame-timeout, --frames-tracing, --link-* "
+                 "and the --max-* limits take numbers\n";
+    return 2;
+  }
+  if (o.frames_tracing < 0 || o.frames_tracing > 2) {
+    std::cerr << "transtick-root: --frames-tracing is auto, 1 or 2\n";
     return 2;
   }
   if (o.max_queued < 1 || o.max_jobs_per_client < 1 || o.max_job_pixels == 0) {

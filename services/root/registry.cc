@@ -188,6 +188,15 @@ int Registry::size() const {
   return static_cast<int>(workers_.size());
 }
 
+bool Registry::AllOn(const std::string& machine) const {
+  if (machine.empty()) return false;
+  absl::MutexLock lock(&mu_);
+  for (const auto& [id, w] : workers_) {
+    if (w->machine != machine) return false;
+  }
+  return true;
+}
+
 std::map<std::string, HeldSlab> Registry::Held() const {
   absl::MutexLock lock(&mu_);
   return held_;

@@ -75,6 +75,9 @@ class Registry {
   absl::StatusOr<std::vector<std::shared_ptr<WorkerEntry>>> Workers(
       std::chrono::milliseconds wait, const std::function<bool()>& cancelled);
   int size() const;
+  // Whether every registered worker said it runs on `machine` (its boot
+  // id); false when one did not say, or `machine` is empty.
+  bool AllOn(const std::string& machine) const;
   // Whether the worker is registered and was heard from within the expiry.
   bool Alive(const std::string& id);
 

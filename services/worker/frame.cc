@@ -33,6 +33,9 @@ double ThreadCpuMs() {
 
 // Rays a tracer takes from the inbox, or primaries it generates, at a time.
 constexpr size_t kWorkUnit = 256;
+// Rays a tracer traces between looks at whether an older frame has work
+// here (TraceOrder): about 50 us of tracing.
+constexpr int kOrderLook = 64;
 // How long an idle tracer sleeps before looking again (it is woken sooner
 // when rays arrive).
 constexpr auto kIdleWait = std::chrono::milliseconds(5);
@@ -47,6 +50,7 @@ void Inbox::Push(std::vector<RayDescriptor> rays) {
   size_ += rays.size();
   high_water_ = std::max(high_water_, size_);
   batches_.push_back(std::move(rays));
+  waiting_.store(true, std::memory_order_relaxed);
 }
 
 bool Inbox::TryPop(size_t max, std::vector<RayDescriptor>* out) {
@@ -64,7 +68,60 @@ bool Inbox::TryPop(size_t max, std::vector<RayDescriptor>* out) {
     }
   }
   size_ -= taken;
+  waiting_.store(size_ > 0, std::memory_order_relaxed);
   return taken > 0;
+}
+
+uint64_t TraceOrder::Join(const Member* member, bool interactive) {
+  absl::MutexLock lock(&mu_);
+  const uint64_t place = next_++;
+  frames_.push_back({place, interactive, member});
+  members_.store(static_cast<int>(frames_.size()), std::memory_order_relaxed);
+  return place;
+}
+
+void TraceOrder::Leave(uint64_t place) {
+  absl::MutexLock lock(&mu_);  // the frames behind look again on unlock
+  std::erase_if(frames_, [place](const Entry& e) { return e.place == place; });
+  members_.store(static_cast<int>(frames_.size()), std::memory_order_relaxed);
+  ++generation_;
+}
+
+bool TraceOrder::BehindLocked(uint64_t place) const {
+  bool interactive = false;
+  for (const Entry& e : frames_) {
+    if (e.place == place) interactive = e.interactive;
+  }
+  for (const Entry& e : frames_) {
+    const bool ahead = e.interactive != interactive ? e.interactive : e.place < place;
+    if (ahead && e.member->HasWork()) return true;
+  }
+  return false;
+}
+
+bool TraceOrder::Behind(uint64_t place) const {
+  // One frame (as between a job's frames, or with no job overlapping) is
+  // behind nobody: no lock.
+  if (members_.load(std::memory_order_relaxed) < 2) return false;
+  absl::MutexLock lock(&mu_);
+  return BehindLocked(place);
+}
+
+void TraceOrder::Wait(uint64_t place, std::chrono::milliseconds timeout) {
+  absl::MutexLock lock(&mu_);
+  waiting_.fetch_add(1, std::memory_order_relaxed);
+  const uint64_t seen = generation_;
+  auto go = [&]() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+    return generation_ != seen || !BehindLocked(place);
+  };
+  mu_.AwaitWithTimeout(absl::Condition(&go), absl::FromChrono(timeout));
+  waiting_.fetch_sub(1, std::memory_order_relaxed);
+}
+
+void TraceOrder::Notify() {
+  if (waiting_.load(std::memory_order_relaxed) == 0) return;
+  absl::MutexLock lock(&mu_);
+  ++generation_;
 }
 
 void Inbox::Wait(std::chrono::milliseconds timeout) {
@@ -516,7 +573,18 @@ Frame::Frame(const v1::FrameSpec& spec, std::shared_ptr<const Scene> scene, Came
 Frame::~Frame() {
   // Tracer threads hold the frame, so none runs now: this ends at once.
   if (!end_requested_) End(/*cancel=*/true);
+  LeaveOrder();
   --alive_;
+}
+
+bool Frame::HasWork() const {
+  return !stop_.load(std::memory_order_relaxed) &&
+         (working_.load(std::memory_order_relaxed) > 0 || inbox_.waiting() ||
+          next_pixel_.load(std::memory_order_relaxed) < pixels_in_rows_);
+}
+
+void Frame::LeaveOrder() {
+  if (in_order_.exchange(false)) options_.order->Leave(order_place_);
 }
 
 void Frame::Start(std::function<void(absl::Status)> started) {
@@ -534,6 +602,10 @@ void Frame::Start(std::function<void(absl::Status)> started) {
   }
   run_start_ = Clock::now();
   Touch(run_start_);
+  if (options_.order) {
+    order_place_ = options_.order->Join(this, spec_.interactive());
+    in_order_ = true;
+  }
   // Tracing starts at once; the outboxes hold what it produces until the
   // streams below are open. Each tracer holds the frame until it stops, and
   // the last one to stop ends the frame (EndAsync): nothing ever joins a
@@ -709,25 +781,40 @@ void Frame::TraceLoop(int thread_index) {
     if (busy) st.cpu_ms += ThreadCpuMs() - cpu0;
     busy = false;
   };
+  // Nothing to trace for now: what this thread produced goes out at once
+  // rather than after the linger, since more may not come for a while (the
+  // end of a frame, or a neighbour waiting for these rays).
+  auto send = [&] {
+    rest();
+    flush();
+    left_->outbox.Flush();
+    right_->outbox.Flush();
+    deposits_.Flush();
+  };
+  TraceOrder* const order = options_.order.get();
   while (!stop_.load(std::memory_order_relaxed)) {
     const auto t0 = Clock::now();
+    // A frame that started before this one here goes first (TraceOrder).
+    if (order && order->Behind(order_place_)) {
+      send();
+      order->Wait(order_place_, kIdleWait);
+      st.idle_ms += MsBetween(t0, Clock::now());
+      continue;
+    }
     if (!busy) {
       cpu0 = ThreadCpuMs();
       busy = true;
     }
     work.clear();
+    working_.fetch_add(1, std::memory_order_relaxed);
     // Rays from neighbours first: they free the nodes waiting on them.
     bool got =
         inbox_.TryPop(kWorkUnit, &work) || NextPrimaries(&work, &deposits, st.counters.plane_work);
     if (!got) {
-      rest();
-      // Nothing to trace: what this thread produced goes out now rather
-      // than after the linger, since more may not come for a while (the
-      // end of a frame, or a neighbour waiting for these rays).
-      flush();
-      left_->outbox.Flush();
-      right_->outbox.Flush();
-      deposits_.Flush();
+      working_.fetch_sub(1, std::memory_order_relaxed);
+      send();
+      // The frames behind this one may take the cores.
+      if (order) order->Notify();
       inbox_.Wait(kIdleWait);
       st.idle_ms += MsBetween(t0, Clock::now());
       continue;
@@ -736,7 +823,18 @@ void Frame::TraceLoop(int thread_index) {
     Deposit deposit;
     // Every Trace call is bounded (Tracer::max_segments), so a frame that
     // ends stops its tracers within one ray.
+    int since_look = 0;
     while (!work.empty() && !stop_.load(std::memory_order_relaxed)) {
+      // An older frame's rays came meanwhile: the rest of this unit waits
+      // in the inbox, and the cores go to them within a few rays.
+      if (order && ++since_look == kOrderLook) {
+        since_look = 0;
+        if (order->Behind(order_place_)) {
+          inbox_.Push(std::move(work));
+          work = {};
+          break;
+        }
+      }
       RayDescriptor ray = work.back();
       work.pop_back();
       (ray.kind == RayKind::kPrimary ? st.primary : st.shadow) += 1;
@@ -751,6 +849,7 @@ void Frame::TraceLoop(int thread_index) {
       }
     }
     flush();
+    working_.fetch_sub(1, std::memory_order_relaxed);
   }
   flush();
   rest();
@@ -759,6 +858,8 @@ void Frame::TraceLoop(int thread_index) {
 void Frame::EndAsync(bool cancel, std::function<void(v1::WorkerFrameStats)> done) {
   stop_ = true;
   inbox_.Wake();
+  // Its tracers, and the frames behind it, look again.
+  if (options_.order) options_.order->Notify();
   {
     absl::MutexLock lock(&end_mu_);
     if (end_requested_) return;  // REQUIRES says once; a second call is ignored
@@ -794,6 +895,7 @@ v1::WorkerFrameStats Frame::End(bool cancel) {
 
 v1::WorkerFrameStats Frame::Finish(bool cancel) {
   const auto end = Clock::now();
+  LeaveOrder();
   // Closing the outboxes half-closes every stream once its last batch is
   // written (when the frame is complete, nothing is left to write). The
   // streams then wind down on their own: the frame's statistics do not

@@ -42,9 +42,12 @@ class Inbox {
   void Wait(std::chrono::milliseconds timeout);
   void Wake();
   size_t high_water() const;
+  // Whether rays wait here, read without the lock: a moment old at most.
+  bool waiting() const { return waiting_.load(std::memory_order_relaxed); }
 
  private:
   mutable absl::Mutex mu_;
+  std::atomic<bool> waiting_{false};  // size_ > 0, for readers without mu_
   std::deque<std::vector<RayDescriptor>> batches_ ABSL_GUARDED_BY(mu_);
   size_t front_used_ ABSL_GUARDED_BY(mu_) = 0;  // rays of batches_.front() taken
   size_t size_ ABSL_GUARDED_BY(mu_) = 0;        // rays in batches_, less front_used_
@@ -136,8 +139,61 @@ class Outbox {
   std::function<void()> done_;
 };
 
+// The frames one worker traces at once share its cores in order
+// (docs/design.md, "Overlapped frames"): interactive frames first, then in
+// the order they started here. A frame's tracers trace only while no frame
+// ahead of it has work on this worker: rays in its inbox, primary rays not
+// yet made, or a tracer in the middle of a unit of work. The root can so
+// start a job's next frame while the last one still traces: the next one
+// fills what the last one's tail leaves idle (rays in flight to and from
+// its neighbours, the display and the root ending it), and gives the cores
+// back within a few rays when the last one's rays come. Thread-safe.
+class TraceOrder {
+ public:
+  class Member {
+   public:
+    // Whether it has work here that the frames behind it wait for.
+    virtual bool HasWork() const = 0;
+
+   protected:
+    ~Member() = default;
+  };
+
+  // A frame that starts tracing joins; its place, which Leave takes.
+  // REQUIRES: `member` stays valid until Leave.
+  uint64_t Join(const Member* member, bool interactive);
+  void Leave(uint64_t place);
+  // Whether a frame ahead of `place` has work now.
+  bool Behind(uint64_t place) const;
+  // Returns once nothing is ahead of `place`, on Notify or Leave, or after
+  // `timeout`.
+  void Wait(uint64_t place, std::chrono::milliseconds timeout);
+  // A frame's work here ran out (or it ends): the frames behind it look
+  // again.
+  void Notify();
+  int frames() const { return members_.load(std::memory_order_relaxed); }
+
+ private:
+  struct Entry {
+    uint64_t place;
+    bool interactive;
+    const Member* member;
+  };
+  bool BehindLocked(uint64_t place) const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+
+  mutable absl::Mutex mu_;
+  uint64_t next_ ABSL_GUARDED_BY(mu_) = 0;
+  std::vector<Entry> frames_ ABSL_GUARDED_BY(mu_);
+  uint64_t generation_ ABSL_GUARDED_BY(mu_) = 0;  // moved on by Notify and Leave
+  std::atomic<int> members_{0};                   // frames_.size(), read without mu_
+  std::atomic<int> waiting_{0};                   // tracers in Wait
+};
+
 struct FrameOptions {
   int threads = 1;
+  // Shared by the frames of one worker; none: the frame traces whenever
+  // it has work.
+  std::shared_ptr<TraceOrder> order;
   // Ray batches to a neighbour: a neighbour may be waiting for these rays.
   size_t batch_rays = 2048;
   std::chrono::microseconds linger{1000};
@@ -154,7 +210,7 @@ struct FrameOptions {
 // the left neighbour's stream attached when it opens (NewLeftStream), End
 // once. The streams use gRPC's callback API: their reactions only move
 // batches between the network and the inbox and outboxes.
-class Frame : public std::enable_shared_from_this<Frame> {
+class Frame final : public std::enable_shared_from_this<Frame>, public TraceOrder::Member {
  public:
   // REQUIRES: the scene outlives the frame (the frame shares ownership);
   // spec.cuts() valid for the scene's planes (ValidCuts), with the scene
@@ -178,6 +234,9 @@ class Frame : public std::enable_shared_from_this<Frame> {
   Clock::time_point last_activity() const {
     return Clock::time_point(Clock::duration(last_activity_.load(std::memory_order_relaxed)));
   }
+  // Work here that a frame which started later waits for (TraceOrder):
+  // rays in the inbox, primary rays not yet made, or a tracer in a unit.
+  bool HasWork() const override;
   // Frame objects alive in this process. An ended frame is destroyed once
   // its tracer threads have stopped and its streams have let go of it.
   static int64_t alive() { return alive_; }
@@ -215,6 +274,7 @@ class Frame : public std::enable_shared_from_this<Frame> {
   class DisplayStream;
 
   void TraceLoop(int thread_index);
+  void LeaveOrder();  // leaves options_.order, once
   // A tracer thread has left TraceLoop; the last one ends a frame whose end
   // was asked for.
   void TracerStopped();
@@ -260,6 +320,11 @@ class Frame : public std::enable_shared_from_this<Frame> {
   std::atomic<int64_t> next_pixel_{0};
   std::atomic<bool> stop_{false};
   std::atomic<bool> started_{false};
+  // Tracers between taking work and finishing it.
+  std::atomic<int> working_{0};
+  // Its place in options_.order once started; left once no tracer runs.
+  std::atomic<bool> in_order_{false};
+  uint64_t order_place_ = 0;
 
   std::atomic<bool> cancelled_{false};
   std::atomic<uint64_t> rejected_{0};

@@ -44,15 +44,6 @@ uint64_t HostMemory() {
   return 0;
 }
 
-// The kernel's boot id: the same for every process of one machine, in any
-// container or network namespace; empty when unreadable.
-std::string MachineId() {
-  std::ifstream in("/proc/sys/kernel/random/boot_id");
-  std::string id;
-  if (!std::getline(in, id) || id.size() > 64) return "";
-  return id;
-}
-
 // The CPUs this process may run on: its affinity mask, capped by its
 // cgroup's CPU quota (cgroup v2 cpu.max "QUOTA PERIOD", a container's
 // --cpus). 0 when unknown.

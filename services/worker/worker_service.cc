@@ -510,6 +510,7 @@ grpc::Status WorkerService::Prepare(const v1::FrameSpec& spec) {
   fo.threads = options_.threads;
   fo.batch_rays = options_.batch_rays;
   fo.linger = options_.linger;
+  fo.order = order_;
   auto added = frames_.Add(std::make_shared<Frame>(spec, std::move(scene), *std::move(camera),
                                                    request->settings, fo));
   if (!added.ok()) return ToGrpc(added.status());

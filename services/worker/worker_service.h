@@ -102,6 +102,8 @@ class WorkerService final
   std::string address_ ABSL_GUARDED_BY(mu_);
   std::map<std::string, std::shared_ptr<const Scene>> datasets_ ABSL_GUARDED_BY(mu_);
   FrameTable frames_;  // thread-safe by itself
+  // Its frames trace oldest first (thread-safe by itself).
+  const std::shared_ptr<TraceOrder> order_ = std::make_shared<TraceOrder>();
   // Ray streams that came before their frame (thread-safe by itself).
   FrameWaiters early_;
   // Sweeps frames_ for idle frames; declared last, so that it stops first.
