@@ -116,6 +116,7 @@ absl::Status JobRunner::RunJob(Job& job) {
   // image travels and its workers report. At most two are in flight, and
   // images are published in frame order.
   std::shared_ptr<Flight> last;
+  bool said_overlap = false;  // logged once a job
   // Waits for the frame in flight to end (stopping it first when
   // `abandon`); its status.
   auto land = [&](bool abandon) {
@@ -155,11 +156,18 @@ absl::Status JobRunner::RunJob(Job& job) {
     }
     auto next = std::make_shared<Flight>();
     next->frame = *frame;
-    // With two frames tracing, the next one starts once the last runs on
-    // every worker: the workers trace the older first, and the next fills
-    // what its tail leaves idle.
     if (last) {
-      (Overlap() ? last->running : last->traced).WaitForNotification();
+      // With two frames tracing, the next one starts once the last runs on
+      // every worker: the workers trace the older first, and the next fills
+      // what its tail leaves idle.
+      const bool overlap = Overlap();
+      if (!said_overlap) {
+        said_overlap = true;
+        spdlog::info("{}: {}", job.id(),
+                     overlap ? "frames overlap (a frame starts once the last one runs)"
+                             : "frames one at a time (a frame starts once the last one traced)");
+      }
+      (overlap ? last->running : last->traced).WaitForNotification();
     }
     next->thread = std::thread([this, &job, data, &chosen, me = next, before = last] {
       me->status = RunView(job, *data, chosen, *me, before.get());

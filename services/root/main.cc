@@ -107,10 +107,15 @@ int main(int argc, char** argv) {
     spdlog::error("{}", std::string(node.status().message()));
     return 1;
   }
-  spdlog::info("root serving on port {} (metrics on {}); data {}, state {}, display {}, {} ring(s)",
-               (*node)->port(),
-               (*node)->metrics_port() == 0 ? "no port" : std::to_string((*node)->metrics_port()), o.data_dir, o.state_dir.empty() ? "(memory)" : o.state_dir,
-               o.display, o.rings);
+  spdlog::info(
+      "root serving on port {} (metrics on {}); data {}, state {}, display {}, {} ring(s), "
+      "frames tracing {}",
+      (*node)->port(),
+      (*node)->metrics_port() == 0 ? "no port" : std::to_string((*node)->metrics_port()),
+      o.data_dir, o.state_dir.empty() ? "(memory)" : o.state_dir, o.display, o.rings,
+      o.frames_tracing == kAutoFramesTracing
+          ? std::string("auto (2 when a worker runs on another machine)")
+          : std::to_string(o.frames_tracing));
   int sig = WaitForSignal();
   spdlog::info("signal {}: stopping", sig);
   (*node)->Stop(std::chrono::milliseconds(5000));
