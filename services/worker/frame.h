@@ -234,8 +234,8 @@ class Frame final : public std::enable_shared_from_this<Frame>, public TraceOrde
   Clock::time_point last_activity() const {
     return Clock::time_point(Clock::duration(last_activity_.load(std::memory_order_relaxed)));
   }
-  // Work here that a frame which started later waits for (TraceOrder):
-  // rays in the inbox, primary rays not yet made, or a tracer in a unit.
+  // Work here that the frames behind it wait for (TraceOrder): rays in the
+  // inbox, primary rays not yet made, or a tracer in a unit.
   bool HasWork() const override;
   // Frame objects alive in this process. An ended frame is destroyed once
   // its tracer threads have stopped and its streams have let go of it.
