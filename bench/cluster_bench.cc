@@ -8,6 +8,8 @@
 //                         [--repeat N] [--grid N]
 //   cluster_bench hops    [--volume FILE] [--materials FILE] [--size WxH]
 //                         [--workers 2,4,8]
+//   cluster_bench primaries [--volume FILE] [--materials FILE] [--size WxH]
+//                           [--workers 2,4,8]
 //   cluster_bench weights [--volume FILE] [--materials FILE] [--size WxH]
 //                         [--workers 2,4] [--repeat N]
 //   cluster_bench deposits [--volume FILE] [--materials FILE] [--size WxH]
@@ -49,6 +51,14 @@
 //   band as they came). Prints hops and transit hops per frame, their
 //   share, the traversal steps the transits took, and the rays that ended
 //   at a slab plane with nothing but their band ahead (field_summary.h).
+// primaries: how many primary rays the slabs make only to drop them. A
+//   slab makes the rays of the pixels in its footprint (RingLayout) that
+//   are not void, and keeps those entering the volume in its planes. For N
+//   equal slabs and five views (azimuth 0 and 45 at elevation 0 and 15,
+//   and 30 at 40), the rays kept (each made by one slab), and the rays made
+//   with the footprints in use against the projections of the slabs'
+//   boxes (the footprints before 8 December 2026), with the time a ray
+//   costs to make (Camera::GenerateAt and Tracer::MakePrimary).
 // weights: what the work profile's units cost for smooth surfaces (tracer.h,
 //   kFieldWork). For N equal slabs of each view (azimuth 0, 45, 90, 135), of
 //   the volume given and of engine.nrrd beside it, every ray of a frame is
@@ -148,7 +158,8 @@ namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
 constexpr char kUsage[] =
-    "usage: cluster_bench scaling|forward|tables|hops|weights|deposits|rays|converge|refine\n"
+    "usage: cluster_bench scaling|forward|tables|hops|primaries|weights|deposits|rays|converge|\n"
+    "                     refine\n"
     "                     [--volume FILE] [--materials FILE]\n"
     "                     [--size WxH] [--azimuth DEG] [--repeat N] [--workers 1,2,4]\n"
     "                     [--rays N] [--grid N] [--threads N] [--balance MODE]\n";
@@ -182,8 +193,8 @@ std::string Parse(int argc, char** argv, Options* o) {
   o->mode = argv[1];
   if (o->mode == "--help" || o->mode == "-h") return "help";
   if (o->mode != "scaling" && o->mode != "forward" && o->mode != "tables" && o->mode != "hops" &&
-      o->mode != "weights" && o->mode != "deposits" && o->mode != "rays" && o->mode != "converge" &&
-      o->mode != "refine") {
+      o->mode != "primaries" && o->mode != "weights" && o->mode != "deposits" &&
+      o->mode != "rays" && o->mode != "converge" && o->mode != "refine") {
     return "unknown mode '" + o->mode + "'";
   }
   for (int i = 2; i < argc; ++i) {
@@ -731,6 +742,78 @@ int Hops(const Options& o) {
                     static_cast<ull>(ended));
       });
   return status.ok() ? 0 : Fail(status);
+}
+
+// ---------------------------------------------------------------- primaries
+
+int Primaries(const Options& o) {
+  auto setup = Prepare(o);
+  if (!setup.ok()) return Fail(setup.status());
+  const Scene& whole = *setup->scene;
+  std::printf("volume %s, %dx%d, equal slabs; primary rays per frame (one sample a pixel)\n",
+              o.volume.c_str(), o.width, o.height);
+  std::printf("%-12s %6s %10s %14s %12s %10s %10s %10s\n", "view", "slabs", "kept", "made (boxes)",
+              "made (now)", "boxes/kept", "now/kept", "saved ms");
+  const std::pair<double, double> views[] = {{0, 0}, {45, 0}, {0, 15}, {45, 15}, {30, 40}};
+  for (const auto& [azimuth, elevation] : views) {
+    v1::View view = MakeView(o, azimuth);
+    view.set_elevation(elevation);
+    auto camera = Camera::Create(*ToCameraSpec(view), setup->extent);
+    if (!camera.ok()) return Fail(camera.status());
+    const RenderSettings settings = ToRenderSettings(view);
+    // What making a ray costs: every pixel's, the least of three passes.
+    const Tracer whole_tracer(whole, settings, *camera);
+    double ns = HUGE_VAL;
+    for (int pass = 0; pass < 3; ++pass) {
+      uint64_t made = 0, entered = 0;
+      const auto t0 = Clock::now();
+      for (int py = 0; py < camera->height(); ++py) {
+        for (int px = 0; px < camera->width(); ++px) {
+          RayDescriptor ray;
+          entered += whole_tracer.MakePrimary(camera->Generate(px, py), 0, &ray);
+          ++made;
+        }
+      }
+      ns = std::min(ns, MsSince(t0) * 1e6 / static_cast<double>(made));
+      if (entered == 0) return Fail(absl::FailedPreconditionError("no ray enters the volume"));
+    }
+    for (int n : o.workers) {
+      if (n < 1 || n > whole.dims()[1]) continue;
+      const SlabRing ring(whole, n, settings, *camera);
+      uint64_t kept = 0, made = 0, made_boxes = 0;
+      for (int i = 0; i < n; ++i) {
+        const Vec3 lo{-0.5 * setup->extent.x,
+                      (ring.cuts[i] - 0.5 * whole.dims()[1]) * whole.spacing()[1],
+                      -0.5 * setup->extent.z};
+        const Vec3 hi{0.5 * setup->extent.x,
+                      (ring.cuts[i + 1] - 0.5 * whole.dims()[1]) * whole.spacing()[1],
+                      0.5 * setup->extent.z};
+        const ImageSpans box = camera->Footprint(lo, hi);
+        for (int py = 0; py < camera->height(); ++py) {
+          for (int px = 0; px < camera->width(); ++px) {
+            if (ring.tracers[i].Void(px, py)) continue;
+            made += ring.layout.Footprint(i).Contains(px, py);
+            made_boxes += box.Contains(px, py);
+            RayDescriptor ray;
+            kept += ring.layout.Primary(i, px, py, 0, 1, ring.tracers[i], &ray) ==
+                    RingLayout::PrimaryRole::kTrace;
+          }
+        }
+      }
+      char name[32];
+      std::snprintf(name, sizeof(name), "az %g el %g", azimuth, elevation);
+      using ull = unsigned long long;
+      std::printf("%-12s %6d %10llu %14llu %12llu %10.2f %10.2f %10.2f\n", name, n,
+                  static_cast<ull>(kept), static_cast<ull>(made_boxes), static_cast<ull>(made),
+                  kept ? static_cast<double>(made_boxes) / kept : 0.0,
+                  kept ? static_cast<double>(made) / kept : 0.0,
+                  (static_cast<double>(made_boxes) - static_cast<double>(made)) * ns / 1e6);
+      if (made > made_boxes || kept > made) {
+        return Fail(absl::InternalError("a footprint holds more than its box, or too few rays"));
+      }
+    }
+  }
+  return 0;
 }
 
 // ---------------------------------------------------------------- weights
@@ -1403,6 +1486,7 @@ int main(int argc, char** argv) {
   }
   if (options.mode == "forward") return transtick::Forward(options);
   if (options.mode == "hops") return transtick::Hops(options);
+  if (options.mode == "primaries") return transtick::Primaries(options);
   if (options.mode == "weights") return transtick::Weights(options);
   if (options.mode == "deposits") return transtick::Deposits(options);
   if (options.mode == "rays") return transtick::PackedRays(options);

@@ -100,16 +100,89 @@ TEST(RingLayoutTest, RouteKnownAnswers) {
   EXPECT_EQ(RingLayout::Neighbour(1, Hop::kRight), 2);
 }
 
-TEST(RingLayoutTest, FootprintsAreTheSlabsWorldBoxes) {
-  const std::array<double, 3> spacing = {1, 1.5, 2};
-  const Camera camera = CameraFor(spacing, 64, 48, 30, 20);
-  const std::vector<int> cuts = {0, 10, 11, 34};
-  const RingLayout layout(cuts, kDims, spacing, camera);
-  for (int i = 0; i < 3; ++i) {
-    const Vec3 lo{-20.0, (cuts[i] - 17.0) * 1.5, -38.0};
-    const Vec3 hi{20.0, (cuts[i + 1] - 17.0) * 1.5, 38.0};
-    EXPECT_EQ(layout.Footprint(i).rows, camera.Footprint(lo, hi).rows) << i;
+// A slab's footprint is where the rays that first enter the volume in its
+// planes pass: over random views (orbits, and explicit eyes in, on and
+// around the volume's box), spacings, cuts and sample positions, the slab
+// holding a ray's entry cell has the ray's pixel in its footprint, and
+// each footprint lies within the projection of the slab's box. Seen from
+// outside the box, the footprints overlap less than the boxes' did: a ray
+// is made on fewer slabs only to be dropped.
+TEST(RingLayoutTest, FootprintsHoldTheRaysEnteringTheirSlabs) {
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<double> unit(0, 1);
+  int64_t entries = 0, box_area = 0, footprint_area = 0, inside_views = 0;
+  for (const std::array<double, 3>& spacing :
+       {std::array<double, 3>{1, 1, 1}, std::array<double, 3>{0.7, 1.3, 2},
+        std::array<double, 3>{2, 0.5, 1}}) {
+    const Scene scene = SphereScene(spacing);
+    const Vec3 half{0.5 * kDims[0] * spacing[0], 0.5 * kDims[1] * spacing[1],
+                    0.5 * kDims[2] * spacing[2]};
+    for (int v = 0; v < 120; ++v) {
+      CameraSpec spec;
+      spec.width = 24 + static_cast<int>(rng() % 24);
+      spec.height = 24 + static_cast<int>(rng() % 24);
+      spec.projection = rng() % 3 == 0 ? Projection::kOrthographic : Projection::kPerspective;
+      spec.zoom = 0.5 + 3.5 * unit(rng);
+      spec.fov_deg = 10 + 100 * unit(rng);
+      const bool orbit = v % 2 == 0;
+      if (orbit) {
+        spec.azimuth_deg = 360 * unit(rng);
+        spec.elevation_deg = v % 8 == 0 ? 90 * ((v / 8) % 3 - 1) : -89 + 178 * unit(rng);
+      } else {
+        // An eye anywhere from inside the box to twice its size away, now
+        // and then on one of its faces' planes.
+        Vec3 eye{half.x * (4 * unit(rng) - 2), half.y * (4 * unit(rng) - 2),
+                 half.z * (4 * unit(rng) - 2)};
+        if (v % 6 == 1) eye[static_cast<int>(rng() % 3)] = rng() % 2 ? half.x : -half.x;
+        eye.y = v % 10 == 3 ? half.y : eye.y;
+        const Vec3 target{half.x * (unit(rng) - 0.5), half.y * (unit(rng) - 0.5),
+                          half.z * (unit(rng) - 0.5)};
+        if (Length(eye - target) < 1e-3) continue;
+        spec.view = ExplicitView{eye, target, Vec3{0, 1, 0}};
+        if (std::abs(Dot(Normalize(target - eye), Vec3{0, 1, 0})) > 0.999) {
+          spec.view->up = Vec3{1, 0, 0};
+        }
+        inside_views +=
+            std::abs(eye.x) < half.x && std::abs(eye.y) < half.y && std::abs(eye.z) < half.z;
+      }
+      auto made = Camera::Create(spec, Vec3{2 * half.x, 2 * half.y, 2 * half.z});
+      ASSERT_TRUE(made.ok()) << made.status();
+      const Camera& camera = *made;
+      const Tracer tracer(scene, RenderSettings{}, camera);
+      const RingLayout layout(RandomCuts(rng, kDims[1]), kDims, spacing, camera);
+      for (int i = 0; i < layout.slabs(); ++i) {
+        const Vec3 lo{-half.x, (layout.y_begin(i) - 0.5 * kDims[1]) * spacing[1], -half.z};
+        const Vec3 hi{half.x, (layout.y_end(i) - 0.5 * kDims[1]) * spacing[1], half.z};
+        const ImageSpans box = camera.Footprint(lo, hi);
+        for (int row = 0; row < camera.height(); ++row) {
+          const auto [first, last] = layout.Footprint(i).Row(row);
+          const auto [box_first, box_last] = box.Row(row);
+          if (first < last) {
+            EXPECT_GE(first, box_first) << "slab " << i << " row " << row;
+            EXPECT_LE(last, box_last) << "slab " << i << " row " << row;
+            if (orbit) footprint_area += last - first;
+          }
+          if (orbit) box_area += std::max(0, box_last - box_first);
+        }
+      }
+      const int samples = 1 + static_cast<int>(rng() % 5);
+      for (int row = 0; row < camera.height(); ++row) {
+        for (int col = 0; col < camera.width(); ++col) {
+          const auto [ox, oy] = SampleOffset(static_cast<int>(rng() % samples), samples);
+          RayDescriptor ray;
+          if (!tracer.MakePrimary(camera.GenerateAt(col, row, ox, oy), 0, &ray)) continue;
+          ++entries;
+          ASSERT_TRUE(layout.Footprint(layout.SlabOf(ray.cell[1])).Contains(col, row))
+              << "pixel " << col << "," << row << " enters in slab " << layout.SlabOf(ray.cell[1])
+              << " of " << layout.slabs() << ", view " << v;
+        }
+      }
+    }
   }
+  EXPECT_GT(entries, 100000);
+  EXPECT_GT(inside_views, 5);  // views from inside the box were seen
+  // The slabs' footprints overlap far less than their boxes'.
+  EXPECT_LT(footprint_area, box_area * 8 / 10) << footprint_area << " of " << box_area;
 }
 
 // Every pixel of every view, over random cuts: exactly one slab makes its

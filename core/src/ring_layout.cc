@@ -9,6 +9,26 @@
 
 namespace transtick {
 
+namespace {
+
+// Row by row, the hull of both spans (an empty span adds nothing).
+void Widen(ImageSpans* spans, const ImageSpans& more) {
+  for (size_t row = 0; row < spans->rows.size(); ++row) {
+    auto& [first, last] = spans->rows[row];
+    const auto [f, l] = more.rows[row];
+    if (f >= l) continue;
+    if (first >= last) {
+      first = f;
+      last = l;
+    } else {
+      first = std::min(first, f);
+      last = std::max(last, l);
+    }
+  }
+}
+
+}  // namespace
+
 RingLayout::RingLayout(std::vector<int> cuts, const std::array<int, 3>& dims,
                        const std::array<double, 3>& spacing, const Camera& camera)
     : cuts_(std::move(cuts)), dims_(dims), camera_(camera) {
@@ -16,11 +36,72 @@ RingLayout::RingLayout(std::vector<int> cuts, const std::array<int, 3>& dims,
   TRANSTICK_CHECK(ValidCuts(cuts_, dims[1], slabs()));
   const auto& d = dims;
   const auto& sp = spacing;
-  // Each slab's box in world space (the volume's centre at the origin).
+  // The volume's box in world space (its centre at the origin), and plane
+  // y's height there.
+  const Vec3 box_lo{-0.5 * d[0] * sp[0], -0.5 * d[1] * sp[1], -0.5 * d[2] * sp[2]};
+  const Vec3 box_hi{0.5 * d[0] * sp[0], 0.5 * d[1] * sp[1], 0.5 * d[2] * sp[2]};
+  auto plane_y = [&](int y) { return (y - 0.5 * d[1]) * sp[1]; };
+  // A ray enters the volume where it first meets the box. When every corner
+  // of the box lies ahead of the plane through the eye, every ray starts
+  // outside it (a perspective ray at the eye, an orthographic one on that
+  // plane) and enters through a face it meets from outside: a face whose
+  // plane the eye lies outside of (perspective), or whose outward normal
+  // points against the view (orthographic). Otherwise a ray may start
+  // inside, and its entry is anywhere in the box.
+  bool outside = true;
+  for (int corner = 0; corner < 8; ++corner) {
+    const Vec3 p{corner & 1 ? box_hi.x : box_lo.x, corner & 2 ? box_hi.y : box_lo.y,
+                 corner & 4 ? box_hi.z : box_lo.z};
+    const Vec3 v = p - camera_.eye();
+    if (!(Dot(v, camera_.forward()) > 1e-6 * (1 + Length(v)))) outside = false;
+  }
+  // Whether a ray can enter through the face on side `hi` of axis a: not
+  // when the eye lies strictly inside that face's plane, or the view runs
+  // strictly away from it. Kept when in doubt: the footprints may only
+  // grow by it.
+  auto enters = [&](int a, bool hi) {
+    if (camera_.projection() == Projection::kPerspective) {
+      return hi ? camera_.eye()[a] >= box_hi[a] : camera_.eye()[a] <= box_lo[a];
+    }
+    return hi ? camera_.forward()[a] <= 0 : camera_.forward()[a] >= 0;
+  };
   for (int i = 0; i < slabs(); ++i) {
-    const Vec3 lo{-0.5 * d[0] * sp[0], (cuts_[i] - 0.5 * d[1]) * sp[1], -0.5 * d[2] * sp[2]};
-    const Vec3 hi{0.5 * d[0] * sp[0], (cuts_[i + 1] - 0.5 * d[1]) * sp[1], 0.5 * d[2] * sp[2]};
-    footprints_.push_back(camera_.Footprint(lo, hi));
+    // The slab's box.
+    Vec3 lo = box_lo, hi = box_hi;
+    lo.y = plane_y(cuts_[i]);
+    hi.y = plane_y(cuts_[i + 1]);
+    ImageSpans box = camera_.Footprint(lo, hi);
+    if (!outside) {
+      footprints_.push_back(std::move(box));
+      continue;
+    }
+    // The pixels whose rays may enter in this slab: the parts of the faces
+    // they can enter by that lie within the slab's planes, widened by a
+    // plane each side against the rounding of the entry cell (the entry's
+    // cell is the floor of a point computed in the volume's index space).
+    lo.y = plane_y(std::max(cuts_[i] - 1, 0));
+    hi.y = plane_y(std::min(cuts_[i + 1] + 1, d[1]));
+    ImageSpans spans;
+    spans.rows.assign(camera_.height(), {0, 0});
+    for (int a = 0; a < 3; ++a) {
+      for (bool upper : {false, true}) {
+        if (!enters(a, upper)) continue;
+        Vec3 face_lo = lo, face_hi = hi;
+        const double at = upper ? box_hi[a] : box_lo[a];
+        // A face across y belongs to the slabs whose planes reach it.
+        if (a == 1 && (at < lo.y || at > hi.y)) continue;
+        face_lo[a] = face_hi[a] = at;
+        Widen(&spans, camera_.Footprint(face_lo, face_hi));
+      }
+    }
+    // Within the slab's box, which every ray entering in it crosses.
+    for (size_t row = 0; row < spans.rows.size(); ++row) {
+      auto& [first, last] = spans.rows[row];
+      first = std::max(first, box.rows[row].first);
+      last = std::min(last, box.rows[row].second);
+      if (first >= last) first = last = 0;
+    }
+    footprints_.push_back(std::move(spans));
   }
 }
 

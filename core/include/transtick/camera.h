@@ -100,6 +100,7 @@ class Camera {
 
   int width() const { return width_; }
   int height() const { return height_; }
+  Projection projection() const { return projection_; }
   const Vec3& eye() const { return eye_; }
   const Vec3& forward() const { return forward_; }
   const Vec3& right() const { return right_; }

@@ -23,7 +23,7 @@ namespace transtick {
 // The slabs of one ring for one frame's view: slab i holds the planes
 // [cuts[i], cuts[i + 1]) and its neighbours are slabs i - 1 (left) and
 // i + 1 (right). Immutable after construction and thread-safe; a value
-// (the cuts, one rectangle per slab and a copy of the camera), built once
+// (the cuts, one footprint per slab and a copy of the camera), built once
 // per frame.
 class RingLayout {
  public:
@@ -59,8 +59,13 @@ class RingLayout {
     return hop == Hop::kLeft ? from - 1 : from + 1;
   }
 
-  // The pixels whose primary rays may enter the slab: Camera::Footprint of
-  // the slab's world box, conservative, row by row.
+  // The pixels whose primary rays may first enter the volume in the slab,
+  // conservative, row by row. Seen from outside the volume's box, a ray
+  // enters through a face it meets from outside: the hull of the
+  // projections (Camera::Footprint) of those faces' parts within the
+  // slab's planes, one plane more each side, cut to the projection of the
+  // slab's box. When a ray may start inside the box (a corner of it lies
+  // behind the plane through the eye), the projection of the slab's box.
   const ImageSpans& Footprint(int slab) const { return footprints_[slab]; }
 
   // What slab `slab` does about the primary ray of pixel (col, row), the
@@ -72,7 +77,8 @@ class RingLayout {
   //   kNone   another slab takes care of the pixel.
   // Over all slabs, every pixel gets exactly one kTrace or one kMiss. A slab
   // makes rays only for the pixels of its own footprint (a ray entering the
-  // slab crosses its box), and keeps those whose entry cell it holds. A
+  // volume in the slab is among them), and keeps those whose entry cell it
+  // holds. A
   // miss is deposited by MissSlab(col, row).
   // REQUIRES: 0 <= slab < slabs(), the pixel inside the image, `tracer`
   // traces a scene of this layout's dims and spacing.
