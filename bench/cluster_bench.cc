@@ -52,7 +52,7 @@
 //   share, the traversal steps the transits took, and the rays that ended
 //   at a slab plane with nothing but their band ahead (field_summary.h).
 // primaries: how many primary rays the slabs make only to drop them. A
-//   slab makes the rays of the pixels in its footprint (RingLayout) that
+//   slab makes the rays of the pixels it holds (RingLayout::Holds) that
 //   are not void, and keeps those entering the volume in its planes. For N
 //   equal slabs and five views (azimuth 0 and 45 at elevation 0 and 15,
 //   and 30 at 40), the rays kept (each made by one slab), and the rays made
@@ -792,7 +792,7 @@ int Primaries(const Options& o) {
         for (int py = 0; py < camera->height(); ++py) {
           for (int px = 0; px < camera->width(); ++px) {
             if (ring.tracers[i].Void(px, py)) continue;
-            made += ring.layout.Footprint(i).Contains(px, py);
+            made += ring.layout.Holds(i, px, py);
             made_boxes += box.Contains(px, py);
             RayDescriptor ray;
             kept += ring.layout.Primary(i, px, py, 0, 1, ring.tracers[i], &ray) ==

@@ -71,38 +71,51 @@ RingLayout::RingLayout(std::vector<int> cuts, const std::array<int, 3>& dims,
     lo.y = plane_y(cuts_[i]);
     hi.y = plane_y(cuts_[i + 1]);
     ImageSpans box = camera_.Footprint(lo, hi);
+    std::vector<ImageSpans> parts;
     if (!outside) {
-      footprints_.push_back(std::move(box));
-      continue;
-    }
-    // The pixels whose rays may enter in this slab: the parts of the faces
-    // they can enter by that lie within the slab's planes, widened by a
-    // plane each side against the rounding of the entry cell (the entry's
-    // cell is the floor of a point computed in the volume's index space).
-    lo.y = plane_y(std::max(cuts_[i] - 1, 0));
-    hi.y = plane_y(std::min(cuts_[i + 1] + 1, d[1]));
-    ImageSpans spans;
-    spans.rows.assign(camera_.height(), {0, 0});
-    for (int a = 0; a < 3; ++a) {
-      for (bool upper : {false, true}) {
-        if (!enters(a, upper)) continue;
-        Vec3 face_lo = lo, face_hi = hi;
-        const double at = upper ? box_hi[a] : box_lo[a];
-        // A face across y belongs to the slabs whose planes reach it.
-        if (a == 1 && (at < lo.y || at > hi.y)) continue;
-        face_lo[a] = face_hi[a] = at;
-        Widen(&spans, camera_.Footprint(face_lo, face_hi));
+      parts.push_back(box);
+    } else {
+      // The pixels whose rays may enter in this slab: the parts of the
+      // faces they can enter by that lie within the slab's planes, widened
+      // by a plane each side against the rounding of the entry cell (the
+      // entry's cell is the floor of a point computed in the volume's index
+      // space), each within the slab's box, which every ray entering in the
+      // slab crosses.
+      lo.y = plane_y(std::max(cuts_[i] - 1, 0));
+      hi.y = plane_y(std::min(cuts_[i + 1] + 1, d[1]));
+      for (int a = 0; a < 3; ++a) {
+        for (bool upper : {false, true}) {
+          if (!enters(a, upper)) continue;
+          Vec3 face_lo = lo, face_hi = hi;
+          const double at = upper ? box_hi[a] : box_lo[a];
+          // A face across y belongs to the slabs whose planes reach it.
+          if (a == 1 && (at < lo.y || at > hi.y)) continue;
+          face_lo[a] = face_hi[a] = at;
+          ImageSpans part = camera_.Footprint(face_lo, face_hi);
+          for (size_t row = 0; row < part.rows.size(); ++row) {
+            auto& [first, last] = part.rows[row];
+            first = std::max(first, box.rows[row].first);
+            last = std::min(last, box.rows[row].second);
+            if (first >= last) first = last = 0;
+          }
+          parts.push_back(std::move(part));
+        }
       }
     }
-    // Within the slab's box, which every ray entering in it crosses.
-    for (size_t row = 0; row < spans.rows.size(); ++row) {
-      auto& [first, last] = spans.rows[row];
-      first = std::max(first, box.rows[row].first);
-      last = std::min(last, box.rows[row].second);
-      if (first >= last) first = last = 0;
-    }
-    footprints_.push_back(std::move(spans));
+    ImageSpans hull;
+    hull.rows.assign(camera_.height(), {0, 0});
+    for (const ImageSpans& part : parts) Widen(&hull, part);
+    footprints_.push_back(std::move(hull));
+    parts_.push_back(std::move(parts));
   }
+}
+
+bool RingLayout::Holds(int slab, int col, int row) const {
+  if (!footprints_[slab].Contains(col, row)) return false;
+  for (const ImageSpans& part : parts_[slab]) {
+    if (part.Contains(col, row)) return true;
+  }
+  return false;
 }
 
 int RingLayout::SlabOf(int y) const {
@@ -122,7 +135,7 @@ RingLayout::Hop RingLayout::Route(int from, const std::array<int32_t, 3>& cell) 
 
 int RingLayout::MissSlab(int col, int row) const {
   for (int i = 0; i < slabs(); ++i) {
-    if (footprints_[i].Contains(col, row)) return i;
+    if (Holds(i, col, row)) return i;
   }
   return 0;
 }
@@ -130,7 +143,7 @@ int RingLayout::MissSlab(int col, int row) const {
 RingLayout::PrimaryRole RingLayout::Primary(int slab, int col, int row, int sample, int samples,
                                             const Tracer& tracer, RayDescriptor* ray) const {
   TRANSTICK_DCHECK(slab >= 0 && slab < slabs());
-  if (!footprints_[slab].Contains(col, row)) {
+  if (!Holds(slab, col, row)) {
     // The ray cannot enter this slab. Slab 0 deposits the miss of a pixel
     // in no footprint (MissSlab is then 0; for any other pixel outside
     // slab 0's footprint it names the slab that does).

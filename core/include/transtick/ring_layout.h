@@ -60,12 +60,15 @@ class RingLayout {
   }
 
   // The pixels whose primary rays may first enter the volume in the slab,
-  // conservative, row by row. Seen from outside the volume's box, a ray
-  // enters through a face it meets from outside: the hull of the
-  // projections (Camera::Footprint) of those faces' parts within the
-  // slab's planes, one plane more each side, cut to the projection of the
-  // slab's box. When a ray may start inside the box (a corner of it lies
-  // behind the plane through the eye), the projection of the slab's box.
+  // conservative. Seen from outside the volume's box, a ray enters through
+  // a face it meets from outside: the projections (Camera::Footprint) of
+  // those faces' parts within the slab's planes, one plane more each side,
+  // each cut to the projection of the slab's box. When a ray may start
+  // inside the box (a corner of it lies behind the plane through the eye),
+  // the projection of the slab's box. Holds says whether a pixel is among
+  // them; Footprint gives, row by row, the columns from the first to the
+  // last of them.
+  bool Holds(int slab, int col, int row) const;
   const ImageSpans& Footprint(int slab) const { return footprints_[slab]; }
 
   // What slab `slab` does about the primary ray of pixel (col, row), the
@@ -76,9 +79,8 @@ class RingLayout {
   //           (Tracer::MissDeposit of row * width + col).
   //   kNone   another slab takes care of the pixel.
   // Over all slabs, every pixel gets exactly one kTrace or one kMiss. A slab
-  // makes rays only for the pixels of its own footprint (a ray entering the
-  // volume in the slab is among them), and keeps those whose entry cell it
-  // holds. A
+  // makes rays only for the pixels it Holds (a ray entering the volume in
+  // the slab is among them), and keeps those whose entry cell it holds. A
   // miss is deposited by MissSlab(col, row).
   // REQUIRES: 0 <= slab < slabs(), the pixel inside the image, `tracer`
   // traces a scene of this layout's dims and spacing.
@@ -98,7 +100,7 @@ class RingLayout {
                      std::vector<RayDescriptor>* out, std::string* deposits) const;
 
   // The slab that deposits the miss of pixel (col, row): the first slab
-  // whose footprint holds the pixel, which makes its ray and finds the
+  // that Holds the pixel, which makes its ray and finds the
   // miss; or slab 0 for a pixel in no footprint, whose ray meets no slab
   // and is never made.
   int MissSlab(int col, int row) const;
@@ -106,7 +108,8 @@ class RingLayout {
  private:
   std::vector<int> cuts_;
   std::array<int, 3> dims_;
-  std::vector<ImageSpans> footprints_;  // one per slab
+  std::vector<ImageSpans> footprints_;          // one per slab: its parts' hull, row by row
+  std::vector<std::vector<ImageSpans>> parts_;  // one per slab: its faces' parts, or its box
   Camera camera_;
 };
 
