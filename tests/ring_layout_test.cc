@@ -111,7 +111,6 @@ TEST(RingLayoutTest, FootprintsHoldTheRaysEnteringTheirSlabs) {
   std::mt19937 rng(23);
   std::uniform_real_distribution<double> unit(0, 1);
   int64_t entries = 0, box_area = 0, footprint_area = 0, inside_views = 0;
-  int64_t held_pixels = 0, extra_holds = 0;
   for (const std::array<double, 3>& spacing :
        {std::array<double, 3>{1, 1, 1}, std::array<double, 3>{0.7, 1.3, 2},
         std::array<double, 3>{2, 0.5, 1}}) {
@@ -134,7 +133,10 @@ TEST(RingLayoutTest, FootprintsHoldTheRaysEnteringTheirSlabs) {
         // and then on one of its faces' planes.
         Vec3 eye{half.x * (4 * unit(rng) - 2), half.y * (4 * unit(rng) - 2),
                  half.z * (4 * unit(rng) - 2)};
-        if (v % 6 == 1) eye[static_cast<int>(rng() % 3)] = rng() % 2 ? half.x : -half.x;
+        if (v % 6 == 1) {
+          const int a = static_cast<int>(rng() % 3);
+          eye[a] = rng() % 2 ? half[a] : -half[a];
+        }
         eye.y = v % 10 == 3 ? half.y : eye.y;
         const Vec3 target{half.x * (unit(rng) - 0.5), half.y * (unit(rng) - 0.5),
                           half.z * (unit(rng) - 0.5)};
@@ -171,16 +173,6 @@ TEST(RingLayoutTest, FootprintsHoldTheRaysEnteringTheirSlabs) {
           if (orbit) box_area += std::max(0, box_last - box_first);
         }
       }
-      // Pixels held by more than one slab: each of those makes the ray and
-      // all but one drop it.
-      for (int row = 0; orbit && row < camera.height(); ++row) {
-        for (int col = 0; col < camera.width(); ++col) {
-          int holders = 0;
-          for (int i = 0; i < layout.slabs(); ++i) holders += layout.Holds(i, col, row);
-          held_pixels += holders > 0;
-          extra_holds += std::max(0, holders - 1);
-        }
-      }
       const int samples = 1 + static_cast<int>(rng() % 5);
       for (int row = 0; row < camera.height(); ++row) {
         for (int col = 0; col < camera.width(); ++col) {
@@ -199,7 +191,7 @@ TEST(RingLayoutTest, FootprintsHoldTheRaysEnteringTheirSlabs) {
   EXPECT_GT(inside_views, 5);  // views from inside the box were seen
   // The slabs' footprints overlap far less than their boxes'.
   EXPECT_LT(footprint_area, box_area * 8 / 10) << footprint_area << " of " << box_area;
-  EXPECT_GT(held_pixels, 0);
+  EXPECT_GT(footprint_area, 0);
 }
 
 // Seen from outside, a pixel's ray enters in one slab, and few pixels are
